@@ -1,0 +1,134 @@
+"""Unified intrinsic + extrinsic least-squares calibration of a sun sensor on a turntable
+(seed 001 step B; seed 000 step 1).
+
+Observation i: turntable readings θ_i and the centroid (u_i, v_i) of the sun image. Model:
+
+    s_i = R_sun_from_mount · R_rot_from_mount(θ_i)ᵀ · d_rot        (sun direction, sensor frame)
+    (u_i, v_i) = PinholeBrown(fx, fy, cx, cy, k1, k2, p1, p2[, k3]).project(s_i)
+
+Unknowns: the intrinsics and a small rotation δ with R_sun_from_mount = exp([δ]×) R₀
+(R₀ from a Kabsch/Wahba start), so the covariance of δ is directly the per-axis
+uncertainty of R(sun←rot) in the sensor frame. Solved with scipy.optimize.least_squares;
+covariance = s²(JᵀJ)⁻¹ with s² the residual variance (or a known centroid σ).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from rigsim.optics.camera import PinholeBrown
+from rigsim.rig.turntable import TurntableModel
+
+INTRINSIC_NAMES = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"]
+
+
+@dataclass
+class SunCalibration:
+    camera: PinholeBrown
+    R_sun_from_rot: np.ndarray
+    param_names: list[str]
+    params: np.ndarray
+    covariance: np.ndarray
+    rms_px: float
+    n_points: int
+    residuals_px: np.ndarray = field(repr=False)
+    uv: np.ndarray = field(repr=False)
+
+    @property
+    def sigma(self) -> dict[str, float]:
+        return dict(zip(self.param_names, np.sqrt(np.diag(self.covariance))))
+
+    @property
+    def rotation_covariance_rad2(self) -> np.ndarray:
+        """Covariance of the small rotation error of R(sun←rot), about the sensor axes."""
+        return self.covariance[-3:, -3:]
+
+
+def sun_directions_in_mount(model: TurntableModel, poses: Mapping[str, np.ndarray], d_rot=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """(N, 3) sun directions in the mount frame for poses {label: angles (N,)}."""
+    R = model.R_rot_from_mount(poses)  # (N, 3, 3)
+    d = np.asarray(d_rot, float) / np.linalg.norm(d_rot)
+    return np.einsum("nji,j->ni", R, d)
+
+
+def calibrate_sun_sensor(
+    poses_rad: Mapping[str, np.ndarray],
+    uv: np.ndarray,
+    model: TurntableModel,
+    width: int,
+    height: int,
+    f_guess_px: float,
+    d_rot=(0.0, 0.0, 1.0),
+    fit_k3: bool = False,
+    fit_tangential: bool = True,
+    centroid_sigma_px: float | None = None,
+) -> SunCalibration:
+    """Fit intrinsics and R(sun←rot) to observed sun-image centroids.
+
+    ``poses_rad``: the turntable *readings* per observation; ``uv``: (N, 2) centroids.
+    ``f_guess_px``: design focal length in pixels (a starting value only).
+    """
+    uv = np.asarray(uv, float)
+    m_dirs = sun_directions_in_mount(model, poses_rad, d_rot)
+    n = len(uv)
+    if n < 8:
+        raise ValueError(f"calibration needs at least 8 points on the detector, got {n}")
+
+    names = ["fx", "fy", "cx", "cy", "k1", "k2"] + (["p1", "p2"] if fit_tangential else []) + (["k3"] if fit_k3 else [])
+    p0 = {"fx": f_guess_px, "fy": f_guess_px, "cx": (width - 1) / 2, "cy": (height - 1) / 2}
+
+    def camera(x) -> PinholeBrown:
+        d = dict(zip(names, x[: len(names)]))
+        return PinholeBrown(**{k: d.get(k, 0.0) for k in INTRINSIC_NAMES}, width=width, height=height)
+
+    # Start: undistorted pinhole with the guess, rotation by Wahba (scipy align_vectors).
+    cam0 = PinholeBrown(f_guess_px, f_guess_px, p0["cx"], p0["cy"], width=width, height=height)
+    s_obs = cam0.unproject(uv)
+    R0 = Rotation.align_vectors(s_obs, m_dirs)[0].as_matrix()
+    x_int = np.array([p0.get(k, 0.0) for k in names])
+
+    def residual(x, R_ref):
+        R = Rotation.from_rotvec(x[-3:]).as_matrix() @ R_ref
+        s = m_dirs @ R.T
+        return (camera(x).project(s) - uv).ravel()
+
+    x = np.concatenate([x_int, np.zeros(3)])
+    R_ref = R0
+    for _ in range(2):  # second pass re-linearises δ around the estimate (δ ≈ 0 at the end)
+        sol = least_squares(residual, x, args=(R_ref,), method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, x_scale="jac")
+        R_ref = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
+        x = np.concatenate([sol.x[:-3], np.zeros(3)])
+    sol = least_squares(residual, x, args=(R_ref,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, x_scale="jac")
+    R_fin = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
+    res = sol.fun
+    dof = max(res.size - sol.x.size, 1)
+    s2 = centroid_sigma_px**2 if centroid_sigma_px is not None else float(res @ res) / dof
+    J = sol.jac
+    cov = np.linalg.pinv(J.T @ J) * s2
+    return SunCalibration(
+        camera=camera(sol.x),
+        R_sun_from_rot=R_fin,
+        param_names=names + ["rx", "ry", "rz"],
+        params=np.concatenate([sol.x[:-3], np.zeros(3)]),
+        covariance=cov,
+        rms_px=float(np.sqrt(np.mean(res.reshape(-1, 2) ** 2) * 2)),
+        n_points=n,
+        residuals_px=res.reshape(-1, 2),
+        uv=uv,
+    )
+
+
+def sweep_poses(axes: Sequence[str], range_deg: float, step_deg: float, fixed: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+    """Grid of poses over two axes, ±range every step (seed 001: ±60° every 5°)."""
+    k = int(round(range_deg / step_deg))
+    vals = np.radians(np.arange(-k, k + 1) * step_deg)
+    A, B = np.meshgrid(vals, vals, indexing="ij")
+    poses = {axes[0]: A.ravel(), axes[1]: B.ravel()}
+    for lab, v in (fixed or {}).items():
+        poses[lab] = np.full(A.size, v)
+    return poses

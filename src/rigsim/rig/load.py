@@ -1,0 +1,171 @@
+"""Load and validate rig files (TOML) into :class:`~rigsim.rig.schema.Rig`.
+
+Every problem becomes one :class:`RigError` whose message names the file, the field, the
+value and the allowed range — never a traceback from inside pydantic or tomllib.
+"""
+
+from __future__ import annotations
+
+import tomllib
+import typing
+from pathlib import Path
+
+import annotated_types as at
+from pydantic import BaseModel, ValidationError
+
+from rigsim.rig.schema import Rig
+
+SCENES_DIR = Path(__file__).resolve().parents[3] / "scenes"
+
+
+class RigError(ValueError):
+    """A rig file is unreadable or invalid. ``str(err)`` is the user-facing message."""
+
+    def __init__(self, path, problems: list[str]):
+        self.path = str(path)
+        self.problems = problems
+        head = f"{self.path}: invalid rig file"
+        if len(problems) == 1:
+            msg = f"{head}: {problems[0]}"
+        else:
+            msg = head + f" ({len(problems)} problems):\n" + "\n".join(f"  - {p}" for p in problems)
+        super().__init__(msg)
+
+
+def _field_at(model: type[BaseModel], loc: tuple) -> tuple[type[BaseModel] | None, object | None]:
+    """Walk ``loc`` through the model; return (parent model class, FieldInfo of the last key)."""
+    cls: object = model
+    info = None
+    parent = None
+    for key in loc:
+        if isinstance(key, int):
+            cls = _inner(cls, list)
+            continue
+        if isinstance(cls, type) and issubclass(cls, BaseModel):
+            parent = cls
+            info = cls.model_fields.get(key)
+            if info is None:
+                return parent, None
+            cls = _strip(info.annotation)
+        else:
+            cls = _inner(cls, dict)
+            info = None
+    return parent, info
+
+
+def _strip(tp):
+    """Unwrap Optional / Annotated to the concrete class."""
+    origin = typing.get_origin(tp)
+    if origin is typing.Annotated:
+        return _strip(typing.get_args(tp)[0])
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return _strip(args[0]) if len(args) == 1 else tp
+    return tp
+
+
+def _inner(tp, container):
+    tp = _strip(tp)
+    if typing.get_origin(tp) in (list, dict):
+        args = typing.get_args(tp)
+        return _strip(args[-1])
+    return tp
+
+
+def _allowed(info) -> str:
+    if info is None:
+        return ""
+    lo = hi = None
+    for m in info.metadata:
+        if isinstance(m, at.Ge):
+            lo = f"≥ {m.ge}"
+        elif isinstance(m, at.Gt):
+            lo = f"> {m.gt}"
+        elif isinstance(m, at.Le):
+            hi = f"≤ {m.le}"
+        elif isinstance(m, at.Lt):
+            hi = f"< {m.lt}"
+    parts = [p for p in (lo, hi) if p]
+    if parts:
+        return "allowed: " + " and ".join(parts)
+    ann = typing.get_origin(_strip(info.annotation))
+    if ann is typing.Literal:
+        return "allowed: one of " + ", ".join(repr(a) for a in typing.get_args(_strip(info.annotation)))
+    return ""
+
+
+def _dotted(loc: tuple) -> str:
+    out = ""
+    for k in loc:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else str(k))
+    return out or "(top level)"
+
+
+def _describe(err: dict) -> str:
+    loc = tuple(err.get("loc", ()))
+    field = _dotted(loc)
+    etype = err.get("type", "")
+    value = err.get("input")
+    if etype == "extra_forbidden":
+        parent, _ = _field_at(Rig, loc[:-1]) if len(loc) > 1 else (Rig, None)
+        if len(loc) > 1:
+            pcls, pinfo = _field_at(Rig, loc[:-1])
+            target = _strip(pinfo.annotation) if pinfo is not None else None
+            target = _inner(target, list) if target is not None else None
+        else:
+            target = Rig
+        keys = sorted(target.model_fields) if isinstance(target, type) and issubclass(target, BaseModel) else []
+        allowed = f" (allowed keys here: {', '.join(keys)})" if keys else ""
+        return f"unknown key `{field}`{allowed}"
+    if etype == "missing":
+        return f"field `{field}` is required but missing"
+    _, info = _field_at(Rig, loc)
+    allowed = _allowed(info)
+    msg = err.get("msg", "invalid")
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    shown = repr(value) if not isinstance(value, dict) else "{…}"
+    if len(shown) > 80:
+        shown = shown[:77] + "..."
+    tail = f"; {allowed}" if allowed and allowed.split(": ", 1)[-1] not in msg else ""
+    return f"field `{field}` = {shown}: {msg}{tail}"
+
+
+def parse_rig(data: dict, source: str | Path = "<dict>") -> Rig:
+    try:
+        return Rig.model_validate(data)
+    except ValidationError as exc:
+        raise RigError(source, [_describe(e) for e in exc.errors()]) from None
+
+
+def resolve_rig_path(name_or_path: str | Path) -> Path:
+    """A path, or the stem of a file in scenes/ (``sun_sensor_2axis_diaphragm``)."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" and p.exists():
+        return p
+    cand = SCENES_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    if cand.exists():
+        return cand
+    if p.exists():
+        return p
+    known = ", ".join(sorted(x.stem for x in SCENES_DIR.glob("*.toml"))) or "(none)"
+    raise RigError(name_or_path, [f"no such rig file; give a path or one of the default rigs: {known}"])
+
+
+def load_rig(name_or_path: str | Path) -> Rig:
+    path = resolve_rig_path(name_or_path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise RigError(path, [f"cannot read file: {exc.strerror}"]) from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise RigError(path, [f"not UTF-8 text (byte {exc.start})"]) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise RigError(path, [f"TOML syntax error: {exc}"]) from None
+    return parse_rig(data, path)
+
+
+def default_rigs() -> list[Path]:
+    return sorted(SCENES_DIR.glob("*.toml"))
