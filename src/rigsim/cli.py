@@ -1,0 +1,267 @@
+"""The ``rigsim`` command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import rigsim
+
+DEFAULT_RIG = "sun_sensor_2axis_diaphragm"
+
+EPILOG = """\
+examples:
+  rigsim run cube-mirror --analytic             seed 000 campaign on the default rig
+  rigsim run cube-mirror --analytic --rig sun_sensor_3axis_autocollimator
+  rigsim triad 181.398 0.528 91.386 -0.048      R(pm<-rot) from Table 1's final angles
+  rigsim rig check scenes/my_rig.toml           validate a rig file
+  rigsim doctor                                 versions, libLLVM and Mitsuba variant
+
+Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
+"""
+
+
+class CliError(Exception):
+    pass
+
+
+def _fmt_row(cells, widths):
+    return "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+
+def _table(header, rows) -> str:
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    out = [_fmt_row(header, widths), _fmt_row(["-" * w for w in widths], widths)]
+    out += [_fmt_row(r, widths) for r in rows]
+    return "\n".join(out)
+
+
+# ------------------------------------------------------------------------------ triad
+
+def cmd_triad(args) -> int:
+    from rigsim.estimation.cube_attitude import AXIS_ORDERS_2AXIS, cube_from_rot_triad
+    from rigsim.frames import angle_between
+
+    if args.axis_order not in AXIS_ORDERS_2AXIS:
+        raise CliError(f"--axis-order = {args.axis_order!r}: allowed {sorted(AXIS_ORDERS_2AXIS)}")
+    for name, v in zip(("θ1", "θ2", "θ3", "θ4"), args.angles_deg):
+        if not -360.0 <= v <= 360.0:
+            raise CliError(f"{name} = {v}: allowed range is -360 to 360 degrees")
+    t1, t2, t3, t4 = np.radians(args.angles_deg)
+    poses = [{"X": t1, "Y": t2}, {"X": t3, "Y": t4}]
+    try:
+        R, r1, r2 = cube_from_rot_triad(poses, args.faces, args.axis_order)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    np.set_printoptions(precision=7, suppress=True)
+    print(f"R(pm<-rot) by TRIAD (seed 000 eqs 1-10), faces n1={args.faces[0]} n2={args.faces[1]} (cube frame)")
+    print(f"reading: axis order {args.axis_order} — {AXIS_ORDERS_2AXIS[args.axis_order]}")
+    print("normals r = R_rot_from_mount(θ)ᵀ·d with d = (0,0,1), the beam direction (towards the source)")
+    print(f"θ1={args.angles_deg[0]}° θ2={args.angles_deg[1]}° θ3={args.angles_deg[2]}° θ4={args.angles_deg[3]}°")
+    print(R)
+    print(f"r1 (rot) = {r1}\nr2 (rot) = {r2}")
+    ang = np.degrees(angle_between(r1, r2))
+    print(f"angle between the two measured normals: {ang:.5f}° (a perfect cube: 90°; deviation {(ang - 90) * 3600:+.1f}″)")
+    other = "YX" if args.axis_order == "XY" else "XY"
+    R2, _, _ = cube_from_rot_triad(poses, args.faces, other)
+    from rigsim.frames import rotation_angle
+    print(f"the other reading ({other}) differs by {np.degrees(rotation_angle(R, R2)):.4f}°")
+    if args.json:
+        print(json.dumps({"R_pm_from_rot": R.tolist(), "axis_order": args.axis_order, "normal_angle_deg": float(ang)}))
+    return 0
+
+
+# ------------------------------------------------------------------------------ run
+
+def _progress(total, desc, enabled=True):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="campaign", disable=None if enabled else True, file=sys.stderr, dynamic_ncols=True)
+
+
+def cmd_run_cube_mirror(args) -> int:
+    from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
+    from rigsim.procedures import cube_mirror as cm
+    from rigsim.rig import load_rig
+
+    if not args.analytic:
+        print("note: the rendered campaign is not built yet; running the analytic campaign (--analytic)", file=sys.stderr)
+    rig = load_rig(args.rig)
+    if args.trials < 2:
+        raise CliError(f"--trials = {args.trials}: allowed range is 2 to 100000")
+    axis_order = args.axis_order or cm.default_axis_order(rig)
+    if sorted(axis_order) != sorted(a.label for a in rig.turntable.axes):
+        raise CliError(f"--axis-order = {axis_order!r}: must be a permutation of {[a.label for a in rig.turntable.axes]}")
+    rng = np.random.default_rng(args.seed)
+    real = cm.realization_from_rig(rig, ideal=args.ideal)
+    noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
+    res = cm.run_campaign(rig, real, noise, rng, axis_order)
+
+    print(f"rigsim {rigsim.__version__} — cube-mirror campaign, analytic (seed {rig.seed_document}), rig '{rig.name}'")
+    print(f"rig file: {args.rig}   seed: {args.seed}   axis order (outer→inner): {axis_order}   "
+          f"errors: {'none (ideal rig)' if args.ideal else 'the rig file’s true errors + random noise'}")
+    cal = res.calibration
+    print(f"\nStep 1/B  sun-sensor sweep ±{rig.procedure.sweep_range_deg:g}° every {rig.procedure.sweep_step_deg:g}°: "
+          f"{cal.n_points} poses on the detector, fit RMS {cal.rms_px:.4f} px")
+    ss = rig.sun_sensor
+    truth = {"fx": ss.fx_px, "fy": ss.fy_px, "cx": ss.principal_point_px[0], "cy": ss.principal_point_px[1], **ss.distortion.model_dump()}
+    rows = []
+    for name, val, sig in zip(cal.param_names, cal.params, np.sqrt(np.diag(cal.covariance))):
+        if name in truth:
+            rows.append([name, f"{truth[name]:.6g}", f"{val:.6g}", f"{val - truth[name]:+.3g}", f"{sig:.2g}", f"{(val - truth[name]) / sig:+.2f}" if sig > 0 else "-"])
+    print(_table(["param", "truth", "recovered", "error", "σ (pred.)", "error/σ"], rows))
+    poses = ", ".join(f"θ{2 * i + 1}={p['X']:.4f}° θ{2 * i + 2}={p['Y']:.4f}°" for i, p in enumerate(res.null_poses_deg))
+    print(f"\nSteps 2-3/C  nulls on faces {rig.procedure.faces[0]} and {rig.procedure.faces[1]} (readings): {poses}")
+
+    def row(label, est, tru):
+        e = small_angle_error(est, tru) * ARCSEC_PER_RAD
+        return [label, *(f"{x:+.3f}" for x in e), f"{np.linalg.norm(e):.3f}"]
+
+    print("\nTruth vs recovered (small-angle error of the recovered rotation, about the target frame's axes, arcsec):")
+    print(_table(["rotation", "x″", "y″", "z″", "|δ|″"], [
+        row("R(sun←rot)  step 1/B", res.R_sun_from_rot_est, res.R_sun_from_rot_true),
+        row("R(cube←rot) TRIAD", res.R_cube_from_rot_est, res.R_cube_from_rot_true),
+        row("R(cube←sun) composed", res.R_cube_from_sun_est, res.R_cube_from_sun_true),
+    ]))
+    np.set_printoptions(precision=7, suppress=True)
+    print(f"\nrecovered R(cube←sun):\n{res.R_cube_from_sun_est}")
+
+    out = {"rig": rig.name, "seed": args.seed, "axis_order": axis_order, "ideal": args.ideal,
+           "error_arcsec": res.error_arcsec.tolist(), "null_poses_deg": res.null_poses_deg,
+           "R_cube_from_sun_est": res.R_cube_from_sun_est.tolist(), "R_cube_from_sun_true": res.R_cube_from_sun_true.tolist()}
+    if not args.no_budget:
+        n_src = len(cm.budget_sources(rig)) + (2 if rig.procedure.method == "diaphragm" else 1)
+        with _progress(n_src * args.trials, "error budget (Monte Carlo)", not args.quiet) as bar:
+            rows_b = cm.error_budget(rig, args.trials, args.seed + 1, axis_order, progress=bar.update)
+        print(f"\nError budget by Monte Carlo ({args.trials} campaigns per row): σ of the R(cube←sun) error per cube axis")
+        tab = []
+        for r in rows_b:
+            tab.append([r.source, *(f"{s:.2f}" for s in r.sigma_arcsec), f"{r.rss_arcsec:.2f}", "-" if r.paper_arcsec is None else f"{r.paper_arcsec:.2f}"])
+        print(_table(["source", "σx″", "σy″", "σz″", "RSS″", "paper σ″"], tab))
+        if rig.procedure.method == "diaphragm":
+            print("paper: RSS of σ1..σ4 = 3.69″ (eq 14), claim < 4″ (1σ). The paper's σ is one number per source; "
+                  "rigsim reports the resulting σ about each cube axis (docs/error_budget.md).")
+        out["budget"] = [{"source": r.source, "sigma_arcsec": r.sigma_arcsec.tolist(), "paper_arcsec": r.paper_arcsec} for r in rows_b]
+    if args.json_out:
+        Path(args.json_out).write_text(json.dumps(out, indent=2))
+        print(f"\nwrote {args.json_out}")
+    return 0
+
+
+# ------------------------------------------------------------------------------ rig / doctor
+
+def cmd_rig_check(args) -> int:
+    from rigsim.rig import load_rig
+
+    rig = load_rig(args.rig)
+    print(f"{args.rig}: OK — '{rig.name}' (seed {rig.seed_document}, {rig.turntable.kind} turntable, method {rig.procedure.method})")
+    return 0
+
+
+def cmd_rig_list(args) -> int:
+    from rigsim.rig import default_rigs, load_rig
+
+    for p in default_rigs():
+        r = load_rig(p)
+        print(f"{p.stem:40s} seed {r.seed_document}  {r.description}")
+    return 0
+
+
+def cmd_doctor(args) -> int:
+    import platform
+
+    info: dict = {"rigsim": rigsim.__version__, "python": platform.python_version()}
+    try:
+        from rigsim.render.backend import doctor_report
+    except ImportError as exc:  # render package not available
+        info["render"] = f"unavailable: {exc}"
+    else:
+        info.update(doctor_report())
+    if args.json:
+        print(json.dumps(info, indent=2, default=str))
+        return 0
+    for k, v in info.items():
+        if isinstance(v, list):
+            print(f"{k}:")
+            for item in v:
+                print(f"  - {item}")
+        else:
+            print(f"{k}: {v}")
+    return 0
+
+
+# ------------------------------------------------------------------------------ parser
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="rigsim",
+        description="rigsim — physically rendered optical simulator of the rigs that calibrate spacecraft attitude sensors.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--version", action="version", version=f"rigsim {rigsim.__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    d = sub.add_parser("doctor", help="versions, libLLVM and the Mitsuba variant rigsim will use")
+    d.add_argument("--json", action="store_true", help="machine-readable output")
+    d.set_defaults(func=cmd_doctor)
+
+    t = sub.add_parser("triad", help="R(pm<-rot) by TRIAD from the four null angles (seed 000 Table 1)",
+                       description="Dual-vector attitude of the mirror cube in the turntable frame from θ1..θ4 (degrees).")
+    t.add_argument("angles_deg", nargs=4, type=float, metavar="θ", help="θ1 θ2 θ3 θ4 in degrees (θ1, θ3 about X'; θ2, θ4 about Y')")
+    t.add_argument("--axis-order", default="XY", help="nesting reading: XY (eq 7, default) or YX (step text); docs/readings.md")
+    t.add_argument("--faces", nargs=2, default=["+Z", "+Y"], choices=["+X", "-X", "+Y", "-Y", "+Z", "-Z"], help="cube faces nulled first and second (default +Z +Y, eq 6)")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=cmd_triad)
+
+    r = sub.add_parser("run", help="run a documented procedure end to end")
+    rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")
+    cmr = rs.add_parser("cube-mirror", help="seeds 000/001: sun sensor ↔ mirror cube calibration campaign",
+                        description="Run the cube-mirror campaign on a rig and compare with truth; then the Monte-Carlo error budget.",
+                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    cmr.add_argument("--rig", default=DEFAULT_RIG, help="rig file path or default rig name")
+    cmr.add_argument("--analytic", action="store_true", help="analytic campaign (exact geometry + modelled noise, no rendering)")
+    cmr.add_argument("--ideal", action="store_true", help="no errors at all: checks the simulator itself (error ≈ 1e-10″)")
+    cmr.add_argument("--seed", type=int, default=2009, help="random seed (the same seed gives the same numbers)")
+    cmr.add_argument("--trials", type=int, default=300, help="Monte-Carlo campaigns per error-budget row")
+    cmr.add_argument("--axis-order", default=None, help="estimator's axis nesting reading, outermost first (default: the rig's)")
+    cmr.add_argument("--no-budget", action="store_true", help="skip the Monte-Carlo error budget")
+    cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
+    cmr.add_argument("--quiet", action="store_true", help="no progress bar")
+    cmr.set_defaults(func=cmd_run_cube_mirror)
+
+    g = sub.add_parser("rig", help="rig files: list the defaults, validate a file")
+    gs = g.add_subparsers(dest="rig_command", metavar="ACTION")
+    gc = gs.add_parser("check", help="validate a rig file")
+    gc.add_argument("rig")
+    gc.set_defaults(func=cmd_rig_check)
+    gl = gs.add_parser("list", help="list the default rigs in scenes/")
+    gl.set_defaults(func=cmd_rig_list)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    from rigsim.rig.load import RigError
+    from rigsim.rig.turntable import GeometryError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (RigError, CliError, GeometryError) as exc:
+        print(f"rigsim: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("rigsim: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
