@@ -107,13 +107,13 @@ def _describe(err: dict) -> str:
     etype = err.get("type", "")
     value = err.get("input")
     if etype == "extra_forbidden":
-        parent, _ = _field_at(Rig, loc[:-1]) if len(loc) > 1 else (Rig, None)
+        target = Rig
         if len(loc) > 1:
-            pcls, pinfo = _field_at(Rig, loc[:-1])
-            target = _strip(pinfo.annotation) if pinfo is not None else None
-            target = _inner(target, list) if target is not None else None
-        else:
-            target = Rig
+            _, pinfo = _field_at(Rig, loc[:-1])
+            target = _inner(pinfo.annotation, list) if pinfo is not None else None
+            if isinstance(loc[-2], int) or target is None:
+                _, pinfo = _field_at(Rig, tuple(k for k in loc[:-1] if not isinstance(k, int)))
+                target = _inner(pinfo.annotation, list) if pinfo is not None else None
         keys = sorted(target.model_fields) if isinstance(target, type) and issubclass(target, BaseModel) else []
         allowed = f" (allowed keys here: {', '.join(keys)})" if keys else ""
         return f"unknown key `{field}`{allowed}"
@@ -124,7 +124,10 @@ def _describe(err: dict) -> str:
     msg = err.get("msg", "invalid")
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
-    shown = repr(value) if not isinstance(value, dict) else "{…}"
+    if isinstance(value, dict):  # a check across several fields of one table
+        where = f"table `[{field}]`" if loc else "the rig"
+        return f"in {where}: {msg}"
+    shown = repr(value)
     if len(shown) > 80:
         shown = shown[:77] + "..."
     tail = f"; {allowed}" if allowed and allowed.split(": ", 1)[-1] not in msg else ""
