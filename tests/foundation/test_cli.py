@@ -1,0 +1,82 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import rigsim
+from rigsim.cli import main
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "rigsim.cli", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_version_and_help():
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"rigsim {rigsim.__version__}"
+    r = run("--help")
+    assert r.returncode == 0 and "run" in r.stdout and "triad" in r.stdout and "doctor" in r.stdout and "examples:" in r.stdout
+    r = run("run", "cube-mirror", "--help")
+    assert r.returncode == 0 and "--analytic" in r.stdout and "--seed" in r.stdout
+
+
+def test_triad_table1(capsys):
+    assert main(["triad", "181.398", "0.528", "91.386", "-0.048", "--json"]) == 0
+    out = capsys.readouterr().out
+    data = json.loads(out.strip().splitlines()[-1])
+    R = np.array(data["R_pm_from_rot"])
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    assert data["axis_order"] == "XY"
+    assert data["normal_angle_deg"] == pytest.approx(90.0121, abs=1e-4)
+    assert "the other reading (YX) differs by 1.05" in out
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["triad", "181.398", "0.528", "91.386", "500"], "θ4 = 500.0: allowed range is -360 to 360 degrees"),
+    (["triad", "1", "2", "3", "4", "--axis-order", "ZX"], "--axis-order = 'ZX': allowed ['XY', 'YX']"),
+    (["run", "cube-mirror", "--rig", "nope"], "no such rig file"),
+    (["run", "cube-mirror", "--trials", "1"], "--trials = 1: allowed range is 2 to 100000"),
+    (["run", "cube-mirror", "--axis-order", "XZ", "--no-budget"], "--axis-order = 'XZ': must be a permutation"),
+])
+def test_bad_cli_input_is_a_clear_error(args, expected):
+    r = run(*args)
+    assert r.returncode == 2
+    assert expected in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_bad_rig_file_via_cli(tmp_path):
+    p = tmp_path / "r.toml"
+    p.write_text((rigsim.rig.load.SCENES_DIR / "sun_sensor_2axis_diaphragm.toml").read_text().replace("edge_mm = 25.0", "edge_mm = -25.0"))
+    r = run("rig", "check", str(p))
+    assert r.returncode == 2 and "field `cube.edge_mm` = -25.0" in r.stderr and "> 0" in r.stderr
+
+
+def test_run_ideal_analytic_prints_truth_vs_recovered(tmp_path):
+    out = tmp_path / "res.json"
+    r = run("run", "cube-mirror", "--analytic", "--ideal", "--no-budget", "--json-out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "Truth vs recovered" in r.stdout and "R(cube←sun) composed" in r.stdout
+    res = json.loads(out.read_text())
+    assert np.abs(res["error_arcsec"]).max() < 1e-6
+
+
+def test_run_with_budget_is_reproducible(tmp_path):
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    for p in (a, b):
+        r = run("run", "cube-mirror", "--analytic", "--trials", "20", "--seed", "5", "--quiet", "--json-out", str(p))
+        assert r.returncode == 0, r.stderr
+    ja, jb = json.loads(a.read_text()), json.loads(b.read_text())
+    assert ja == jb
+    names = [row["source"] for row in ja["budget"]]
+    assert names[0].startswith("σ1") and names[-1] == "all sources together"
+    assert "Error budget by Monte Carlo" in r.stdout
+
+
+def test_doctor_never_crashes():
+    r = run("doctor", "--json")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["rigsim"] == rigsim.__version__ and "python" in info
