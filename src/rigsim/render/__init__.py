@@ -1,0 +1,12 @@
+"""Everything that imports mitsuba/drjit lives in this package, and only here.
+
+Importing ``rigsim.render`` (or :mod:`rigsim.render.backend`, :mod:`rigsim.render.camera`,
+:mod:`rigsim.render.frameio`) does not import mitsuba. Modules that need it
+(:mod:`rigsim.render.sensors`, :mod:`rigsim.render.sunspot`) call
+:func:`rigsim.render.backend.ensure_variant` before touching mitsuba, which picks a libLLVM that
+passed a subprocess self-test.
+"""
+
+from rigsim.render.backend import choose_variant, doctor_report, ensure_variant
+
+__all__ = ["choose_variant", "doctor_report", "ensure_variant"]
