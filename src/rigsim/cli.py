@@ -141,7 +141,7 @@ def cmd_run_cube_mirror(args) -> int:
         tab = []
         for r in rows_b:
             tab.append([r.source, *(f"{s:.2f}" for s in r.sigma_arcsec), f"{r.rss_arcsec:.2f}", "-" if r.paper_arcsec is None else f"{r.paper_arcsec:.2f}"])
-        print(_table(["source", "σx″", "σy″", "σz″", "RSS″", "paper σ″"], tab))
+        print(_table(["source", "σx″", "σy″", "σz″", "RSS″", "document σ″"], tab))
         if rig.procedure.method == "diaphragm":
             print("paper: RSS of σ1..σ4 = 3.69″ (eq 14), claim < 4″ (1σ). The paper's σ is one number per source; "
                   "rigsim reports the resulting σ about each cube axis (docs/error_budget.md).")
