@@ -1,0 +1,321 @@
+"""Shared input handling for the centroiders: shape checks, masks, per-ROI background and noise,
+quality flags that do not depend on the method. Internal module."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .result import Centroid, CentroidBatch, Flag, NoiseModel
+
+MAD_TO_SD = 1.482602218505602
+
+
+@dataclass
+class Prepared:
+    data: np.ndarray  # (N, h, w) float64, bad pixels set to 0
+    good: np.ndarray  # (N, h, w) bool: finite, not masked (saturated pixels are *good* here)
+    sat: np.ndarray  # (N, h, w) bool: at/above saturation (subset of good)
+    bg: np.ndarray  # (N,) background level per ROI (DN)
+    bg_sd: np.ndarray  # (N,) background noise sd per ROI (DN)
+    flags: np.ndarray  # (N,) int flags so far
+    single: bool
+    noise: NoiseModel | None
+    x: np.ndarray  # (w,) u coordinate of columns
+    y: np.ndarray  # (h,) v coordinate of rows
+
+    @property
+    def n(self) -> int:
+        return self.data.shape[0]
+
+    def variance(self, expected: np.ndarray, bg: np.ndarray | None = None, idx=None) -> np.ndarray:
+        """Pixel variance (DN^2) for expected values ``expected`` (N, h, w) (background included).
+
+        With a NoiseModel: its Poisson + read-noise formula. Without one: the measured
+        background variance plus the signal above background as Poisson with gain 1 e-/DN.
+        """
+        if self.noise is not None:
+            var = self.noise.variance(expected)
+            floor = 0.25 / self.noise.gain_e_per_dn**2  # (half an electron)^2
+        else:
+            sel = slice(None) if idx is None else idx
+            b = self.bg[sel] if bg is None else bg
+            var = (self.bg_sd[sel] ** 2)[:, None, None] + np.maximum(expected - b[:, None, None], 0.0)
+            floor = 1e-12 * max(float(np.max(np.abs(self.data), initial=0.0)), 1.0) ** 2
+        return np.maximum(var, floor)
+
+    def variance_flat(self, expected: np.ndarray, roi: np.ndarray) -> np.ndarray:
+        """Like `variance` for a flat array of pixels belonging to ROIs ``roi``."""
+        if self.noise is not None:
+            return np.maximum(self.noise.variance(expected), 0.25 / self.noise.gain_e_per_dn**2)
+        var = self.bg_sd[roi] ** 2 + np.maximum(expected - self.bg[roi], 0.0)
+        return np.maximum(var, 1e-300)
+
+
+def as_stack(img) -> tuple[np.ndarray, bool]:
+    a = np.asarray(img)
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+        raise TypeError(f"image must be a numeric array, got dtype {a.dtype}")
+    if np.iscomplexobj(a):
+        raise TypeError("image must be real, got a complex array")
+    if a.ndim == 2:
+        return a[None], True
+    if a.ndim == 3:
+        return a, False
+    raise ValueError(f"image must have shape (h, w) or (N, h, w), got shape {a.shape}")
+
+
+def _per_roi(value, n: int, name: str) -> np.ndarray | None:
+    if value is None:
+        return None
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 0:
+        return np.full(n, float(a))
+    if a.shape != (n,):
+        raise ValueError(f"{name} must be a scalar or have shape ({n},), got shape {a.shape}")
+    return a
+
+
+def prepare(
+    img,
+    *,
+    mask=None,
+    saturation=None,
+    background=None,
+    noise: NoiseModel | None = None,
+    flags=None,
+) -> Prepared:
+    stack, single = as_stack(img)
+    n, h, w = stack.shape
+    if noise is not None and not isinstance(noise, NoiseModel):
+        raise TypeError(f"noise must be a rigsim.imaging.NoiseModel or None, got {type(noise).__name__}")
+    if saturation is None and np.issubdtype(stack.dtype, np.integer):
+        saturation = float(np.iinfo(stack.dtype).max)
+    data = stack.astype(float, copy=False)
+    finite = np.isfinite(data)
+    all_finite = bool(finite.all())
+    good = finite if (all_finite and mask is None) else finite.copy()
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != stack.shape[-m.ndim :] and m.shape != stack.shape:
+            raise ValueError(f"mask shape {m.shape} does not match image shape {np.asarray(img).shape}")
+        good &= ~np.broadcast_to(m, stack.shape)
+    fl = np.zeros(n, dtype=np.int64)
+    fin = _per_roi(flags, n, "flags")
+    if fin is not None:
+        fl |= fin.astype(np.int64)
+    fl[np.any(~finite, axis=(1, 2))] |= Flag.NAN
+    if saturation is not None:
+        sat = good & (data >= float(saturation))
+    else:
+        sat = np.zeros_like(good)
+    fl[np.any(sat, axis=(1, 2))] |= Flag.SATURATED
+    if not good.all():
+        data = np.where(good, data, 0.0)
+
+    # background and its noise from the outer ring of each ROI (robust: median, MAD)
+    ring = np.zeros((h, w), dtype=bool)
+    if h >= 3 and w >= 3:
+        ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
+    ring_ok = good[:, ring] & ~sat[:, ring]
+    rv = data[:, ring]  # (N, nring)
+    med = np.full(n, np.nan)
+    mad = np.full(n, np.nan)
+    need_mad = noise is None
+    if rv.shape[1]:
+        full = ring_ok.all(axis=1)
+        if full.all():  # fast path: every ring is usable
+            med = np.median(rv, axis=1)
+            if need_mad:
+                mad = np.median(np.abs(rv - med[:, None]), axis=1)
+        else:
+            for i in np.flatnonzero(ring_ok.any(axis=1)):
+                r = rv[i][ring_ok[i]]
+                med[i] = np.median(r)
+                mad[i] = np.median(np.abs(r - med[i]))
+    bg_given = _per_roi(background, n, "background")
+    bg = med if bg_given is None else bg_given
+    if noise is not None:
+        # the noise model is the stated truth about the detector: use it for the background noise
+        bg_sd = np.sqrt(noise.variance(np.where(np.isfinite(bg), bg, 0.0)))
+    else:
+        bg_sd = MAD_TO_SD * mad
+    # no usable ring (tiny ROI, or ring all bad): fall back to robust stats of all good pixels
+    bad_bg = ~np.isfinite(bg) | ~np.isfinite(bg_sd)
+    for i in np.flatnonzero(bad_bg):
+        vals = data[i][good[i] & ~sat[i]]
+        if vals.size == 0:
+            continue
+        if not np.isfinite(bg[i]):
+            bg[i] = np.percentile(vals, 25.0)
+        if not np.isfinite(bg_sd[i]):
+            bg_sd[i] = MAD_TO_SD * np.median(np.abs(vals - np.median(vals)))
+    x = np.arange(w, dtype=float)
+    y = np.arange(h, dtype=float)
+    # nothing usable at all
+    none_good = ~np.any(good, axis=(1, 2))
+    fl[none_good] |= Flag.EMPTY | Flag.INVALID
+    all_sat = np.any(good, axis=(1, 2)) & ~np.any(good & ~sat, axis=(1, 2))
+    fl[all_sat] |= Flag.INVALID
+    if h < 3 or w < 3:
+        fl |= Flag.EMPTY | Flag.INVALID
+    return Prepared(data, good, sat, bg, bg_sd, fl, single, noise, x, y)
+
+
+def secondary_peak_flags(p: Prepared, resid: np.ndarray, nsigma: float = 5.0) -> np.ndarray:
+    """BLENDED where a ROI has a significant second local maximum separated from the main one
+    by a significant dip. ``resid`` is the background-subtracted data (N, h, w)."""
+    n, h, w = resid.shape
+    out = np.zeros(n, dtype=bool)
+    if h < 3 or w < 3 or n == 0:
+        return out
+    if p.good.all() and not p.sat.any():
+        a = resid.astype(np.float32)
+    else:
+        a = np.where(p.good & ~p.sat, resid, -np.inf).astype(np.float32)
+    # 3x3 maximum filter (separable; the array border acts as -inf)
+    m = a.copy()
+    np.maximum(m[:, :, 1:], a[:, :, :-1], out=m[:, :, 1:])
+    np.maximum(m[:, :, :-1], a[:, :, 1:], out=m[:, :, :-1])
+    m2 = m.copy()
+    np.maximum(m2[:, 1:, :], m[:, :-1, :], out=m2[:, 1:, :])
+    np.maximum(m2[:, :-1, :], m[:, 1:, :], out=m2[:, :-1, :])
+    # local maxima are sparse: test their significance only there
+    ni, vi, ui = np.nonzero((a >= m2) & (a > 0))
+    vals = a[ni, vi, ui].astype(float)
+    var_pk = p.variance_flat(vals + p.bg[ni], ni)
+    sig = vals * vals > (nsigma * nsigma) * var_pk
+    cnt = np.bincount(ni[sig], minlength=n)
+    cand = np.flatnonzero(cnt >= 2)
+    signif = np.zeros(a.shape, dtype=bool)
+    signif[ni[sig], vi[sig], ui[sig]] = True
+    sd = np.sqrt(p.variance(resid[cand] + p.bg[cand, None, None], idx=cand)) if cand.size else None
+    for ci, i in enumerate(cand):
+        vv, uu = np.nonzero(signif[i])
+        hts = a[i, vv, uu]
+        order = np.argsort(hts)[::-1]
+        v1, u1 = vv[order[0]], uu[order[0]]
+        for k in order[1:]:
+            v2, u2 = vv[k], uu[k]
+            nsamp = int(max(abs(v2 - v1), abs(u2 - u1))) * 2 + 1
+            t = np.linspace(0.0, 1.0, nsamp + 1)
+            lv = np.rint(v1 + t * (v2 - v1)).astype(int)
+            lu = np.rint(u1 + t * (u2 - u1)).astype(int)
+            line = resid[i, lv, lu]
+            ok = p.good[i, lv, lu]
+            if not np.all(ok):
+                continue
+            saddle = line.min()
+            h2 = float(a[i, v2, u2])
+            dip_sd = np.sqrt(sd[ci, v2, u2] ** 2 + sd[ci, lv[np.argmin(line)], lu[np.argmin(line)]] ** 2)
+            if h2 - saddle > max(3.0 * dip_sd, 0.1 * h2):
+                out[i] = True
+                break
+    return out
+
+
+def edge_flags(p: Prepared, u: np.ndarray, v: np.ndarray, margin_px: np.ndarray) -> np.ndarray:
+    """EDGE where the centre is within ``margin_px`` of the array's outer pixel boundary, or the
+    brightest good pixel lies on the border row/column."""
+    n, h, w = p.data.shape
+    lo_u, hi_u = -0.5 + margin_px, (w - 0.5) - margin_px
+    lo_v, hi_v = -0.5 + margin_px, (h - 0.5) - margin_px
+    with np.errstate(invalid="ignore"):
+        near = (u < lo_u) | (u > hi_u) | (v < lo_v) | (v > hi_v)
+    a = np.where(p.good, p.data, -np.inf).reshape(n, -1)
+    k = np.argmax(a, axis=1)
+    pv, pu = np.divmod(k, w)
+    on_border = (pv == 0) | (pv == h - 1) | (pu == 0) | (pu == w - 1)
+    return near | on_border
+
+
+def finish(
+    p: Prepared,
+    method: str,
+    u,
+    v,
+    su,
+    sv,
+    flux,
+    bg,
+    flags,
+    origin_uv=None,
+    extra: dict | None = None,
+):
+    """Apply INVALID -> NaN, origin shift, and return a Centroid or a CentroidBatch."""
+    n = p.n
+    u = np.asarray(u, dtype=float).copy()
+    v = np.asarray(v, dtype=float).copy()
+    su = np.asarray(su, dtype=float).copy()
+    sv = np.asarray(sv, dtype=float).copy()
+    flags = np.asarray(flags, dtype=np.int64).copy()
+    h, w = p.data.shape[1:]
+    with np.errstate(invalid="ignore"):
+        outside = ~((u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5))
+    nonfinite = ~(np.isfinite(u) & np.isfinite(v) & np.isfinite(su) & np.isfinite(sv))
+    flags[outside | nonfinite] |= Flag.INVALID
+    inv = (flags & Flag.INVALID) != 0
+    u[inv] = v[inv] = su[inv] = sv[inv] = np.nan
+    if origin_uv is not None:
+        o = np.asarray(origin_uv, dtype=float)
+        o = np.broadcast_to(o, (n, 2))
+        u = u + o[:, 0]
+        v = v + o[:, 1]
+    batch = CentroidBatch(
+        u=u,
+        v=v,
+        sigma_u=su,
+        sigma_v=sv,
+        flux=np.asarray(flux, dtype=float),
+        background=np.asarray(bg, dtype=float),
+        flags=flags,
+        method=method,
+        extra=extra or {},
+    )
+    if p.single:
+        return batch[0]
+    return batch
+
+
+def chol_solve(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Batched Cholesky for small SPD systems: returns (x, inverse, ok).
+
+    ``a`` (N, P, P), ``b`` (N, P). Non positive-definite systems give NaN and ok=False; no
+    exception is raised for them (unlike np.linalg.solve on a batch).
+    """
+    n, P, _ = a.shape
+    L = np.zeros_like(a)
+    ok = np.ones(n, dtype=bool)
+    for j in range(P):
+        d = a[:, j, j] - np.sum(L[:, j, :j] ** 2, axis=1)
+        ok &= d > 0
+        ljj = np.sqrt(np.where(d > 0, d, np.nan))
+        L[:, j, j] = ljj
+        for i in range(j + 1, P):
+            L[:, i, j] = (a[:, i, j] - np.sum(L[:, i, :j] * L[:, j, :j], axis=1)) / ljj
+
+    def fwd(rhs):  # L y = rhs
+        y = np.zeros_like(rhs)
+        for i in range(P):
+            y[:, i] = (rhs[:, i] - np.sum(L[:, i, :i] * y[:, :i], axis=1)) / L[:, i, i]
+        return y
+
+    def bwd(y):  # L^T x = y
+        x = np.zeros_like(y)
+        for i in range(P - 1, -1, -1):
+            x[:, i] = (y[:, i] - np.sum(L[:, i + 1 :, i] * x[:, i + 1 :], axis=1)) / L[:, i, i]
+        return x
+
+    with np.errstate(all="ignore"):
+        x = bwd(fwd(b))
+        inv = np.zeros_like(a)
+        eye = np.eye(P)
+        for k in range(P):
+            inv[:, :, k] = bwd(fwd(np.broadcast_to(eye[k], (n, P)).copy()))
+    return x, inv, ok
+
+
+def to_single_centroid(batch: CentroidBatch) -> Centroid:
+    return batch[0]
