@@ -226,3 +226,24 @@ def test_off_detector_and_edge_cut_are_flagged(wide_sun):
 def test_window_too_small_is_rejected_or_flagged():
     with pytest.raises(ValueError, match="window_px"):
         SunSpotRenderer(NARROW, full_angle_rad=math.radians(2.0), window_px=16)
+
+
+@pytest.mark.slow
+def test_sun_spot_dense_field_sweep(wide_sun):
+    """80 seeded random directions over the whole usable field of the wide lens."""
+    rng = np.random.default_rng(2024)
+    errs = []
+    while len(errs) < 80:
+        th, az = math.degrees(math.acos(rng.uniform(math.cos(math.radians(62)), 1.0))), \
+            rng.uniform(0, 360)
+        s = _dir(th, az)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GeometryWarning)
+            win = wide_sun.render(s, seed=len(errs))
+        if any(win.flags[f] for f in ("spot_off_detector", "spot_cut_by_edge",
+                                      "spot_exceeds_window", "spot_outside_model")):
+            continue
+        errs.append(win.centroid() - cv2_truth(WIDE, s, SUN_FULL_ANGLE_RAD, 400, 800)["pixel"])
+    errs = np.array(errs)
+    assert np.max(np.abs(errs)) <= REQUIREMENT_PX
+    assert np.sqrt(np.mean(errs ** 2)) <= 0.004

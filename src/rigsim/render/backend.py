@@ -68,7 +68,7 @@ SCALAR_SPECTRAL_VARIANT = "scalar_spectral"
 _SELFTEST = Path(__file__).with_name("_llvm_selftest.py")
 _SELFTEST_TIMEOUT_S = 180.0
 _CACHE_FORMAT = 1
-_SELFTEST_VERSION = 1  # bump when _llvm_selftest.py changes so old verdicts are re-tested
+_SELFTEST_VERSION = 2  # bump when _llvm_selftest.py changes so old verdicts are re-tested
 
 _LIB_DIRS = (
     "/usr/lib/x86_64-linux-gnu",
