@@ -247,3 +247,8 @@ def test_sun_spot_dense_field_sweep(wide_sun):
     errs = np.array(errs)
     assert np.max(np.abs(errs)) <= REQUIREMENT_PX
     assert np.sqrt(np.mean(errs ** 2)) <= 0.004
+
+
+def test_ldsampler_spp_must_be_power_of_four():
+    with pytest.raises(ValueError, match="power of 4"):
+        SunSpotRenderer(NARROW, spp=512)

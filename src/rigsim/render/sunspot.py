@@ -52,6 +52,15 @@ SIMULATOR_32ARCMIN_RAD = math.radians(32.0 / 60.0)
 _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
+def _check_spp(spp, sampler: str) -> None:
+    if int(spp) != spp or spp < 1:
+        raise ValueError(f"spp = {spp!r}: must be an integer >= 1")
+    spp = int(spp)
+    if sampler == "ldsampler" and (spp & (spp - 1) or (spp.bit_length() - 1) % 2):
+        raise ValueError(f"spp = {spp!r}: the ldsampler needs a power of 4 (e.g. 256, 1024, "
+                         "4096); Mitsuba would silently round it")
+
+
 class GeometryWarning(UserWarning):
     """Geometry that cannot give a valid measurement (spot off the detector, cut, too big...)."""
 
@@ -232,8 +241,7 @@ class SunSpotRenderer:
             raise ValueError(f"full_angle_rad = {full_angle_rad!r}: must be in (0, 0.349) rad")
         if int(window_px) != window_px or not (4 <= window_px <= 4096):
             raise ValueError(f"window_px = {window_px!r}: must be an integer in [4, 4096]")
-        if int(spp) != spp or spp < 1:
-            raise ValueError(f"spp = {spp!r}: must be an integer >= 1")
+        _check_spp(spp, sampler)
         if not (spot_photons > 0 and math.isfinite(spot_photons)):
             raise ValueError(f"spot_photons = {spot_photons!r}: must be a finite number > 0")
         if response not in ("flux", "radiance"):
@@ -358,6 +366,7 @@ class SunSpotRenderer:
         """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks."""
         import mitsuba as mi
 
+        _check_spp(spp, self.sampler)
         if self._full is None or self._full[2] != spp:
             scene, params = self._build(self.camera.width, self.camera.height, spp)
             self._full = (scene, params, spp)
