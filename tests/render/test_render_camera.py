@@ -93,3 +93,17 @@ def test_bad_intrinsics_rejected_with_field_name():
         PinholeCamera(fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=0, height=10)
     with pytest.raises(ValueError, match="pixel_size_mm"):
         TelecentricCamera(pixel_size_mm=-1.0, cx=0.0, cy=0.0, width=10, height=10)
+
+
+def test_same_projection_as_the_analytic_optics_model():
+    """render's camera and optics' PinholeBrown are one model (the Rig feeds both)."""
+    optics = pytest.importorskip("rigsim.optics.camera")
+    pb = optics.PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, k1=-0.15, k2=0.012,
+                             p1=3e-4, p2=-2e-4, k3=-0.0003, width=1024, height=1024)
+    cam = PinholeCamera.from_intrinsics(pb)
+    assert cam == WIDE
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(200, 3))
+    d[:, 2] = np.abs(d[:, 2]) + 1.0
+    uv, _ = cam.project(d)
+    np.testing.assert_allclose(uv, pb.project(d), atol=1e-9)

@@ -76,6 +76,13 @@ class PinholeCamera:
                 raise ValueError(f"PinholeCamera.{name} = {v!r}: must be finite")
         object.__setattr__(self, "r2_max", radial_r2_max(self.k1, self.k2, self.k3))
 
+    @classmethod
+    def from_intrinsics(cls, cam) -> "PinholeCamera":
+        """From any object with fx, fy, cx, cy, k1, k2, k3, p1, p2, width, height attributes,
+        e.g. :class:`rigsim.optics.camera.PinholeBrown` (same convention)."""
+        return cls(**{n: getattr(cam, n) for n in ("fx", "fy", "cx", "cy", "width", "height",
+                                                   "k1", "k2", "k3", "p1", "p2")})
+
     # -- OpenCV interop ---------------------------------------------------------------------
     @property
     def camera_matrix(self) -> np.ndarray:
