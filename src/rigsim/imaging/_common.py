@@ -11,6 +11,9 @@ import numpy as np
 from .result import Centroid, CentroidBatch, Flag, NoiseModel
 
 MAD_TO_SD = 1.482602218505602
+#: pixels with |value| above this are treated like non-finite ones (no detector gets near it;
+#: beyond it squares and sums of pixels overflow float64)
+MAX_ABS_PIXEL = 1e30
 
 
 @dataclass
@@ -43,7 +46,7 @@ class Prepared:
             sel = slice(None) if idx is None else idx
             b = self.bg[sel] if bg is None else bg
             var = (self.bg_sd[sel] ** 2)[:, None, None] + np.maximum(expected - b[:, None, None], 0.0)
-            floor = 1e-12 * max(float(np.max(np.abs(self.data), initial=0.0)), 1.0) ** 2
+            floor = 1e-12 * max(float(np.max(np.abs(self.data), initial=0.0)), 1.0) ** 2  # data <= 1e30
         return np.maximum(var, floor)
 
     def variance_flat(self, expected: np.ndarray, roi: np.ndarray) -> np.ndarray:
@@ -94,7 +97,8 @@ def prepare(
     if saturation is None and np.issubdtype(stack.dtype, np.integer):
         saturation = float(np.iinfo(stack.dtype).max)
     data = stack.astype(float, copy=False)
-    finite = np.isfinite(data)
+    with np.errstate(invalid="ignore"):
+        finite = np.abs(data) <= MAX_ABS_PIXEL  # False for NaN and inf as well
     all_finite = bool(finite.all())
     good = finite if (all_finite and mask is None) else finite.copy()
     if mask is not None:
@@ -279,43 +283,7 @@ def finish(
     return batch
 
 
-def chol_solve(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Batched Cholesky for small SPD systems: returns (x, inverse, ok).
-
-    ``a`` (N, P, P), ``b`` (N, P). Non positive-definite systems give NaN and ok=False; no
-    exception is raised for them (unlike np.linalg.solve on a batch).
-    """
-    n, P, _ = a.shape
-    L = np.zeros_like(a)
-    ok = np.ones(n, dtype=bool)
-    for j in range(P):
-        d = a[:, j, j] - np.sum(L[:, j, :j] ** 2, axis=1)
-        ok &= d > 0
-        ljj = np.sqrt(np.where(d > 0, d, np.nan))
-        L[:, j, j] = ljj
-        for i in range(j + 1, P):
-            L[:, i, j] = (a[:, i, j] - np.sum(L[:, i, :j] * L[:, j, :j], axis=1)) / ljj
-
-    def fwd(rhs):  # L y = rhs
-        y = np.zeros_like(rhs)
-        for i in range(P):
-            y[:, i] = (rhs[:, i] - np.sum(L[:, i, :i] * y[:, :i], axis=1)) / L[:, i, i]
-        return y
-
-    def bwd(y):  # L^T x = y
-        x = np.zeros_like(y)
-        for i in range(P - 1, -1, -1):
-            x[:, i] = (y[:, i] - np.sum(L[:, i + 1 :, i] * x[:, i + 1 :], axis=1)) / L[:, i, i]
-        return x
-
-    with np.errstate(all="ignore"):
-        x = bwd(fwd(b))
-        inv = np.zeros_like(a)
-        eye = np.eye(P)
-        for k in range(P):
-            inv[:, :, k] = bwd(fwd(np.broadcast_to(eye[k], (n, P)).copy()))
-    return x, inv, ok
-
-
-def to_single_centroid(batch: CentroidBatch) -> Centroid:
-    return batch[0]
+def trivial_result(p: Prepared, method: str, origin_uv=None):
+    """Result for inputs with nothing to measure (N = 0, or ROIs smaller than 3 x 3)."""
+    nan = np.full(p.n, np.nan)
+    return finish(p, method, nan, nan, nan, nan, nan, nan, p.flags | Flag.INVALID | Flag.EMPTY, origin_uv)

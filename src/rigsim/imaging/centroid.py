@@ -32,7 +32,7 @@ import math
 import numpy as np
 from scipy.special import erf
 
-from ._common import Prepared, edge_flags, finish, prepare, secondary_peak_flags
+from ._common import Prepared, edge_flags, finish, prepare, secondary_peak_flags, trivial_result
 from .result import Centroid, CentroidBatch, Flag, NoiseModel
 
 __all__ = [
@@ -109,6 +109,8 @@ def centroid_tcom(
     """
     p = prepare(img, mask=mask, saturation=saturation, background=background, noise=noise, flags=flags)
     n = p.n
+    if n == 0 or min(p.data.shape[1:]) < 3:
+        return trivial_result(p, "tcom", origin_uv)
     thr_given = None if threshold is None else np.broadcast_to(np.asarray(threshold, dtype=float), (n,))
     thr = p.bg + threshold_sigma * p.bg_sd if thr_given is None else thr_given.astype(float)
     u, v, W, var_u, var_v, flux, var_flux, npix = _threshold_moments(p, thr, mode)
@@ -150,6 +152,8 @@ def centroid_wcom(
     """
     p = prepare(img, mask=mask, saturation=saturation, background=background, noise=noise, flags=flags)
     n = p.n
+    if n == 0 or min(p.data.shape[1:]) < 3:
+        return trivial_result(p, "wcom", origin_uv)
     d = p.data - p.bg[:, None, None]
     d = np.where(p.good, d, 0.0)
     thr = p.bg + 3.0 * p.bg_sd
@@ -467,8 +471,7 @@ def centroid_gauss(
         raise ValueError(f"sigma_px must be finite and > 0, got {sigma_px!r}")
     fl = p.flags.copy()
     if n == 0 or h < 3 or w < 3:
-        nan = np.full(n, np.nan)
-        return finish(p, "gauss", nan, nan, nan, nan, nan, nan, fl | Flag.INVALID, origin_uv)
+        return trivial_result(p, "gauss", origin_uv)
     P = 5 if fit_sigma else 4
     u, v, F, B = _gauss_init(p, s)
     use = p.good & ~p.sat
@@ -531,8 +534,8 @@ def centroid_gauss_lsq(
     s0 = np.broadcast_to(np.asarray(1.0 if sigma_px is None else sigma_px, dtype=float), (n,))
     fl = p.flags.copy()
     out = {k: np.full(n, np.nan) for k in ("u", "v", "su", "sv", "F", "B", "sF", "s_u", "s_v", "chi2")}
-    if h < 3 or w < 3:
-        return finish(p, "gauss_lsq", out["u"], out["v"], out["su"], out["sv"], out["F"], out["B"], fl | Flag.INVALID, origin_uv)
+    if n == 0 or h < 3 or w < 3:
+        return trivial_result(p, "gauss_lsq", origin_uv)
     u0, v0, f0, b0 = _gauss_init(p, s0.copy())
     npar_sig = 2 if elliptical else (1 if fit_sigma else 0)
     for i in range(n):
@@ -613,9 +616,11 @@ def centroid_gauss_lsq(
         out["chi2"][i] = np.sum((data - mu) ** 2 / var) / dof if dof > 0 else np.nan
         if not status_ok:
             fl[i] |= Flag.NOT_CONVERGED
+        with np.errstate(divide="ignore", invalid="ignore"):
+            snr_i = out["F"][i] / out["sF"][i]
         if not out["F"][i] > 0:
             fl[i] |= Flag.EMPTY | Flag.INVALID
-        elif not out["F"][i] / out["sF"][i] >= min_snr:
+        elif not snr_i >= min_snr:
             fl[i] |= Flag.FAINT
         if dof > 0 and out["chi2"][i] > 1.0 + 5.0 * math.sqrt(2.0 / dof):
             fl[i] |= Flag.POOR_FIT

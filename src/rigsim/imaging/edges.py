@@ -207,6 +207,10 @@ def fit_circle_points(uv, *, reject_nsigma: float = 4.0, max_reject_iter: int = 
         return _invalid_circle(Flag.EMPTY, len(uv), "points")
     keep = np.ones(len(uv), dtype=bool)
     c = np.array(_kasa(uv))
+    # robust (soft L1) start so that a few outliers cannot capture the fit
+    c = least_squares(
+        lambda p: np.hypot(uv[:, 0] - p[0], uv[:, 1] - p[1]) - p[2], c, loss="soft_l1", f_scale=0.5
+    ).x
     res = None
     for _ in range(max_reject_iter):
         pts = uv[keep]
@@ -269,6 +273,7 @@ def fit_ellipse_points(uv, *, reject_nsigma: float = 4.0, max_reject_iter: int =
     if b > a:
         a, b, th = b, a, th + math.pi / 2
     p = np.array([cx, cy, max(a, 1e-3), max(b, 1e-3), th], dtype=float)
+    p = least_squares(_ellipse_residual, p, args=(uv,), loss="soft_l1", f_scale=0.5).x  # robust start
     keep = np.ones(len(uv), dtype=bool)
     res = None
     for _ in range(max_reject_iter):
@@ -371,19 +376,24 @@ def _fit_disk_model(af, good, ep: EdgePoints, cf: CircleFit, fl: Flag, saturatio
         use &= ~(af >= saturation)
     vv, uu = np.mgrid[0:h, 0:w]
     r0 = np.hypot(uu - cf.u, vv - cf.v)
-    s0 = 0.7
+    s0 = 0.5
     band = use & (np.abs(r0 - cf.radius_px) < 4.0 + 3.0 * s0)
     if band.sum() < 10:
         return _invalid_circle(fl | Flag.EMPTY, int(band.sum()), "model")
-    x = uu[band].astype(float)
-    y = vv[band].astype(float)
     d = af[band]
     amp0 = ep.inside - ep.outside
+    # the model is averaged over ss x ss sub-pixel samples (pixel integration), so that ``s`` is
+    # the optical blur alone and sharp edges are not biased by the pixel box
+    ss = 5
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    ou, ov = np.meshgrid(off, off)
+    x = (uu[band].astype(float)[:, None] + ou.ravel()[None, :])  # (K, ss*ss)
+    y = (vv[band].astype(float)[:, None] + ov.ravel()[None, :])
 
     def model(p):
         cu, cv_, R, A, B, s = p
         r = np.hypot(x - cu, y - cv_)
-        return B + A * 0.5 * (1.0 + erf((R - r) / (math.sqrt(2.0) * s)))
+        return B + A * np.mean(0.5 * (1.0 + erf((R - r) / (math.sqrt(2.0) * s))), axis=1)
 
     def jac(p):
         cu, cv_, R, A, B, s = p
@@ -392,12 +402,12 @@ def _fit_disk_model(af, good, ep: EdgePoints, cf: CircleFit, fl: Flag, saturatio
         phi = np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
         dm_dR = A * phi / s
         return np.stack([
-            dm_dR * (x - cu) / r,  # d/dcu: dr/dcu = -(x-cu)/r, dm/dr = -A phi / s
-            dm_dR * (y - cv_) / r,
-            dm_dR,
-            0.5 * (1.0 + erf(z / math.sqrt(2.0))),
-            np.ones_like(r),
-            -A * phi * z / s,
+            np.mean(dm_dR * (x - cu) / r, axis=1),  # dr/dcu = -(x-cu)/r, dm/dr = -A phi / s
+            np.mean(dm_dR * (y - cv_) / r, axis=1),
+            np.mean(dm_dR, axis=1),
+            np.mean(0.5 * (1.0 + erf(z / math.sqrt(2.0))), axis=1),
+            np.ones(x.shape[0]),
+            np.mean(-A * phi * z / s, axis=1),
         ], axis=1)
 
     def variance(mu):
@@ -406,7 +416,7 @@ def _fit_disk_model(af, good, ep: EdgePoints, cf: CircleFit, fl: Flag, saturatio
         return np.maximum(ep.noise_sd**2 + np.maximum(mu - ep.outside, 0.0), 1e-12)
 
     p = np.array([cf.u, cf.v, cf.radius_px, amp0, ep.outside, s0])
-    lo = np.array([-np.inf, -np.inf, 0.5, -np.inf, -np.inf, 0.05])
+    lo = np.array([-np.inf, -np.inf, 0.5, -np.inf, -np.inf, 0.02])
     hi = np.array([np.inf, np.inf, np.inf, np.inf, np.inf, 50.0])
     for _ in range(3):
         sw = 1.0 / np.sqrt(variance(model(p)))

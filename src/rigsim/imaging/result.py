@@ -25,7 +25,7 @@ class Flag(enum.IntFlag):
     EDGE = 2  #: the spot is cut by the frame (or ROI) edge, or lies within ~2 sigma of it
     FAINT = 4  #: estimated flux / sigma_flux below the method's ``min_snr``
     BLENDED = 8  #: a second significant peak in the ROI / a neighbour closer than the ROI size
-    NAN = 16  #: non-finite pixels were present and ignored
+    NAN = 16  #: non-finite (or |value| > 1e30) pixels were present and ignored
     EMPTY = 32  #: no signal: nothing above the threshold, zero or negative flux
     NOT_CONVERGED = 64  #: an iterative method stopped at its iteration limit
     POOR_FIT = 128  #: model fit with reduced chi-square far above 1 (wrong PSF, blend, artefact)
