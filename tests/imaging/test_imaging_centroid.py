@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import (
-    Flag,
     NoiseModel,
     centroid,
     centroid_gauss,

@@ -3,12 +3,11 @@ quality flags that do not depend on the method. Internal module."""
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from .result import Centroid, CentroidBatch, Flag, NoiseModel
+from .result import CentroidBatch, Flag, NoiseModel
 
 MAD_TO_SD = 1.482602218505602
 #: pixels with |value| above this are treated like non-finite ones (no detector gets near it;
