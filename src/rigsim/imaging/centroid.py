@@ -157,7 +157,7 @@ def centroid_wcom(
     d = p.data - p.bg[:, None, None]
     d = np.where(p.good, d, 0.0)
     thr = p.bg + 3.0 * p.bg_sd
-    u, v, W, *_ = _threshold_moments(p, thr, "subtract")
+    u, v, W, _, _, tflux, tvar_flux, _ = _threshold_moments(p, thr, "subtract")
     fl = p.flags.copy()
     start_bad = ~(np.isfinite(u) & np.isfinite(v))
     pv, pu = _peak_index(p, d)
@@ -222,7 +222,9 @@ def centroid_wcom(
         var_u = np.sum((wgt * dx) ** 2 * var, axis=(1, 2)) / gu_d**2
         var_v = np.sum((wgt * dy) ** 2 * var, axis=(1, 2)) / gv_d**2
         flux = np.sum(d, axis=(1, 2))
-        snr = flux / np.sqrt(np.sum(var, axis=(1, 2)))
+        # detection SNR from the pixels above background + 3 sigma (as in centroid_tcom): the
+        # whole-ROI sum is too noisy to judge faintness
+        snr = tflux / np.sqrt(tvar_flux)
     bad = ~(np.sum(wd, axis=(1, 2)) > 0) | ~(gu_d < 0) | ~(gv_d < 0)
     fl[bad] |= Flag.EMPTY | Flag.INVALID
     fl[~bad & ~(snr >= min_snr)] |= Flag.FAINT
