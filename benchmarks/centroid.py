@@ -2,7 +2,7 @@
 synthetic spots, against the Cramér–Rao bound.
 
 Spots: pixel-integrated circular Gaussian, sigma = 1 px; background 20 e-/px, read noise 5 e-,
-gain 1 e-/DN; random sub-pixel phase, uniform in [-0.5, 0.5) px on both axes; known truth.
+gain K = 1 DN/e-; random sub-pixel phase, uniform in [-0.5, 0.5) px on both axes; known truth.
 SNR definition (rigsim.imaging.synth.snr_gaussian):
 
     SNR = F / sqrt(F + 4 pi sigma^2 (B + R^2))      (F total flux, B background/px, R read noise)
@@ -57,7 +57,7 @@ from rigsim.imaging.synth import add_noise, flux_for_snr, gaussian_spots
 SIGMA_PX = 1.0
 BACKGROUND_E = 20.0
 READ_NOISE_E = 5.0
-NOISE = NoiseModel(gain_e_per_dn=1.0, read_noise_e=READ_NOISE_E)
+NOISE = NoiseModel(gain_dn_per_e=1.0, read_noise_e=READ_NOISE_E)
 TILE = 9
 SNRS = (30.0, 100.0, 300.0)
 

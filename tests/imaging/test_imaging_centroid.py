@@ -144,7 +144,7 @@ def test_origin_shift():
 
 
 def test_default_noise_model_without_noisemodel():
-    """Without a NoiseModel (gain 1 e-/DN assumed, background noise measured) the fit is still
+    """Without a NoiseModel (gain K = 1 DN/e- assumed, background noise measured) the fit is still
     unbiased and its sigma is within 20 % of the scatter for gain-1 data."""
     img, u, v, _, _ = _spots(100.0, 1500, seed=21)
     r = centroid_gauss(img, sigma_px=SIGMA)
@@ -175,7 +175,7 @@ def test_pixel_convention_matches_opencv_moments_and_fitellipse():
     (cx, cy), _, _ = cv2.fitEllipse(max(contours, key=len))
     assert cx == pytest.approx(u0, abs=0.1) and cy == pytest.approx(v0, abs=0.1)
     # the pixel-integrated blurred-disk model is unbiased even for this sharp edge
-    c = fit_circle(img, method="model", noise=NoiseModel(1.0e4, 1.0))
+    c = fit_circle(img, method="model", noise=NoiseModel(1.0e-4, 1.0))
     assert c.u == pytest.approx(m["m10"] / m["m00"], abs=3e-3)
     assert c.v == pytest.approx(m["m01"] / m["m00"], abs=3e-3)
     # the faster edge-point fit has a small systematic error from linear interpolation across

@@ -8,7 +8,7 @@ import pytest
 from rigsim.imaging import Flag, NoiseModel, detect, estimate_background, find_spots
 from rigsim.imaging.synth import add_noise, gaussian_frame
 
-NOISE = NoiseModel(2.0, 6.0)  # gain 2 e-/DN, read noise 6 e-
+NOISE = NoiseModel(0.5, 6.0)  # K = 0.5 DN/e-, read noise 6 e-
 BG_DN = 40.0
 
 

@@ -57,13 +57,15 @@ def test_snr_definition_round_trip():
 
 
 def test_noise_statistics_and_seeding():
-    nm = NoiseModel(gain_e_per_dn=2.0, read_noise_e=4.0)
-    exp = np.full((200, 200), 50.0)  # DN
+    nm = NoiseModel(gain_dn_per_e=0.5, read_noise_e=4.0, offset_dn=64.0)
+    exp = np.full((200, 200), 114.0)  # DN: 50 DN of signal above the 64 DN offset
     a = add_noise(exp, nm, np.random.default_rng(1))
     b = add_noise(exp, nm, np.random.default_rng(1))
     assert np.array_equal(a, b)
-    assert a.mean() == pytest.approx(50.0, abs=5 * math.sqrt(nm.variance(np.array(50.0)) / a.size))
-    assert a.var() == pytest.approx(float(nm.variance(np.array(50.0))), rel=0.03)
+    var = float(nm.variance(np.array(114.0)))
+    assert var == pytest.approx(0.5 * 50.0 + (0.5 * 4.0) ** 2)
+    assert a.mean() == pytest.approx(114.0, abs=5 * math.sqrt(var / a.size))
+    assert a.var() == pytest.approx(var, rel=0.03)
     with pytest.raises(TypeError):
         add_noise(exp, nm, 1)
     s = add_noise(exp * 100, nm, np.random.default_rng(2), saturation_dn=5000.0)

@@ -36,11 +36,11 @@ class Prepared:
         """Pixel variance (DN^2) for expected values ``expected`` (N, h, w) (background included).
 
         With a NoiseModel: its Poisson + read-noise formula. Without one: the measured
-        background variance plus the signal above background as Poisson with gain 1 e-/DN.
+        background variance plus the signal above background as Poisson with gain K = 1 DN/e-.
         """
         if self.noise is not None:
             var = self.noise.variance(expected)
-            floor = 0.25 / self.noise.gain_e_per_dn**2  # (half an electron)^2
+            floor = self.noise.min_variance_dn2
         else:
             sel = slice(None) if idx is None else idx
             b = self.bg[sel] if bg is None else bg
@@ -51,7 +51,7 @@ class Prepared:
     def variance_flat(self, expected: np.ndarray, roi: np.ndarray) -> np.ndarray:
         """Like `variance` for a flat array of pixels belonging to ROIs ``roi``."""
         if self.noise is not None:
-            return np.maximum(self.noise.variance(expected), 0.25 / self.noise.gain_e_per_dn**2)
+            return np.maximum(self.noise.variance(expected), self.noise.min_variance_dn2)
         var = self.bg_sd[roi] ** 2 + np.maximum(expected - self.bg[roi], 0.0)
         return np.maximum(var, 1e-300)
 

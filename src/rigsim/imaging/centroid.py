@@ -15,7 +15,7 @@ background : None, float or (N,) array
     Background level (DN). None: median of the ROI's outer ring of pixels.
 noise : NoiseModel or None
     Pixel noise of the bias-subtracted frame. None: background noise is measured (MAD of the
-    ring) and the signal is assumed Poisson with gain 1 e-/DN.
+    ring) and the signal is assumed Poisson with gain K = 1 DN/e-.
 saturation : float or None
     Pixels at or above it are flagged SATURATED (and ignored by the Gaussian fits). For integer
     arrays None means the dtype's maximum.

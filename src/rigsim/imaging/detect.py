@@ -169,7 +169,7 @@ def _separated(img: np.ndarray, bgl: np.ndarray, rms: np.ndarray, p1, p2, dip_ns
         return True
     k = int(np.argmin(line))
     h2 = img[v2, u2] - bgl[v2, u2]
-    # pixel noise ~ sqrt(background rms^2 + signal) (gain ~ 1 e-/DN assumed here)
+    # pixel noise ~ sqrt(background rms^2 + signal) (K ~ 1 DN/e- assumed here)
     sd2 = rms[v2, u2] ** 2 + max(h2, 0.0)
     sds = rms[lv[k], lu[k]] ** 2 + max(line[k], 0.0)
     return (h2 - line[k]) > max(dip_nsigma * math.sqrt(sd2 + sds), 0.1 * h2)

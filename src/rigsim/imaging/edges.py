@@ -346,7 +346,7 @@ def fit_circle(
     ``method="edge"``: geometric circle through `edge_points` (level halfway between outside and
     inside levels unless ``level``). ``method="model"``: then fits I = B + A * Phi((R - r) / s)
     (Phi the normal CDF, r the distance from the centre) to the pixels within a few s of the edge,
-    weighted by ``noise`` (or by measured background noise, gain 1 e-/DN); its covariance is the
+    weighted by ``noise`` (or by measured background noise, gain K = 1 DN/e-); its covariance is the
     inverse Fisher matrix. Flags: EDGE if the circle is cut by the frame, SATURATED, NAN, EMPTY
     / FAINT when no edge is found (then INVALID, NaN centre).
     """
@@ -412,7 +412,7 @@ def _fit_disk_model(af, good, ep: EdgePoints, cf: CircleFit, fl: Flag, saturatio
 
     def variance(mu):
         if noise is not None:
-            return np.maximum(noise.variance(mu), 0.25 / noise.gain_e_per_dn**2)
+            return np.maximum(noise.variance(mu), noise.min_variance_dn2)
         return np.maximum(ep.noise_sd**2 + np.maximum(mu - ep.outside, 0.0), 1e-12)
 
     p = np.array([cf.u, cf.v, cf.radius_px, amp0, ep.outside, s0])

@@ -34,30 +34,52 @@ class Flag(enum.IntFlag):
 
 @dataclass(frozen=True)
 class NoiseModel:
-    """Per-pixel noise of a bias-subtracted frame in DN.
+    """Per-pixel noise of a frame in DN (EMVA 1288 linear camera, as `rigsim.detector`).
 
-    variance_DN = max(expected_DN, 0) / gain_e_per_dn + (read_noise_e / gain_e_per_dn)**2
+        variance_DN = K * max(expected_DN - offset_dn, 0) + (K * read_noise_e)**2 + extra_variance_dn2
 
-    ``expected_DN`` includes the background (sky/dark), which is assumed to be Poisson. Subtract
-    any electronic offset (bias) before using a NoiseModel.
+    K = ``gain_dn_per_e`` (system gain, DN per electron). ``expected_DN`` includes the background
+    (sky and dark signal, assumed Poisson) and the ``offset_dn`` black level (noise-free).
+    ``extra_variance_dn2`` adds e.g. ADC quantisation (1/12 DN^2).
     """
 
-    gain_e_per_dn: float = 1.0
+    gain_dn_per_e: float = 1.0
     read_noise_e: float = 0.0
+    offset_dn: float = 0.0
+    extra_variance_dn2: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.gain_e_per_dn) and self.gain_e_per_dn > 0):
-            raise ValueError(f"NoiseModel.gain_e_per_dn must be finite and > 0, got {self.gain_e_per_dn!r}")
-        if not (np.isfinite(self.read_noise_e) and self.read_noise_e >= 0):
-            raise ValueError(f"NoiseModel.read_noise_e must be finite and >= 0, got {self.read_noise_e!r}")
+        for name, lo_ok in (("gain_dn_per_e", lambda x: x > 0), ("read_noise_e", lambda x: x >= 0),
+                            ("offset_dn", lambda x: True), ("extra_variance_dn2", lambda x: x >= 0)):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float, np.floating, np.integer)) and np.isfinite(val) and lo_ok(val)):
+                rng = "> 0" if name == "gain_dn_per_e" else (">= 0" if name != "offset_dn" else "finite")
+                raise ValueError(f"NoiseModel.{name} must be {rng}, got {val!r}")
+
+    @classmethod
+    def from_detector(cls, cfg) -> "NoiseModel":
+        """From any object with ``gain_dn_per_e``, ``read_noise_e`` and ``offset_dn`` (e.g.
+        `rigsim.detector.DetectorConfig`); adds the 1/12 DN^2 quantisation variance."""
+        return cls(
+            gain_dn_per_e=float(cfg.gain_dn_per_e),
+            read_noise_e=float(cfg.read_noise_e),
+            offset_dn=float(getattr(cfg, "offset_dn", 0.0)),
+            extra_variance_dn2=1.0 / 12.0,
+        )
 
     @property
     def read_noise_dn(self) -> float:
-        return self.read_noise_e / self.gain_e_per_dn
+        return self.read_noise_e * self.gain_dn_per_e
+
+    @property
+    def min_variance_dn2(self) -> float:
+        """Variance floor used for weights: (half an electron)^2 in DN^2."""
+        return (0.5 * self.gain_dn_per_e) ** 2
 
     def variance(self, expected_dn: np.ndarray) -> np.ndarray:
         """Variance (DN^2) of pixels whose expected value is ``expected_dn``."""
-        return np.maximum(expected_dn, 0.0) / self.gain_e_per_dn + self.read_noise_dn**2
+        k = self.gain_dn_per_e
+        return k * np.maximum(expected_dn - self.offset_dn, 0.0) + self.read_noise_dn**2 + self.extra_variance_dn2
 
 
 @dataclass(frozen=True)

@@ -140,18 +140,23 @@ def add_noise(
     *,
     saturation_dn: float | None = None,
 ) -> np.ndarray:
-    """Poisson(expected * gain) electrons + Gaussian read noise, returned in DN (float).
+    """Poisson electrons + Gaussian read noise, returned in DN (float, not quantised).
 
-    ``rng`` must be a numpy Generator (explicit seeding is mandatory in rigsim). Values above
-    ``saturation_dn`` are clipped to it.
+    electrons ~ Poisson((expected_dn - offset_dn) / K) + Normal(0, read_noise_e);
+    DN = K * electrons + offset_dn (K = ``noise.gain_dn_per_e``; ``extra_variance_dn2`` is added
+    as Gaussian noise). ``rng`` must be a numpy Generator (explicit seeding is mandatory in
+    rigsim). Values above ``saturation_dn`` are clipped to it.
     """
     if not isinstance(rng, np.random.Generator):
         raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(seed)")
-    lam = np.maximum(np.asarray(expected_dn, dtype=float), 0.0) * noise.gain_e_per_dn
+    k = noise.gain_dn_per_e
+    lam = np.maximum(np.asarray(expected_dn, dtype=float) - noise.offset_dn, 0.0) / k
     e = rng.poisson(lam).astype(float)
     if noise.read_noise_e > 0:
         e += rng.normal(0.0, noise.read_noise_e, size=e.shape)
-    dn = e / noise.gain_e_per_dn
+    dn = e * k + noise.offset_dn
+    if noise.extra_variance_dn2 > 0:
+        dn += rng.normal(0.0, np.sqrt(noise.extra_variance_dn2), size=dn.shape)
     if saturation_dn is not None:
         dn = np.minimum(dn, saturation_dn)
     return dn
