@@ -10,6 +10,7 @@ from .centroid import (
     centroid,
     centroid_gauss,
     centroid_gauss_lsq,
+    centroid_gauss_multi,
     centroid_tcom,
     centroid_wcom,
 )
@@ -39,6 +40,7 @@ __all__ = [
     "centroid_wcom",
     "centroid_gauss",
     "centroid_gauss_lsq",
+    "centroid_gauss_multi",
     "METHODS",
     "CRLB",
     "crlb_gaussian",

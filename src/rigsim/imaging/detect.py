@@ -157,7 +157,8 @@ def _local_maxima(a: np.ndarray) -> np.ndarray:
     return (a >= dil) & np.isfinite(a)
 
 
-def _separated(img: np.ndarray, bgl: np.ndarray, rms: np.ndarray, p1, p2, dip_nsigma: float) -> bool:
+def _separated(img: np.ndarray, bgl: np.ndarray, rms: np.ndarray, p1, p2, dip_nsigma: float,
+               dip_fraction: float, noise: NoiseModel | None) -> bool:
     """True if the straight line between peaks p1 (brighter) and p2 dips significantly."""
     (v1, u1), (v2, u2) = p1, p2
     nsamp = int(max(abs(v2 - v1), abs(u2 - u1))) * 2 + 1
@@ -169,10 +170,13 @@ def _separated(img: np.ndarray, bgl: np.ndarray, rms: np.ndarray, p1, p2, dip_ns
         return True
     k = int(np.argmin(line))
     h2 = img[v2, u2] - bgl[v2, u2]
-    # pixel noise ~ sqrt(background rms^2 + signal) (K ~ 1 DN/e- assumed here)
-    sd2 = rms[v2, u2] ** 2 + max(h2, 0.0)
-    sds = rms[lv[k], lu[k]] ** 2 + max(line[k], 0.0)
-    return (h2 - line[k]) > max(dip_nsigma * math.sqrt(sd2 + sds), 0.1 * h2)
+
+    def var(val, bg_rms):  # pixel variance: background noise + signal shot noise
+        k_gain = 1.0 if noise is None else noise.gain_dn_per_e  # K = 1 DN/e- without a NoiseModel
+        return bg_rms**2 + k_gain * max(val, 0.0)
+
+    sd = math.sqrt(var(h2, rms[v2, u2]) + var(line[k], rms[lv[k], lu[k]]))
+    return (h2 - line[k]) > max(dip_nsigma * sd, dip_fraction * h2)
 
 
 def detect(
@@ -186,11 +190,15 @@ def detect(
     mask=None,
     deblend: bool = True,
     dip_nsigma: float = 3.0,
+    dip_fraction: float = 0.03,
+    noise: NoiseModel | None = None,
 ) -> Detections:
     """Find spots: pixels above background + ``threshold_sigma`` * rms, 8-connected components
     of at least ``min_area_px`` pixels. With ``deblend``, a component holding several local maxima
-    that are separated by a significant dip (``dip_nsigma``, and at least 10 % of the fainter
-    peak) is split into one source per peak, each flagged BLENDED.
+    that are separated by a significant dip (``dip_nsigma`` times its noise, and at least
+    ``dip_fraction`` of the fainter peak's height) is split into one source per peak, each
+    flagged BLENDED. ``noise`` (optional) sets the shot-noise part of the dip test (default K = 1
+    DN/e-).
 
     Per-source flags: SATURATED (a pixel >= ``saturation``), EDGE (touches the frame border or a
     non-finite/masked pixel region), NAN (non-finite pixels adjacent), BLENDED.
@@ -270,7 +278,7 @@ def detect(
         peaks = [pk[0]]
         if deblend:
             for p in pk[1:]:
-                if all(_separated(a, bgl, rms, q, p, dip_nsigma) for q in peaks):
+                if all(_separated(a, bgl, rms, q, p, dip_nsigma, dip_fraction, noise) for q in peaks):
                     peaks.append(p)
         if len(peaks) == 1:
             yy, xx = np.nonzero(comp)
@@ -391,6 +399,7 @@ def find_spots(
     saturation: float | None = None,
     box_px: int | None = None,
     mask=None,
+    deblend_fit: bool = True,
     **centroid_kwargs,
 ) -> tuple[CentroidBatch, Detections]:
     """Detect all spots in a frame and centroid each on its own ROI (one batched call).
@@ -398,13 +407,15 @@ def find_spots(
     ``roi_px`` defaults to the odd size covering +-4 sigma (``sigma_px`` or 1.5 px), at least 7.
     Returned positions are in frame coordinates. Flags: from detection (BLENDED, SATURATED, EDGE),
     from ROI extraction (EDGE), from the centroider; also BLENDED when another detection's peak
-    lies inside a spot's ROI.
+    lies inside a spot's ROI. With ``deblend_fit`` and a Gaussian method, each group of blended
+    spots (up to 8) is then refitted jointly by `centroid_gauss_multi` (they keep BLENDED).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {sorted(METHODS)}, got {method!r}")
     a = _as_frame(img)
     det = detect(
-        a, threshold_sigma=threshold_sigma, min_area_px=min_area_px, saturation=saturation, box_px=box_px, mask=mask
+        a, threshold_sigma=threshold_sigma, min_area_px=min_area_px, saturation=saturation, box_px=box_px,
+        mask=mask, noise=noise,
     )
     s_guess = 1.5 if sigma_px is None else float(sigma_px)
     size = roi_px if roi_px is not None else max(7, 2 * int(math.ceil(4.0 * s_guess)) + 1)
@@ -445,4 +456,41 @@ def find_spots(
     only_outside = (rois.flags & Flag.EDGE) != 0
     if only_outside.any() and np.all(np.isfinite(a)):
         res.flags[only_outside] &= ~int(Flag.NAN)
+    if deblend_fit and method in ("gauss", "gauss_lsq"):
+        _refit_blends(a, det, res, fl, close, r, sigma_px, noise, saturation, mask)
     return res, det
+
+
+def _refit_blends(a, det, res: CentroidBatch, pre_flags, close, r, sigma_px, noise, saturation, mask, max_group: int = 8):
+    """Replace the single-spot fits of blended groups (spots whose ROIs hold another spot's peak)
+    by one joint multi-Gaussian fit per group. The BLENDED flag stays."""
+    from scipy.sparse.csgraph import connected_components
+
+    from .centroid import centroid_gauss_multi
+
+    n_grp, grp = connected_components(close, directed=False)
+    h, w = a.shape
+    for g in range(n_grp):
+        idx = np.flatnonzero(grp == g)
+        if len(idx) < 2 or len(idx) > max_group:
+            continue
+        u0 = max(int(det.peak_u[idx].min()) - r, 0)
+        v0 = max(int(det.peak_v[idx].min()) - r, 0)
+        u1 = min(int(det.peak_u[idx].max()) + r + 1, w)
+        v1 = min(int(det.peak_v[idx].max()) + r + 1, h)
+        sub = a[v0:v1, u0:u1]
+        sub_mask = None if mask is None else np.asarray(mask, dtype=bool)[v0:v1, u0:u1]
+        start = np.stack([det.peak_u[idx] - u0, det.peak_v[idx] - v0], axis=1).astype(float)
+        good_prev = np.isfinite(res.u[idx]) & np.isfinite(res.flux[idx])
+        start[good_prev] = np.stack([res.u[idx] - u0, res.v[idx] - v0], axis=1)[good_prev]
+        flux0 = np.where(good_prev & (res.flux[idx] > 0), res.flux[idx], np.maximum(det.flux[idx], 1e-6))
+        m = centroid_gauss_multi(
+            sub, start, sigma_px=sigma_px if sigma_px is not None else 1.0, fit_sigma=sigma_px is None,
+            flux0=flux0, noise=noise, saturation=saturation, mask=sub_mask, origin_uv=(u0, v0),
+        )
+        for j, i in enumerate(idx):
+            res.u[i], res.v[i] = m.u[j], m.v[j]
+            res.sigma_u[i], res.sigma_v[i] = m.sigma_u[j], m.sigma_v[j]
+            res.flux[i], res.background[i] = m.flux[j], m.background[j]
+            # detection / frame-edge flags stay; the single-spot fit's own flags are replaced
+            res.flags[i] = int(pre_flags[i]) | int(m.flags[j]) | int(Flag.BLENDED)
