@@ -151,6 +151,8 @@ def test_boundary_errors_are_ours():
         centroid_gauss(np.zeros((9, 9)))
     with pytest.raises(ValueError, match="sigma_px"):
         centroid_gauss(np.zeros((9, 9)), sigma_px=-1.0)
+    with pytest.raises(ValueError, match="window_sigma_px"):
+        centroid(np.zeros((9, 9)), "wcom", window_sigma_px=0.5)
     with pytest.raises(ValueError, match="method"):
         centroid(np.zeros((9, 9)), "nope")
     with pytest.raises(ValueError, match="gain"):
