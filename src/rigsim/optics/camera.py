@@ -21,6 +21,66 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def brown_distort(x, y, k1, k2, p1, p2, k3):
+    """Normalised undistorted (x, y) → distorted (xd, yd), OpenCV's Brown model; broadcasts."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    r2 = x * x + y * y
+    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return xd, yd
+
+
+def brown_jacobian(x, y, k1, k2, p1, p2, k3):
+    """Entries (a, b, c, d) of ∂(xd, yd)/∂(x, y) = [[a, b], [c, d]]."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    r2 = x * x + y * y
+    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    dr = 2.0 * k1 + r2 * (4.0 * k2 + 6.0 * k3 * r2)  # 2·d(rad)/d(r²)
+    a = rad + dr * x * x + 2.0 * p1 * y + 6.0 * p2 * x
+    b = dr * x * y + 2.0 * p1 * x + 2.0 * p2 * y
+    d = rad + dr * y * y + 6.0 * p1 * y + 2.0 * p2 * x
+    return a, b, b, d
+
+
+def brown_undistort(xd, yd, k1, k2, p1, p2, k3, r2_max=np.inf, iterations: int = 20):
+    """Distorted → undistorted normalised coordinates (Newton). Returns (x, y, valid)."""
+    xd = np.asarray(xd, dtype=np.float64)
+    yd = np.asarray(yd, dtype=np.float64)
+    c = (k1, k2, p1, p2, k3)
+    x, y = xd.copy(), yd.copy()
+    for _ in range(iterations):
+        fxd, fyd = brown_distort(x, y, *c)
+        ex, ey = fxd - xd, fyd - yd
+        a, b, cc, d = brown_jacobian(x, y, *c)
+        det = a * d - b * cc
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = x - (d * ex - b * ey) / det
+            y = y - (-cc * ex + a * ey) / det
+    fxd, fyd = brown_distort(x, y, *c)
+    a, b, cc, d = brown_jacobian(x, y, *c)
+    valid = (np.hypot(fxd - xd, fyd - yd) < 1e-9) & (x * x + y * y < r2_max) & (a * d - b * cc > 0)
+    return x, y, valid
+
+
+def radial_r2_max(k1: float, k2: float, k3: float, cap: float = 1e6) -> float:
+    """Largest r² (normalised, undistorted) below which r·radial(r) is strictly increasing.
+
+    d/dr [r(1 + k1 r² + k2 r⁴ + k3 r⁶)] = 1 + 3k1 s + 5k2 s² + 7k3 s³ with s = r²; beyond its
+    first positive root the radial map folds back and a projection would land in a wrong place.
+    """
+    coeffs = [7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]
+    while coeffs and coeffs[0] == 0.0:
+        coeffs.pop(0)
+    if len(coeffs) <= 1:
+        return cap
+    roots = np.roots(coeffs)
+    pos = [r.real for r in roots if abs(r.imag) < 1e-12 * max(1.0, abs(r.real)) and r.real > 0]
+    return float(min(min(pos), cap)) if pos else cap
+
+
 @dataclass(frozen=True)
 class PinholeBrown:
     fx: float
@@ -56,35 +116,31 @@ class PinholeBrown:
         return np.array([self.k1, self.k2, self.p1, self.p2, self.k3])
 
     def normalized_to_pixel(self, xy: np.ndarray) -> np.ndarray:
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x + y * y
-        radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        xd = x * radial + 2 * self.p1 * x * y + self.p2 * (r2 + 2 * x * x)
-        yd = y * radial + self.p1 * (r2 + 2 * y * y) + 2 * self.p2 * x * y
+        xd, yd = brown_distort(xy[..., 0], xy[..., 1], *self.dist_coeffs())
         return np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=-1)
 
     def project(self, dirs: np.ndarray) -> np.ndarray:
-        """Directions (…, 3) in the camera frame → pixels (…, 2). NaN where s_z ≤ 0."""
+        """Directions (…, 3) in the camera frame → pixels (…, 2).
+
+        NaN where s_z ≤ 0 or beyond the distortion model's monotonic domain (``radial_r2_max``),
+        where the Brown polynomial folds back and the pixel would be wrong.
+        """
         dirs = np.asarray(dirs, dtype=float)
         z = dirs[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             xy = dirs[..., :2] / z[..., None]
         uv = self.normalized_to_pixel(xy)
-        uv[z <= 0] = np.nan
+        r2 = np.sum(xy * xy, axis=-1)
+        uv[(z <= 0) | ~(r2 < radial_r2_max(self.k1, self.k2, self.k3))] = np.nan
         return uv
 
     def pixel_to_normalized(self, uv: np.ndarray, iterations: int = 20) -> np.ndarray:
-        """Invert the distortion (fixed-point iteration, like cv2.undistortPoints)."""
+        """Invert the distortion (Newton); NaN where it has no valid inverse."""
         uv = np.asarray(uv, dtype=float)
-        xd = np.stack([(uv[..., 0] - self.cx) / self.fx, (uv[..., 1] - self.cy) / self.fy], -1)
-        xy = xd.copy()
-        for _ in range(iterations):
-            x, y = xy[..., 0], xy[..., 1]
-            r2 = x * x + y * y
-            radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-            dx = 2 * self.p1 * x * y + self.p2 * (r2 + 2 * x * x)
-            dy = self.p1 * (r2 + 2 * y * y) + 2 * self.p2 * x * y
-            xy = np.stack([(xd[..., 0] - dx) / radial, (xd[..., 1] - dy) / radial], -1)
+        x, y, ok = brown_undistort((uv[..., 0] - self.cx) / self.fx, (uv[..., 1] - self.cy) / self.fy,
+                                   *self.dist_coeffs(), radial_r2_max(self.k1, self.k2, self.k3), iterations)
+        xy = np.stack([x, y], -1)
+        xy[~ok] = np.nan
         return xy
 
     def unproject(self, uv: np.ndarray) -> np.ndarray:

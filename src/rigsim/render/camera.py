@@ -28,20 +28,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from rigsim.optics.camera import brown_distort, brown_jacobian, brown_undistort, radial_r2_max
+
 __all__ = ["PinholeCamera", "TelecentricCamera", "radial_r2_max"]
-
-
-def radial_r2_max(k1: float, k2: float, k3: float, cap: float = 1e6) -> float:
-    """Largest r^2 (normalised, undistorted) below which r*radial(r) is strictly increasing."""
-    # d/dr [r (1 + k1 r^2 + k2 r^4 + k3 r^6)] = 1 + 3 k1 s + 5 k2 s^2 + 7 k3 s^3, s = r^2
-    coeffs = [7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0]
-    while coeffs and coeffs[0] == 0.0:
-        coeffs.pop(0)
-    if len(coeffs) <= 1:
-        return cap
-    roots = np.roots(coeffs)
-    pos = [r.real for r in roots if abs(r.imag) < 1e-12 * max(1.0, abs(r.real)) and r.real > 0]
-    return float(min(min(pos), cap)) if pos else cap
 
 
 @dataclass(frozen=True)
@@ -101,45 +90,15 @@ class PinholeCamera:
     # -- distortion ---------------------------------------------------------------------------
     def distort(self, x, y):
         """Normalised undistorted (x, y) -> distorted (xd, yd); broadcasts."""
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
-        r2 = x * x + y * y
-        rad = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        xd = x * rad + 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x)
-        yd = y * rad + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y
-        return xd, yd
+        return brown_distort(x, y, *self.dist_coeffs)
 
     def distort_jacobian(self, x, y):
         """Entries (a, b, c, d) of d(xd, yd)/d(x, y) = [[a, b], [c, d]]."""
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
-        r2 = x * x + y * y
-        rad = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        dr = 2.0 * self.k1 + r2 * (4.0 * self.k2 + 6.0 * self.k3 * r2)  # d rad / d(r2) * 2
-        a = rad + dr * x * x + 2.0 * self.p1 * y + 6.0 * self.p2 * x
-        b = dr * x * y + 2.0 * self.p1 * x + 2.0 * self.p2 * y
-        c = dr * x * y + 2.0 * self.p1 * x + 2.0 * self.p2 * y
-        d = rad + dr * y * y + 6.0 * self.p1 * y + 2.0 * self.p2 * x
-        return a, b, c, d
+        return brown_jacobian(x, y, *self.dist_coeffs)
 
     def undistort(self, xd, yd, iterations: int = 20):
         """Distorted normalised -> undistorted normalised (Newton). Returns (x, y, valid)."""
-        xd = np.asarray(xd, dtype=np.float64)
-        yd = np.asarray(yd, dtype=np.float64)
-        x, y = xd.copy(), yd.copy()
-        for _ in range(iterations):
-            fxd, fyd = self.distort(x, y)
-            ex, ey = fxd - xd, fyd - yd
-            a, b, c, d = self.distort_jacobian(x, y)
-            det = a * d - b * c
-            with np.errstate(divide="ignore", invalid="ignore"):
-                x = x - (d * ex - b * ey) / det
-                y = y - (-c * ex + a * ey) / det
-        fxd, fyd = self.distort(x, y)
-        a, b, c, d = self.distort_jacobian(x, y)
-        res = np.hypot(fxd - xd, fyd - yd)
-        valid = (res < 1e-9) & (x * x + y * y < self.r2_max) & (a * d - b * c > 0)
-        return x, y, valid
+        return brown_undistort(xd, yd, *self.dist_coeffs, self.r2_max, iterations)
 
     # -- projection ---------------------------------------------------------------------------
     def project(self, p_cam):
