@@ -22,6 +22,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from scipy.spatial.transform import Rotation
 
+from rigsim.detector.config import DetectorConfig
+
 
 FaceName = Literal["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
 AxisLabel = Literal["X", "Y", "Z"]
@@ -147,6 +149,7 @@ class AimingCamera(_Model):
     null_sigma_px: float = Field(1.0, ge=0.0, le=100.0, description="1σ residual hole/spot offset at the end of the search (paper's σ1)")
     mounting_sigma_arcsec: float = Field(0.0, ge=0.0, le=3600.0, description="paper's σ3: equivalent null bias from the camera mounting (1σ)")
     mounting_bias_arcsec: Small3 = Field([0.0, 0.0, 0.0], description="true equivalent null bias of this instance (arcsec)")
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
 
     @property
     def object_pixel_mm(self) -> float:
@@ -161,6 +164,7 @@ class Autocollimator(_Model):
     pixel_pitch_um: float = Field(gt=0.0, le=100.0)
     resolution_arcsec: float = Field(gt=0.0, le=60.0, description="reading resolution / accuracy (1σ): 0.1″ for CZ-2")
     distance_mm: float = Field(500.0, gt=0.0, le=100000.0, description="objective to the mirror")
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
 
 
 class PlaneMirror(_Model):
@@ -191,6 +195,7 @@ class SunSensor(_Model):
     distortion: Distortion = Field(default_factory=Distortion)
     R_sun_from_mount: Orientation = Field(description="TRUE mounting rotation of the sensor on the turntable's inner frame")
     centroid_sigma_px: float = Field(0.05, ge=0.0, le=10.0, description="1σ centroid noise used by analytic campaigns")
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
 
     @model_validator(mode="after")
     def _pp_inside(self):
