@@ -1,0 +1,54 @@
+"""Meshes for the rig scenes, built with trimesh and written as binary PLY.
+
+Flat mirrors need per-face normals: RENDERING-NOTES.md measured that interpolated vertex
+normals break the reflection, so every mesh here has split vertices per face (flat shading)
+and the scene entries set ``face_normals = True``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+DEFAULT_MESH_DIR = Path.home() / ".cache" / "rigsim" / "meshes"
+
+
+def _write(mesh: trimesh.Trimesh, name: str, out_dir: Path | None) -> Path:
+    out_dir = Path(out_dir) if out_dir is not None else DEFAULT_MESH_DIR
+    out_dir.mkdir(parents=True, exist_ok=True)
+    data = mesh.export(file_type="ply", encoding="binary")
+    digest = hashlib.sha1(data).hexdigest()[:12]
+    path = out_dir / f"{name}-{digest}.ply"
+    if not path.exists():
+        tmp = path.with_suffix(".tmp")
+        tmp.write_bytes(data)
+        tmp.replace(path)
+    return path
+
+
+def cube_mesh(edge_mm: float) -> trimesh.Trimesh:
+    """Axis-aligned cube of side ``edge_mm`` centred at the origin of the cube frame.
+
+    Its faces' outward normals are the cube frame's ±X, ±Y, ±Z (face "+Z" = the XY face).
+    """
+    box = trimesh.creation.box(extents=[edge_mm] * 3)
+    box.unmerge_vertices()  # flat faces: no shared, averaged vertex normals
+    return box
+
+
+def cube_ply(edge_mm: float, out_dir: Path | None = None) -> Path:
+    return _write(cube_mesh(edge_mm), f"cube_{edge_mm:g}mm", out_dir)
+
+
+def mesh_ply(mesh: trimesh.Trimesh, name: str, out_dir: Path | None = None) -> Path:
+    """Write any trimesh mesh (content-addressed file name, so repeated builds reuse it)."""
+    return _write(mesh, name, out_dir)
+
+
+def face_normals_ok(mesh: trimesh.Trimesh) -> bool:
+    """True if every face normal is one of the six axis directions (a sanity check for tests)."""
+    n = np.round(mesh.face_normals, 12)
+    return bool(np.all(np.sum(np.abs(n) == 1.0, axis=1) == 1))
