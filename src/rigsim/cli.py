@@ -194,6 +194,80 @@ def cmd_doctor(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------ render / export
+
+def _parse_pose(text: str | None, rig) -> dict[str, float]:
+    """'X=10,Y=-5' → {'X': 10.0, 'Y': -5.0} (degrees), checked against the rig's axes and ranges."""
+    if not text:
+        return {}
+    labels = {a.label: a for a in rig.turntable.axes}
+    pose = {}
+    for part in text.split(","):
+        if "=" not in part:
+            raise CliError(f"--pose = {text!r}: expected LABEL=DEGREES[,LABEL=DEGREES], e.g. X=10,Y=-5")
+        k, v = (x.strip() for x in part.split("=", 1))
+        if k not in labels:
+            raise CliError(f"--pose axis {k!r}: this turntable has axes {sorted(labels)}")
+        try:
+            val = float(v)
+        except ValueError:
+            raise CliError(f"--pose {k} = {v!r}: not a number of degrees") from None
+        lo, hi = labels[k].range_deg
+        if not lo <= val <= hi:
+            raise CliError(f"--pose {k} = {val}: allowed range is {lo} to {hi} degrees")
+        pose[k] = val
+    return pose
+
+
+def cmd_scene_export(args) -> int:
+    from rigsim.render.scenes.export import export_rig
+    from rigsim.rig import load_rig
+
+    rig = load_rig(args.rig)
+    pose = _parse_pose(args.pose, rig)
+    for p in export_rig(rig, Path(args.xml), pose, spp=args.spp):
+        print(f"wrote {p}")
+    print(f"render one with: mitsuba -o out.exr {Path(args.xml) / 'sun_sensor.xml'}")
+    return 0
+
+
+def cmd_render_sun_sensor(args) -> int:
+    import cv2
+
+    from rigsim.render.scenes.sun_sensor import SunSensorScene
+    from rigsim.rig import load_rig
+    from rigsim.truth import realization_from_rig
+
+    rig = load_rig(args.rig)
+    pose = _parse_pose(args.pose, rig)
+    if args.spp < 1 or args.spp & (args.spp - 1) or (args.spp.bit_length() - 1) % 2:
+        raise CliError(f"--spp = {args.spp}: must be a power of 4 (the low-discrepancy sampler), e.g. 256, 1024, 4096")
+    scene = SunSensorScene(rig, realization_from_rig(rig, ideal=args.ideal), spp=args.spp)
+    fr = scene.render({k: np.radians(v) for k, v in pose.items()}, seed=args.seed, noiseless=args.noiseless)
+    out = Path(args.out)
+    png, js = fr.write(out / args.name)
+    print(f"wrote {png} (16-bit DN) and {js} (truth and render settings) in {fr.seconds:.2f} s")
+    flags = {k: v for k, v in fr.sidecar["flags"].items() if v and isinstance(v, (bool, int)) and k != "spot_extent_px"}
+    t = fr.sidecar["truth"]["spot"]
+    if t.get("valid"):
+        print(f"true spot: centre {np.round(t['center_uv'], 4).tolist()} px, pixel-binned centroid "
+              f"{np.round(t['pixel_centroid_uv'], 4).tolist()} px")
+    if flags:
+        print(f"flags: {flags}")
+    if args.preview:
+        win = fr.photons_window
+        u0, v0 = win.origin_uv
+        dn = fr.dn.astype(float)
+        h = win.image.shape[0] // 2
+        crop = dn[max(v0 + h - 12, 0):v0 + h + 12, max(u0 + h - 12, 0):u0 + h + 12]
+        lo, hi = np.percentile(crop, 5), crop.max()
+        img = (np.clip((crop - lo) / max(hi - lo, 1), 0, 1) ** 0.4 * 255).astype(np.uint8)  # gamma shows the noise floor
+        img = cv2.resize(img, None, fx=16, fy=16, interpolation=cv2.INTER_NEAREST)
+        cv2.imwrite(str(args.preview), img)
+        print(f"wrote {args.preview} (8-bit preview: 24×24 px around the spot, 16× zoom, gamma 0.4)")
+    return 0
+
+
 # ------------------------------------------------------------------------------ parser
 
 def build_parser() -> argparse.ArgumentParser:
@@ -233,6 +307,30 @@ def build_parser() -> argparse.ArgumentParser:
     cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
     cmr.add_argument("--quiet", action="store_true", help="no progress bar")
     cmr.set_defaults(func=cmd_run_cube_mirror)
+
+    rd = sub.add_parser("render", help="render frames of a rig (Mitsuba + detector model)")
+    rds = rd.add_subparsers(dest="frame_type", metavar="FRAME")
+    rss = rds.add_parser("sun-sensor", help="the sun simulator seen by the sun sensor at a turntable pose",
+                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    rss.add_argument("--rig", default=DEFAULT_RIG, help="rig file path or default rig name")
+    rss.add_argument("--pose", default=None, help="true turntable angles in degrees, e.g. X=10,Y=-5")
+    rss.add_argument("--seed", type=int, default=0, help="frame seed (same seed, same frame)")
+    rss.add_argument("--spp", type=int, default=1024, help="samples per pixel (power of 4)")
+    rss.add_argument("--noiseless", action="store_true", help="detector without random noise")
+    rss.add_argument("--ideal", action="store_true", help="rig without its true errors")
+    rss.add_argument("--out", default="renders/frames", help="output folder")
+    rss.add_argument("--name", default="sun_sensor", help="file stem of the frame")
+    rss.add_argument("--preview", default=None, metavar="PNG", help="also write an 8-bit zoomed preview")
+    rss.set_defaults(func=cmd_render_sun_sensor)
+
+    sc = sub.add_parser("scene", help="Mitsuba scenes of a rig")
+    scs = sc.add_subparsers(dest="scene_command", metavar="ACTION")
+    sce = scs.add_parser("export", help="write the rig's scenes as Mitsuba XML (rendered by the plain mitsuba command)")
+    sce.add_argument("rig", help="rig file path or default rig name")
+    sce.add_argument("--xml", required=True, metavar="DIR", help="output folder (XML + meshes/)")
+    sce.add_argument("--pose", default=None, help="turntable angles in degrees, e.g. X=180,Y=0")
+    sce.add_argument("--spp", type=int, default=64, help="samples per pixel written into the XML")
+    sce.set_defaults(func=cmd_scene_export)
 
     g = sub.add_parser("rig", help="rig files: list the defaults, validate a file")
     gs = g.add_subparsers(dest="rig_command", metavar="ACTION")

@@ -80,3 +80,22 @@ def test_doctor_never_crashes():
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
     assert info["rigsim"] == rigsim.__version__ and "python" in info
+
+
+def test_render_sun_sensor_cli(tmp_path):
+    r = run("render", "sun-sensor", "--pose", "X=10,Y=-5", "--spp", "256", "--out", str(tmp_path), "--preview", str(tmp_path / "p.png"))
+    assert r.returncode == 0, r.stderr
+    side = json.loads((tmp_path / "sun_sensor.json").read_text())
+    assert side["pose"] == {"X": 10.0, "Y": -5.0} and side["render"]["spp"] == 256
+    assert (tmp_path / "sun_sensor.png").exists() and (tmp_path / "p.png").exists()
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["render", "sun-sensor", "--pose", "Q=3"], "--pose axis 'Q': this turntable has axes ['X', 'Y']"),
+    (["render", "sun-sensor", "--pose", "X=1000"], "--pose X = 1000.0: allowed range is -360.0 to 360.0 degrees"),
+    (["render", "sun-sensor", "--pose", "X10"], "expected LABEL=DEGREES"),
+    (["render", "sun-sensor", "--spp", "100"], "--spp = 100: must be a power of 4"),
+])
+def test_bad_render_arguments(args, expected):
+    r = run(*args)
+    assert r.returncode == 2 and expected in r.stderr and "Traceback" not in r.stderr
