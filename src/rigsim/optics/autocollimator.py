@@ -1,0 +1,832 @@
+"""Photoelectric autocollimator: exact numpy model (the truth for rendered frames).
+
+Pure numpy, float64, no Mitsuba: this module is the *independent* computation that the
+Mitsuba scene (:mod:`rigsim.render.scenes.autocollimator`) is tested against.
+
+Instrument (docs/render_autocollimator.md)
+------------------------------------------
+A point reticle (a pinhole source) sits near the back focal plane of a plano-convex N-BK7
+singlet objective (flat side towards the reticle, convex side towards the mirror: the
+best-form orientation for a collimated beam). The beam leaves along the autocollimator axis,
+limited by a circular stop of diameter ``aperture_mm`` just in front of the convex vertex,
+reflects off the mirror under test (a cube face or the plane mirror on the inner frame), comes
+back through the stop and the lens and lands on the detector, a plane
+``source_offset_mm`` (5 µm) behind the reticle. The reticle sits at the *best-collimation*
+position (the RMS slope of the outgoing rays is minimal; 0.83 mm inside the paraxial focus for
+the seed-001 rig), which is how an autocollimator is focused at infinity.
+
+Truth = an exact Snell trace of every ray (vector refraction at the flat face and the sphere,
+unpolarised Fresnel transmission at each of the four crossings, reflection off the mirror
+plane, clipping by the stop on both passes and by the mirror's outline), with the reticle's
+emission uniform in solid angle over a cone that slightly overfills the stop, sampled by a
+deterministic golden-angle quadrature. Spherical aberration is large for a singlet at f/11,
+so neither ``f·tan(2t)`` nor any single focal length is the truth: the spot centroid is
+computed from the rays (``mean_uv``) and binned into pixels (``pixel_centroid_uv``) exactly as
+a rendered image would be.
+
+Frames and pixels
+-----------------
+Autocollimator frame ``A`` (the Mitsuba scene's world frame): origin at the centre of the lens
+(mid-thickness, on the axis), ``+z_A`` along the optical axis towards the mirror, ``x_A`` the
+rot frame's X' made perpendicular to the axis, ``y_A = z_A × x_A`` (≈ −Y' for an axis along
++Z'). Detector pixel (u, v) (OpenCV convention, pixel (0,0)'s centre at (0,0)) is the point
+``x_A = (u − cx)·pitch``, ``y_A = (v − cy)·pitch`` of the detector plane, with (cx, cy) the
+detector centre, which is where the optical axis meets it.
+
+Reading
+-------
+The true tilt of a mirror is the pair of angles of its normal ``n`` (pointing back at the
+autocollimator) in the A frame: ``θx = atan2(n_x, −n_z)``, ``θy = atan2(n_y, −n_z)`` — the
+normal tilted towards +x_A gives θx > 0 and moves the spot towards +u. The beam is deviated by
+twice that (half the beam deviation = mirror tilt). :meth:`AutocollimatorOptics.reading`
+converts a spot position into these two angles with the instrument's calibration (fitted on
+the exact model with a large flat mirror, radial form ``F·tan(ρ)·(1 + c·ρ²)``);
+:meth:`AutocollimatorOptics.tilt_from_spot` inverts the exact model for a given mirror
+outline and position (what a perfect calibration in this very geometry would return).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.optics.cube import FACE_NORMALS
+from rigsim.optics.placement import cube_pose
+from rigsim.rig.schema import Autocollimator, Rig
+from rigsim.rig.turntable import GeometryError, pose_deg_to_rad
+from rigsim.truth import Realization
+
+__all__ = [
+    "SCHOTT_N_BK7",
+    "n_bk7",
+    "PlanoConvexObjective",
+    "MirrorTarget",
+    "RayBundle",
+    "SpotTruth",
+    "AutocollimatorOptics",
+    "AutocollimatorLayout",
+    "autocollimator_layout",
+    "mirror_target",
+    "flat_mirror",
+    "retilt",
+    "cone_directions",
+    "reference_axis_rot",
+    "reference_pose_rad",
+]
+
+SCHOTT_N_BK7 = ((1.03961212, 0.00600069867), (0.231792344, 0.0200179144), (1.01046945, 103.560653))
+"""Schott Sellmeier coefficients (B_i, C_i in µm²) of N-BK7."""
+
+_GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+
+
+def n_bk7(wavelength_nm: float) -> float:
+    """Refractive index of N-BK7 (Schott Sellmeier formula); 1.5168 at 587.56 nm."""
+    l2 = (float(wavelength_nm) * 1e-3) ** 2
+    return math.sqrt(1.0 + sum(b * l2 / (l2 - c) for b, c in SCHOTT_N_BK7))
+
+
+# ------------------------------------------------------------------------------ objective
+@dataclass(frozen=True)
+class PlanoConvexObjective:
+    """A plano-convex singlet in the A frame: flat face at z = −t/2, convex vertex at +t/2.
+
+    ``focal_length_mm`` is the paraxial EFL at ``wavelength_nm``; for a plano-convex lens it
+    does not depend on the thickness: R = f·(n − 1). ``clear_aperture_mm`` is the stop
+    diameter; the glass is ``edge_margin_mm`` wider in radius so that the stop, not the rim,
+    limits the beam.
+    """
+
+    focal_length_mm: float
+    clear_aperture_mm: float
+    center_thickness_mm: float = 5.0
+    wavelength_nm: float = 587.56
+    edge_margin_mm: float = 2.0
+    stop_gap_mm: float = 0.5
+    glass: str = "N-BK7"
+
+    def __post_init__(self):
+        if not (self.focal_length_mm > 0 and self.clear_aperture_mm > 0 and self.center_thickness_mm > 0):
+            raise ValueError("focal length, aperture and thickness must be > 0")
+        sag = self.sag(self.lens_radius_mm)
+        if not math.isfinite(sag) or sag >= self.center_thickness_mm - 0.5:
+            raise ValueError(
+                f"a plano-convex lens of f = {self.focal_length_mm} mm and Ø{2 * self.lens_radius_mm:g} mm "
+                f"needs more than {self.center_thickness_mm} mm centre thickness (sag {sag:.2f} mm)")
+
+    @property
+    def n(self) -> float:
+        return n_bk7(self.wavelength_nm)
+
+    @property
+    def radius_mm(self) -> float:
+        return self.focal_length_mm * (self.n - 1.0)
+
+    @property
+    def lens_radius_mm(self) -> float:
+        return 0.5 * self.clear_aperture_mm + self.edge_margin_mm
+
+    @property
+    def stop_radius_mm(self) -> float:
+        return 0.5 * self.clear_aperture_mm
+
+    @property
+    def z_vertex(self) -> float:
+        return 0.5 * self.center_thickness_mm
+
+    @property
+    def z_flat(self) -> float:
+        return -0.5 * self.center_thickness_mm
+
+    @property
+    def z_centre(self) -> float:
+        """Centre of curvature of the convex face (inside the glass side, on −z)."""
+        return self.z_vertex - self.radius_mm
+
+    @property
+    def z_stop(self) -> float:
+        return self.z_vertex + self.stop_gap_mm
+
+    @property
+    def bfd_paraxial_mm(self) -> float:
+        """Paraxial back focal distance from the flat face (light entering the convex side)."""
+        return self.focal_length_mm - self.center_thickness_mm / self.n
+
+    def sag(self, r) -> np.ndarray:
+        R = self.radius_mm
+        r = np.asarray(r, float)
+        return R - np.sqrt(np.maximum(R * R - r * r, 0.0)) if np.all(r < R) else np.full_like(r, np.nan)
+
+    def as_dict(self) -> dict:
+        return {
+            "type": "plano-convex singlet", "glass": self.glass, "wavelength_nm": self.wavelength_nm,
+            "n": self.n, "focal_length_mm": self.focal_length_mm, "radius_mm": self.radius_mm,
+            "center_thickness_mm": self.center_thickness_mm, "clear_aperture_mm": self.clear_aperture_mm,
+            "lens_diameter_mm": 2 * self.lens_radius_mm, "stop_gap_mm": self.stop_gap_mm,
+            "bfd_paraxial_mm": self.bfd_paraxial_mm,
+        }
+
+
+# ------------------------------------------------------------------------------ mirror
+@dataclass(frozen=True)
+class MirrorTarget:
+    """The mirror under test in the A frame.
+
+    ``normal`` is the unit outward normal (towards the autocollimator). ``shape`` is
+    ``"square"`` (a cube face: ``half_size_mm`` = half the edge, ``e1``/``e2`` its in-plane edge
+    directions) or ``"disk"`` (``half_size_mm`` = radius).
+    """
+
+    centre: np.ndarray
+    normal: np.ndarray
+    shape: str
+    half_size_mm: float
+    e1: np.ndarray
+    e2: np.ndarray
+    reflectance: float = 1.0
+    name: str = ""
+
+    def __post_init__(self):
+        if self.shape not in ("square", "disk"):
+            raise ValueError(f"MirrorTarget.shape = {self.shape!r}: must be 'square' or 'disk'")
+
+    def inside(self, p: np.ndarray) -> np.ndarray:
+        d = np.asarray(p, float) - self.centre
+        a, b = d @ self.e1, d @ self.e2
+        if self.shape == "square":
+            return (np.abs(a) <= self.half_size_mm) & (np.abs(b) <= self.half_size_mm)
+        return a * a + b * b <= self.half_size_mm ** 2
+
+    def outline(self, n: int = 256) -> np.ndarray:
+        """(n, 3) points on the mirror's edge."""
+        if self.shape == "disk":
+            ph = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+            return self.centre + self.half_size_mm * (np.cos(ph)[:, None] * self.e1 + np.sin(ph)[:, None] * self.e2)
+        k = max(n // 4, 1)
+        s = np.linspace(-1.0, 1.0, k, endpoint=False)
+        h = self.half_size_mm
+        pts = [(x, -1.0) for x in s] + [(1.0, y) for y in s] + [(-x, 1.0) for x in s] + [(-1.0, -y) for y in s]
+        pts = np.array(pts) * h
+        return self.centre + pts[:, :1] * self.e1 + pts[:, 1:] * self.e2
+
+    def area_points(self, n_side: int = 41) -> np.ndarray:
+        """Points spread over the mirror's area (for coverage fractions)."""
+        s = (np.arange(n_side) + 0.5) / n_side * 2.0 - 1.0
+        a, b = np.meshgrid(s, s)
+        a, b = a.ravel(), b.ravel()
+        if self.shape == "disk":
+            keep = a * a + b * b <= 1.0
+            a, b = a[keep], b[keep]
+        h = self.half_size_mm
+        return self.centre + h * (a[:, None] * self.e1 + b[:, None] * self.e2)
+
+    def tilt_rad(self) -> np.ndarray:
+        """True reading: (θx, θy) = (atan2(n_x, −n_z), atan2(n_y, −n_z)) in the A frame."""
+        n = self.normal
+        return np.array([math.atan2(n[0], -n[2]), math.atan2(n[1], -n[2])])
+
+
+def _refract(d, nh, eta):
+    """Vector Snell refraction of unit rows ``d`` at unit normals ``nh`` facing the incident
+    side (d·n < 0); ``eta = n_incident / n_transmitted``. Returns (t, T_unpolarised, ok)."""
+    ci = -np.einsum("ij,ij->i", d, nh) if nh.ndim == 2 else -(d @ nh)
+    k = 1.0 - eta * eta * (1.0 - ci * ci)
+    ok = k > 0.0
+    ct = np.sqrt(np.maximum(k, 0.0))
+    nn = nh if nh.ndim == 2 else nh[None, :]
+    t = eta * d + (eta * ci - ct)[:, None] * nn
+    rs = (eta * ci - ct) / (eta * ci + ct)
+    rp = (ci - eta * ct) / (ci + eta * ct)
+    return t, 1.0 - 0.5 * (rs * rs + rp * rp), ok
+
+
+def cone_directions(n: int, half_angle_rad: float, offset: float = 0.5) -> np.ndarray:
+    """``n`` unit directions uniform in solid angle within a cone about +z (golden-angle spiral,
+    stratified in cos θ)."""
+    i = np.arange(n, dtype=np.float64)
+    c = 1.0 - (i + offset) / n * (1.0 - math.cos(half_angle_rad))
+    s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
+    ph = i * _GOLDEN_ANGLE
+    return np.stack([s * np.cos(ph), s * np.sin(ph), c], axis=-1)
+
+
+@dataclass
+class RayBundle:
+    """Result of an exact trace: rays that reached the detector plane and the bookkeeping."""
+
+    uv: np.ndarray  # (m, 2) detector pixel coordinates of the rays that land
+    weight: np.ndarray  # (m,) photons carried by each
+    emitted_photons: float
+    n_rays: int
+    frac_stop_out: float  # of the emitted rays, fraction through the stop on the way out
+    frac_on_mirror: float  # of those, fraction hitting the mirror
+    frac_return: float  # of those, fraction back through the stop and the lens
+    mirror_fill_fraction: float  # fraction of the mirror's area inside the beam footprint
+
+
+@dataclass
+class SpotTruth:
+    """The exact image of the reticle (pixel coordinates, OpenCV convention)."""
+
+    valid: bool
+    mean_uv: np.ndarray | None  # continuous centroid of the image (all rays on the detector plane)
+    pixel_centroid_uv: np.ndarray | None  # first moment of the pixel-binned image in ``window``
+    window: tuple[int, int, int, int] | None  # (u0, v0, w, h) the binned centroid refers to
+    flux_photons: float  # photons reaching the detector plane
+    flux_on_detector: float  # … and landing on the detector area
+    extent_uv: np.ndarray | None  # [[u_min, v_min], [u_max, v_max]] of the landing rays
+    rms_radius_px: float
+    tilt_rad: np.ndarray  # true reading (θx, θy) of the mirror
+    paraxial_uv: np.ndarray  # where f·tan(2t) (paraxial EFL) would put the spot
+    flags: dict = field(default_factory=dict)
+    bundle: RayBundle | None = None
+
+    def as_dict(self) -> dict:
+        d = {
+            "valid": self.valid,
+            "spot_mean_uv": None if self.mean_uv is None else self.mean_uv.tolist(),
+            "spot_pixel_centroid_uv": None if self.pixel_centroid_uv is None else self.pixel_centroid_uv.tolist(),
+            "pixel_centroid_window": None if self.window is None else list(self.window),
+            "flux_photons": self.flux_photons,
+            "flux_on_detector_photons": self.flux_on_detector,
+            "spot_extent_uv": None if self.extent_uv is None else self.extent_uv.tolist(),
+            "spot_rms_radius_px": self.rms_radius_px,
+            "true_tilt_arcsec": (self.tilt_rad * ARCSEC_PER_RAD).tolist(),
+            "paraxial_uv": self.paraxial_uv.tolist(),
+        }
+        if self.bundle is not None:
+            b = self.bundle
+            d.update(truth_rays=b.n_rays, beam_fraction_on_mirror=b.frac_on_mirror,
+                     return_fraction_through_objective=b.frac_return,
+                     mirror_fill_fraction=b.mirror_fill_fraction)
+        return d
+
+
+class AutocollimatorOptics:
+    """Exact model of one autocollimator (numpy, float64). See the module docstring.
+
+    Parameters: the rig's :class:`~rigsim.rig.schema.Autocollimator`; ``wavelength_nm`` of the
+    (monochromatic) reticle light; ``center_thickness_mm`` of the singlet; ``focus``:
+    ``"collimated"`` (reticle at the best-collimation position, default) or ``"paraxial"``
+    (paraxial focal point); ``source_offset_mm``: the detector plane lies this far behind the
+    reticle (the reticle is a point source, not a surface: it casts no shadow); ``overfill``:
+    the reticle's cone reaches the stop plane at ``overfill`` × the stop radius.
+    """
+
+    def __init__(self, ac: Autocollimator, *, wavelength_nm: float = 587.56, center_thickness_mm: float = 5.0,
+                 focus: str = "collimated", source_offset_mm: float = 0.005, overfill: float = 1.01):
+        if focus not in ("collimated", "paraxial"):
+            raise ValueError(f"focus = {focus!r}: must be 'collimated' or 'paraxial'")
+        if not (0.0 < source_offset_mm < 1.0):
+            raise ValueError(f"source_offset_mm = {source_offset_mm!r}: must be in (0, 1) mm")
+        if not (1.0 <= overfill <= 1.2):
+            raise ValueError(f"overfill = {overfill!r}: must be in [1, 1.2]")
+        self.ac = ac
+        self.objective = PlanoConvexObjective(ac.focal_length_mm, ac.aperture_mm, center_thickness_mm, wavelength_nm)
+        self.focus = focus
+        self.source_offset_mm = float(source_offset_mm)
+        self.overfill = float(overfill)
+        self.width, self.height = (int(x) for x in ac.resolution_px)
+        self.pitch_mm = ac.pixel_pitch_um * 1e-3
+        self.cx = (self.width - 1) / 2.0
+        self.cy = (self.height - 1) / 2.0
+        self.distance_mm = float(ac.distance_mm)
+        z_par = self.objective.z_flat - self.objective.bfd_paraxial_mm
+        self.focus_shift_mm = 0.0 if focus == "paraxial" else self._best_collimation_shift(z_par)
+        self.z_source = z_par + self.focus_shift_mm
+        self.z_detector = self.z_source - self.source_offset_mm
+        self.cone_half_angle_rad = self._cone_for_stop(self.overfill)
+        self._calib = None
+
+    # -- geometry helpers ----------------------------------------------------------------
+    @property
+    def source_position(self) -> np.ndarray:
+        return np.array([0.0, 0.0, self.z_source])
+
+    @property
+    def efl_mm(self) -> float:
+        return self.objective.focal_length_mm
+
+    def uv_to_xy(self, uv) -> np.ndarray:
+        uv = np.asarray(uv, float)
+        return np.stack([(uv[..., 0] - self.cx) * self.pitch_mm, (uv[..., 1] - self.cy) * self.pitch_mm], -1)
+
+    def xy_to_uv(self, xy) -> np.ndarray:
+        xy = np.asarray(xy, float)
+        return np.stack([xy[..., 0] / self.pitch_mm + self.cx, xy[..., 1] / self.pitch_mm + self.cy], -1)
+
+    def on_detector(self, uv, margin_px: float = 0.0) -> np.ndarray:
+        uv = np.asarray(uv, float)
+        return ((uv[..., 0] >= -0.5 + margin_px) & (uv[..., 0] < self.width - 0.5 - margin_px)
+                & (uv[..., 1] >= -0.5 + margin_px) & (uv[..., 1] < self.height - 0.5 - margin_px))
+
+    def measuring_range_rad(self) -> tuple[float, float]:
+        """Half range of the mirror tilt (θx, θy) that keeps the spot centre on the detector
+        (paraxial estimate: half-width / f / 2)."""
+        return (0.5 * math.atan(0.5 * self.width * self.pitch_mm / self.efl_mm),
+                0.5 * math.atan(0.5 * self.height * self.pitch_mm / self.efl_mm))
+
+    # -- exact trace ---------------------------------------------------------------------
+    def _outgoing(self, d: np.ndarray, z_source: float | None = None):
+        """Reticle → flat face → convex face → stop plane. Returns (P_stop, dir, T, ok)."""
+        ob = self.objective
+        zs = self.z_source if z_source is None else z_source
+        t = (ob.z_flat - zs) / d[:, 2]
+        P = np.column_stack([t * d[:, 0], t * d[:, 1], np.full(len(d), ob.z_flat)])
+        ok = np.hypot(P[:, 0], P[:, 1]) <= ob.lens_radius_mm
+        d1, T1, ok1 = _refract(d, np.array([0.0, 0.0, -1.0]), 1.0 / ob.n)
+        C = np.array([0.0, 0.0, ob.z_centre])
+        R = ob.radius_mm
+        oc = P - C
+        b = np.einsum("ij,ij->i", oc, d1)
+        c = np.einsum("ij,ij->i", oc, oc) - R * R
+        t2 = -b + np.sqrt(np.maximum(b * b - c, 0.0))
+        P2 = P + t2[:, None] * d1
+        ok &= np.hypot(P2[:, 0], P2[:, 1]) <= ob.lens_radius_mm
+        nrm = (P2 - C) / R
+        d2, T2, ok2 = _refract(d1, -nrm, ob.n)
+        t3 = (ob.z_stop - P2[:, 2]) / d2[:, 2]
+        P3 = P2 + t3[:, None] * d2
+        ok &= ok1 & ok2 & (np.hypot(P3[:, 0], P3[:, 1]) <= ob.stop_radius_mm)
+        return P3, d2, T1 * T2, ok
+
+    def _return(self, H: np.ndarray, r: np.ndarray):
+        """Mirror → stop plane → convex face → flat face → detector plane. Returns (xy, T, ok)."""
+        ob = self.objective
+        ok = r[:, 2] < 0.0
+        t = (ob.z_stop - H[:, 2]) / np.where(ok, r[:, 2], -1.0)
+        P = H + t[:, None] * r
+        ok &= (t > 0) & (np.hypot(P[:, 0], P[:, 1]) <= ob.stop_radius_mm)
+        C = np.array([0.0, 0.0, ob.z_centre])
+        R = ob.radius_mm
+        oc = P - C
+        b = np.einsum("ij,ij->i", oc, r)
+        c = np.einsum("ij,ij->i", oc, oc) - R * R
+        disc = b * b - c
+        ok &= disc >= 0
+        t2 = -b - np.sqrt(np.maximum(disc, 0.0))
+        P2 = P + t2[:, None] * r
+        ok &= np.hypot(P2[:, 0], P2[:, 1]) <= ob.lens_radius_mm
+        nrm = (P2 - C) / R
+        d1, T1, ok1 = _refract(r, nrm, 1.0 / ob.n)
+        t3 = (ob.z_flat - P2[:, 2]) / d1[:, 2]
+        P3 = P2 + t3[:, None] * d1
+        ok &= np.hypot(P3[:, 0], P3[:, 1]) <= ob.lens_radius_mm
+        d2, T2, ok2 = _refract(d1, np.array([0.0, 0.0, 1.0]), ob.n)
+        t4 = (self.z_detector - P3[:, 2]) / d2[:, 2]
+        P4 = P3 + t4[:, None] * d2
+        return P4[:, :2], T1 * T2, ok & ok1 & ok2
+
+    def _best_collimation_shift(self, z_par: float, n: int = 20000) -> float:
+        from scipy.optimize import minimize_scalar
+
+        def rms_slope(dz):
+            zs = z_par + dz
+            th = self._cone_for_stop(1.0, zs)
+            _, d2, _, ok = self._outgoing(cone_directions(n, th), zs)
+            s = d2[ok, :2] / d2[ok, 2:3]
+            return float(np.sqrt(np.mean(np.sum(s * s, axis=1))))
+
+        res = minimize_scalar(rms_slope, bounds=(-0.02 * self.efl_mm, 0.02 * self.efl_mm), method="bounded",
+                              options={"xatol": 1e-7})
+        return float(res.x)
+
+    def _cone_for_stop(self, overfill: float, z_source: float | None = None) -> float:
+        """Half angle of the reticle's cone whose marginal ray meets the stop plane at
+        ``overfill`` × the stop radius."""
+        target = overfill * self.objective.stop_radius_mm
+        lo, hi = 0.0, 0.3
+        for _ in range(80):
+            m = 0.5 * (lo + hi)
+            P3, _, _, _ = self._outgoing(np.array([[math.sin(m), 0.0, math.cos(m)]]), z_source)
+            if P3[0, 0] < target:
+                lo = m
+            else:
+                hi = m
+        return lo
+
+    def trace(self, mirror: MirrorTarget, n_rays: int = 1_000_000, emitted_photons: float = 1.0,
+              chunk: int = 500_000) -> RayBundle:
+        """Exact trace of ``n_rays`` reticle rays off ``mirror`` onto the detector plane."""
+        if n_rays < 1000:
+            raise ValueError(f"n_rays = {n_rays!r}: need at least 1000 rays")
+        w0 = emitted_photons / n_rays
+        uv_parts, w_parts = [], []
+        n_stop = n_mirror = n_back = 0
+        for start in range(0, n_rays, chunk):
+            i = np.arange(start, min(n_rays, start + chunk), dtype=np.float64)
+            c = 1.0 - (i + 0.5) / n_rays * (1.0 - math.cos(self.cone_half_angle_rad))
+            s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
+            ph = i * _GOLDEN_ANGLE
+            d = np.stack([s * np.cos(ph), s * np.sin(ph), c], axis=-1)
+            P, d2, T, ok = self._outgoing(d)
+            P, d2, T = P[ok], d2[ok], T[ok]
+            n_stop += len(P)
+            nm = mirror.normal
+            den = d2 @ nm
+            hit_ok = den < 0
+            t = ((mirror.centre - P) @ nm) / np.where(hit_ok, den, -1.0)
+            H = P + t[:, None] * d2
+            hit_ok &= (t > 0) & mirror.inside(H)
+            H, d2, T = H[hit_ok], d2[hit_ok], T[hit_ok]
+            n_mirror += len(H)
+            r = d2 - 2.0 * (d2 @ nm)[:, None] * nm
+            xy, T2, ok2 = self._return(H, r)
+            n_back += int(ok2.sum())
+            uv_parts.append(self.xy_to_uv(xy[ok2]))
+            w_parts.append(w0 * mirror.reflectance * T[ok2] * T2[ok2])
+        uv = np.concatenate(uv_parts) if uv_parts else np.zeros((0, 2))
+        w = np.concatenate(w_parts) if w_parts else np.zeros(0)
+        return RayBundle(uv, w, float(emitted_photons), int(n_rays), n_stop / n_rays,
+                         n_mirror / max(n_stop, 1), n_back / max(n_mirror, 1), self.mirror_fill_fraction(mirror))
+
+    def beam_radius_at(self, z: float) -> float:
+        """Radius of the outgoing beam footprint (marginal ray) at the plane z (A frame)."""
+        P3, d2, _, _ = self._outgoing(np.array([[math.sin(self.cone_half_angle_rad), 0.0,
+                                                 math.cos(self.cone_half_angle_rad)]]))
+        P3, d2 = P3[0], d2[0]
+        r_stop_edge = self.objective.stop_radius_mm
+        # the beam is limited by the stop: the marginal ray that passes the stop edge
+        slope = d2[0] / d2[2]
+        return float(r_stop_edge + slope * (z - self.objective.z_stop))
+
+    def mirror_fill_fraction(self, mirror: MirrorTarget) -> float:
+        """Fraction of the mirror's area that lies inside the outgoing beam (stop-limited)."""
+        pts = mirror.area_points()
+        # project each mirror point back along the axis: the beam is a near-cylinder about z_A
+        rb = np.array([self.beam_radius_at(z) for z in (pts[:, 2].min(), pts[:, 2].max())]).min()
+        return float(np.mean(np.hypot(pts[:, 0], pts[:, 1]) <= rb))
+
+    # -- spot truth ----------------------------------------------------------------------
+    def paraxial_uv(self, mirror: MirrorTarget) -> np.ndarray:
+        """Where the paraxial model (EFL · tan of the return beam's angle) puts the spot."""
+        nm = mirror.normal
+        d = np.array([0.0, 0.0, 1.0])
+        r = d - 2.0 * (d @ nm) * nm
+        return self.xy_to_uv(self.efl_mm * np.array([r[0], r[1]]) / (-r[2]))
+
+    def spot(self, mirror: MirrorTarget, *, n_rays: int = 1_000_000, emitted_photons: float = 1.0,
+             window: tuple[int, int, int, int] | None = None, window_px: int | None = None,
+             window_margin_px: float = 1.0) -> SpotTruth:
+        """Exact spot image of ``mirror``: centroids, extent, flux and geometry flags.
+
+        ``window`` (u0, v0, w, h) is the region whose pixel-binned centroid is returned (the
+        render window); with ``window_px`` instead it is placed as the renderer places it
+        (:meth:`window_for`). Flags: ``beam_misses_face``, ``beam_partly_misses_face``
+        (the mirror is off-centre: neither is ≥ 99 % of the mirror's area inside the beam nor
+        ≥ 99 % of the beam on the mirror; a cube face smaller than the beam and centred in it is
+        fine), ``return_vignetted`` (> 1 % of the light
+        reflected by the mirror misses the objective on the way back), ``spot_off_detector``,
+        ``spot_cut_by_edge`` (some light lands beyond the detector's edge),
+        ``spot_exceeds_window`` (light beyond the window, less ``window_margin_px``);
+        ``spot_outside_model`` is always False (the exact trace has no domain limit; the key is
+        kept for the common sidecar format). A return beam that misses the objective entirely is
+        ``return_vignetted`` and ``spot_off_detector``.
+        """
+        b = self.trace(mirror, n_rays, emitted_photons)
+        flags = {
+            "beam_misses_face": bool(b.frac_on_mirror == 0.0),
+            "beam_partly_misses_face": bool(b.frac_on_mirror > 0 and max(b.mirror_fill_fraction, b.frac_on_mirror) < 0.99),
+            "return_vignetted": bool(b.frac_on_mirror > 0 and b.frac_return < 0.99),  # > 1 % lost
+            "spot_outside_model": False,
+            "spot_off_detector": False,
+            "spot_cut_by_edge": False,
+            "spot_exceeds_window": False,
+        }
+        tilt = mirror.tilt_rad()
+        par = self.paraxial_uv(mirror)
+        flux = float(b.weight.sum())
+        if flux <= 0:
+            flags["spot_off_detector"] = True
+            return SpotTruth(False, None, None, None, 0.0, 0.0, None, float("nan"), tilt, par, flags, b)
+        w = b.weight
+        uv = b.uv
+        mean = (w[:, None] * uv).sum(0) / flux
+        rms = float(np.sqrt((w * ((uv - mean) ** 2).sum(1)).sum() / flux))
+        on = self.on_detector(uv)
+        flux_on = float(w[on].sum())
+        flags["spot_off_detector"] = bool(flux_on == 0.0)
+        flags["spot_cut_by_edge"] = bool(0.0 < flux_on < flux)
+        ext = np.array([uv.min(0), uv.max(0)])
+        if window is None and window_px is not None:
+            window = self.window_for(mean, window_px)
+        pix = None
+        if window is not None:
+            u0, v0, ww, wh = window
+            flags["spot_exceeds_window"] = bool(
+                ext[0, 0] < u0 - 0.5 + window_margin_px or ext[1, 0] > u0 + ww - 0.5 - window_margin_px
+                or ext[0, 1] < v0 - 0.5 + window_margin_px or ext[1, 1] > v0 + wh - 0.5 - window_margin_px)
+            pix = self.binned_centroid(b, window)
+        return SpotTruth(True, mean, pix, window, flux, flux_on, ext, rms, tilt, par, flags, b)
+
+    def binned_centroid(self, bundle: RayBundle, window: tuple[int, int, int, int]) -> np.ndarray | None:
+        """First moment of the pixel-binned exact image over the pixels of ``window`` that lie on
+        the detector — what a perfect renderer followed by a plain first moment returns."""
+        u0, v0, ww, wh = window
+        ij = np.floor(bundle.uv + 0.5)
+        keep = ((ij[:, 0] >= max(u0, 0)) & (ij[:, 0] < min(u0 + ww, self.width))
+                & (ij[:, 1] >= max(v0, 0)) & (ij[:, 1] < min(v0 + wh, self.height)))
+        s = bundle.weight[keep].sum()
+        if not s > 0:
+            return None
+        return (bundle.weight[keep, None] * ij[keep]).sum(0) / s
+
+    def binned_image(self, bundle: RayBundle, window: tuple[int, int, int, int]) -> np.ndarray:
+        """The exact image (photons per pixel) of ``window``: rays binned into pixels."""
+        u0, v0, ww, wh = window
+        ij = np.floor(bundle.uv + 0.5).astype(np.int64)
+        i, j = ij[:, 0] - u0, ij[:, 1] - v0
+        keep = ((i >= 0) & (i < ww) & (j >= 0) & (j < wh) & (ij[:, 0] >= 0) & (ij[:, 0] < self.width)
+                & (ij[:, 1] >= 0) & (ij[:, 1] < self.height))
+        img = np.zeros((wh, ww))
+        np.add.at(img, (j[keep], i[keep]), bundle.weight[keep])
+        return img
+
+    @staticmethod
+    def window_for(center_uv, window_px: int) -> tuple[int, int, int, int]:
+        """Window (u0, v0, w, h) of ``window_px`` square centred on the rounded ``center_uv``."""
+        half = int(window_px) // 2
+        return (int(math.floor(center_uv[0] + 0.5)) - half, int(math.floor(center_uv[1] + 0.5)) - half,
+                int(window_px), int(window_px))
+
+    # -- reading ---------------------------------------------------------------------------
+    def calibration(self, n_rays: int = 400_000) -> dict:
+        """The instrument's factory calibration, fitted on the exact model: a flat mirror larger
+        than the beam at ``distance_mm``, tilted along x_A; the spot's radial offset s (mm) is
+        fitted as ``F·tan(ρ)·(1 + c·ρ²)`` with ρ the return beam's angle (= 2·tilt)."""
+        if self._calib is None:
+            half = self.measuring_range_rad()[0]
+            ts = np.linspace(0.1, 1.0, 6) * half
+            s, rho = [], []
+            for t in ts:
+                m = flat_mirror(self.distance_mm + self.objective.z_vertex, (t, 0.0),
+                                radius_mm=2.0 * self.objective.clear_aperture_mm)
+                sp = self.spot(m, n_rays=n_rays)
+                s.append((sp.mean_uv[0] - self.cx) * self.pitch_mm)
+                rho.append(2.0 * t)
+            s, rho = np.array(s), np.array(rho)
+            A = np.column_stack([np.tan(rho), np.tan(rho) * rho ** 2])
+            (F, Fc), *_ = np.linalg.lstsq(A, s, rcond=None)
+            resid = s - A @ np.array([F, Fc])
+            self._calib = {"F_mm": float(F), "c": float(Fc / F), "fit_rms_px": float(np.sqrt(np.mean(resid ** 2)) / self.pitch_mm),
+                           "ref_uv": [self.cx, self.cy], "n_rays": n_rays,
+                           "mirror": "flat, Ø2×aperture, at distance_mm"}
+        return self._calib
+
+    def reading(self, uv) -> np.ndarray:
+        """Calibrated reading (θx, θy) in radians of a spot at ``uv`` (arrays of (…, 2) welcome)."""
+        cal = self.calibration()
+        xy = self.uv_to_xy(uv) - self.uv_to_xy(np.array(cal["ref_uv"]))
+        s = np.hypot(xy[..., 0], xy[..., 1])
+        F, c = cal["F_mm"], cal["c"]
+        rho = np.arctan(s / F)
+        for _ in range(30):
+            g = F * np.tan(rho) * (1 + c * rho * rho) - s
+            dg = F * ((1 + np.tan(rho) ** 2) * (1 + c * rho * rho) + np.tan(rho) * 2 * c * rho)
+            rho = rho - g / dg
+        phi = np.arctan2(xy[..., 1], xy[..., 0])
+        th = np.tan(0.5 * rho)
+        return np.stack([np.arctan(th * np.cos(phi)), np.arctan(th * np.sin(phi))], -1)
+
+    def reading_paraxial(self, uv) -> np.ndarray:
+        """Reading with the paraxial focal length and no calibration: ½·atan(Δ·pitch/EFL)."""
+        xy = self.uv_to_xy(uv)
+        return 0.5 * np.arctan(xy / self.efl_mm)
+
+    def tilt_from_spot(self, uv, mirror: MirrorTarget, *, n_rays: int = 400_000, iterations: int = 6,
+                       tol_rad: float = 1e-10) -> np.ndarray:
+        """Invert the exact model: the tilt (θx, θy) of ``mirror`` (same outline and position,
+        normal re-tilted) whose exact spot centroid (``mean_uv``) is at ``uv``."""
+        uv = np.asarray(uv, float)
+        t = self.reading(uv)
+        cal = self.calibration()
+        J = 2.0 * cal["F_mm"] / self.pitch_mm  # px per rad (small angles)
+        for _ in range(iterations):
+            sp = self.spot(retilt(mirror, t), n_rays=n_rays)
+            if not sp.valid:
+                raise GeometryError("the mirror returns no light at this tilt")
+            step = (uv - sp.mean_uv) / J
+            t = t + step
+            if np.max(np.abs(step)) < tol_rad:
+                break
+        return t
+
+
+def flat_mirror(z_mm: float, tilt_rad, radius_mm: float, centre_xy=(0.0, 0.0), reflectance: float = 1.0) -> MirrorTarget:
+    """A disk mirror at z (A frame) whose true reading is ``tilt_rad`` = (θx, θy)."""
+    n = _normal_from_tilt(tilt_rad)
+    e1, e2 = _plane_axes(n)
+    return MirrorTarget(np.array([centre_xy[0], centre_xy[1], float(z_mm)]), n, "disk", float(radius_mm), e1, e2,
+                        reflectance, "flat")
+
+
+def retilt(mirror: MirrorTarget, tilt_rad) -> MirrorTarget:
+    """The same mirror (centre, outline size) with the normal set to reading ``tilt_rad``."""
+    n = _normal_from_tilt(tilt_rad)
+    # rotate the in-plane axes with the minimal rotation taking the old normal to the new one
+    Rm = _min_rotation(mirror.normal, n)
+    return replace(mirror, normal=n, e1=Rm @ mirror.e1, e2=Rm @ mirror.e2)
+
+
+def _normal_from_tilt(tilt_rad) -> np.ndarray:
+    tx, ty = (float(x) for x in tilt_rad)
+    n = np.array([math.tan(tx), math.tan(ty), -1.0])
+    return n / np.linalg.norm(n)
+
+
+def _plane_axes(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = a - (a @ n) * n
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking unit vector a to unit vector b."""
+    v = np.cross(a, b)
+    c = float(a @ b)
+    if np.linalg.norm(v) < 1e-15:
+        return np.eye(3)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1.0 + c)
+
+
+# ------------------------------------------------------------------------------ rig layout
+@dataclass(frozen=True)
+class AutocollimatorLayout:
+    """Where the autocollimator sits in the rot (lab) frame for one target.
+
+    ``R_rot_from_A`` has the A frame's axes as columns; ``origin_rot`` is the A frame's origin
+    (the lens centre) in rot, mm. ``anchor_rot`` is the target's centre at ``reference_pose_rad``
+    (the face's exact null pose, or the zero pose for the plane mirror); the axis passes through
+    it and the objective's convex vertex is ``distance_mm`` from it.
+    """
+
+    target: str
+    face: str | None
+    axis_rot: np.ndarray  # unit, from the target towards the autocollimator (the documents' d)
+    R_rot_from_A: np.ndarray
+    origin_rot: np.ndarray
+    anchor_rot: np.ndarray
+    reference_pose_rad: dict
+    plane_mirror_centre_mount_mm: np.ndarray
+
+    def to_A(self, p_rot) -> np.ndarray:
+        return (np.asarray(p_rot, float) - self.origin_rot) @ self.R_rot_from_A
+
+    def dir_to_A(self, v_rot) -> np.ndarray:
+        return np.asarray(v_rot, float) @ self.R_rot_from_A
+
+    @property
+    def anchor_A(self) -> np.ndarray:
+        return self.to_A(self.anchor_rot)
+
+    def as_dict(self) -> dict:
+        return {"target": self.target, "face": self.face, "axis_rot": self.axis_rot.tolist(),
+                "R_rot_from_A": self.R_rot_from_A.tolist(), "origin_rot_mm": self.origin_rot.tolist(),
+                "anchor_rot_mm": self.anchor_rot.tolist(),
+                "reference_pose_deg": {k: math.degrees(v) for k, v in self.reference_pose_rad.items()},
+                "plane_mirror_centre_mount_mm": self.plane_mirror_centre_mount_mm.tolist()}
+
+
+def reference_pose_rad(rig: Rig, real: Realization) -> dict:
+    """The true turntable pose at which every axis *reads* zero (step A's pose)."""
+    return {a.label: -real.encoder_bias_rad.get(a.label, 0.0) for a in rig.turntable.axes}
+
+
+def reference_axis_rot(rig: Rig, real: Realization) -> np.ndarray:
+    """Step A: the autocollimator adjusted to read zero on the inner-frame plane mirror, all axes
+    reading zero — its axis is the plane mirror's normal in rot (noise-free; same formula as
+    :func:`rigsim.procedures.cube_mirror.reference_direction`)."""
+    if real.plane_mirror_normal_mount is None:
+        raise GeometryError("this rig has no plane mirror; pass axis_rot explicitly")
+    m = real.turntable.R_rot_from_mount(reference_pose_rad(rig, real)) @ real.plane_mirror_normal_mount
+    return m / np.linalg.norm(m)
+
+
+def _plane_mirror_centre_rot(real: Realization, pose_rad: dict, centre_mount) -> np.ndarray:
+    return real.turntable.R_rot_from_mount(pose_rad) @ np.asarray(centre_mount, float)
+
+
+def autocollimator_layout(rig: Rig, real: Realization, target: str = "face", face: str | None = None, *,
+                          axis_rot=None, reference_pose=None, objective_vertex_z_mm: float = 2.5,
+                          plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0)) -> AutocollimatorLayout:
+    """Place the autocollimator for ``target`` = ``"face"`` (cube face ``face``, default the
+    procedure's first face) or ``"plane_mirror"``.
+
+    The axis direction is ``axis_rot`` (unit, towards the autocollimator), by default the step-A
+    direction (:func:`reference_axis_rot`). For a face, the reference pose is the exact pose near
+    the procedure's nominal pose (middle and outer axes adjusted) at which the face's true normal
+    is along the axis — its null; for the plane mirror it is the all-zero reading pose. The
+    axis passes through the target's centre at that pose, and the objective's convex vertex
+    (``objective_vertex_z_mm`` from the lens centre) is ``rig.autocollimator.distance_mm`` from it.
+    ``plane_mirror_centre_mount_mm``: where the plane mirror sits on the inner frame (the rig
+    schema does not say; default the axes' intersection).
+    """
+    if rig.autocollimator is None:
+        raise GeometryError("this rig has no autocollimator")
+    if target not in ("face", "plane_mirror"):
+        raise ValueError(f"target = {target!r}: must be 'face' or 'plane_mirror'")
+    d = reference_axis_rot(rig, real) if axis_rot is None else np.asarray(axis_rot, float)
+    d = d / np.linalg.norm(d)
+    pm_c = np.asarray(plane_mirror_centre_mount_mm, float)
+    if target == "face":
+        face = face or rig.procedure.faces[0]
+        if face not in real.face_normals_mount:
+            raise ValueError(f"face {face!r} has no true normal in this realisation (faces: {sorted(real.face_normals_mount)})")
+        if reference_pose is None:
+            idx = rig.procedure.faces.index(face) if face in rig.procedure.faces else 0
+            start = pose_deg_to_rad(rig.procedure.nominal_poses_deg[idx])
+            free = [a.label for a in rig.turntable.axes if a.label in ("X", "Y")]
+            fixed = {a.label: start.get(a.label, 0.0) for a in rig.turntable.axes if a.label not in free}
+            reference_pose = real.turntable.solve_alignment(real.face_normals_mount[face], d, free, start, fixed)
+        cp = cube_pose(rig, real, reference_pose)
+        anchor = cp.apply(0.5 * rig.cube.edge_mm * FACE_NORMALS[face])
+    else:
+        face = None
+        if real.plane_mirror_normal_mount is None:
+            raise GeometryError("this rig has no plane mirror")
+        if reference_pose is None:
+            reference_pose = reference_pose_rad(rig, real)
+        anchor = _plane_mirror_centre_rot(real, reference_pose, pm_c)
+    z_A = -d
+    x0 = np.array([1.0, 0.0, 0.0])
+    if abs(x0 @ z_A) > 0.9:
+        x0 = np.array([0.0, 1.0, 0.0])
+    x_A = x0 - (x0 @ z_A) * z_A
+    x_A /= np.linalg.norm(x_A)
+    y_A = np.cross(z_A, x_A)
+    R = np.column_stack([x_A, y_A, z_A])
+    origin = anchor + d * (rig.autocollimator.distance_mm + objective_vertex_z_mm)
+    return AutocollimatorLayout(target, face, d, R, origin, anchor, dict(reference_pose), pm_c)
+
+
+def mirror_target(rig: Rig, real: Realization, layout: AutocollimatorLayout, pose_rad: dict,
+                  reflectance: float = 1.0) -> MirrorTarget:
+    """The target mirror at turntable pose ``pose_rad`` (true kinematics), in the A frame."""
+    if layout.target == "face":
+        cp = cube_pose(rig, real, pose_rad)
+        R_rm = real.turntable.R_rot_from_mount(pose_rad)
+        n_rot = R_rm @ real.face_normals_mount[layout.face]
+        n_rot /= np.linalg.norm(n_rot)
+        nominal = FACE_NORMALS[layout.face]
+        centre_rot = cp.apply(0.5 * rig.cube.edge_mm * nominal)
+        # in-plane edge directions of the (ideal) cube face, re-orthogonalised to the true normal
+        k = int(np.argmax(np.abs(nominal)))
+        axes = [cp.R[:, i] for i in range(3) if i != k]
+        n = layout.dir_to_A(n_rot)
+        e1 = layout.dir_to_A(axes[0])
+        e1 = e1 - (e1 @ n) * n
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(n, e1)
+        return MirrorTarget(layout.to_A(centre_rot), n, "square", 0.5 * rig.cube.edge_mm, e1, e2, reflectance,
+                            f"cube face {layout.face}")
+    R_rm = real.turntable.R_rot_from_mount(pose_rad)
+    n_rot = R_rm @ real.plane_mirror_normal_mount
+    n = layout.dir_to_A(n_rot / np.linalg.norm(n_rot))
+    e1, e2 = _plane_axes(n)
+    centre = layout.to_A(_plane_mirror_centre_rot(real, pose_rad, layout.plane_mirror_centre_mount_mm))
+    return MirrorTarget(centre, n, "disk", 0.5 * rig.plane_mirror.diameter_mm, e1, e2, reflectance, "plane mirror")
