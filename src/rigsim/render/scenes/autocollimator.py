@@ -102,7 +102,7 @@ def lens_mesh(obj: PlanoConvexObjective, n_rings: int = 64, n_seg: int = 256) ->
         N.append(np.asarray(n, float))
         return sum(len(x) for x in V[:-1])
 
-    def rings(z_of_r, n_of_p, facing_up: bool):
+    def rings(z_of_r, n_of_p, facing_up: bool, n_rings: int):
         r = rl * np.arange(1, n_rings + 1) / n_rings
         pts = [np.array([[0.0, 0.0, z_of_r(0.0)]])]
         for rk in r:
@@ -128,8 +128,9 @@ def lens_mesh(obj: PlanoConvexObjective, n_rings: int = 64, n_seg: int = 256) ->
     def cap_z(r):
         return obj.z_centre + math.sqrt(R * R - r * r)
 
-    rings(cap_z, lambda P: (P - C) / R, True)
-    rings(lambda r: obj.z_flat, lambda P: np.tile([0.0, 0.0, -1.0], (len(P), 1)), False)
+    rings(cap_z, lambda P: (P - C) / R, True, n_rings)
+    # the flat face needs no tessellation (one fan of n_seg triangles)
+    rings(lambda r: obj.z_flat, lambda P: np.tile([0.0, 0.0, -1.0], (len(P), 1)), False, 1)
     # rim wall from the flat face (z_flat) up to the cap's edge
     z_top = cap_z(rl)
     bot = np.column_stack([rl * cph, rl * sph, np.full(n_seg, obj.z_flat)])
@@ -224,6 +225,7 @@ class AutocollimatorScene:
     source_photons: float  # reticle photons per exposure the scene's intensity stands for
     anchor_A: np.ndarray
     mesh_files: dict = field(default_factory=dict)
+    world_shift_A: np.ndarray = field(default_factory=lambda: np.zeros(3))  # world = A − shift
 
 
 def _camera_matrix(optics: AutocollimatorOptics, window_origin, window_px: int) -> np.ndarray:
@@ -251,8 +253,13 @@ def autocollimator_scene(rig: Rig, real: Realization | None, pose_rad: dict, tar
                          source_photons: float = DEFAULT_SOURCE_PHOTONS, sampler: str = "stratified",
                          lens_ghosts: bool = False, max_depth: int | None = None,
                          mirror_reflectance: float = 1.0,
-                         plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0)) -> AutocollimatorScene:
-    """Build the scene (see the module docstring) and return it with its interpretation."""
+                         plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
+                         world_origin: str = "objective") -> AutocollimatorScene:
+    """Build the scene (see the module docstring) and return it with its interpretation.
+
+    ``world_origin="mirror"`` shifts the whole scene so that the target's centre is the world
+    origin (the objective then sits ~500 mm away). It exists to measure why the default is the
+    objective (docs/render_autocollimator.md); do not use it for production frames."""
     ensure_variant()
     import mitsuba as mi
 
@@ -270,12 +277,22 @@ def autocollimator_scene(rig: Rig, real: Realization | None, pose_rad: dict, tar
     layout = layout or autocollimator_layout(rig, real, target, face, objective_vertex_z_mm=optics.objective.z_vertex,
                                              plane_mirror_centre_mount_mm=plane_mirror_centre_mount_mm)
     obj = optics.objective
+    T = mi.ScalarTransform4f
     mirror = mirror_target(rig, real, layout, pose_rad, mirror_reflectance)
     if window_origin is None:
         window = optics.window_for(optics.paraxial_uv(mirror), window_px)
     else:
         window = (int(window_origin[0]), int(window_origin[1]), int(window_px), int(window_px))
     anchor = layout.anchor_A
+    if world_origin not in ("objective", "mirror"):
+        raise ValueError(f"world_origin = {world_origin!r}: must be 'objective' or 'mirror'")
+    shift = np.zeros(3) if world_origin == "objective" else anchor.copy()
+
+    def placed(M):  # A-frame matrix -> world (translate by -shift)
+        M = np.array(M, float)
+        M[:3, 3] -= shift
+        return T(M.tolist())
+
     V, F = mirror_mesh_A(rig, real, layout, pose_rad)
     mirror_local = trimesh.Trimesh(V - anchor, F, process=False)
     files = {
@@ -285,7 +302,6 @@ def autocollimator_scene(rig: Rig, real: Realization | None, pose_rad: dict, tar
     }
     omega = 2.0 * math.pi * (1.0 - math.cos(optics.cone_half_angle_rad))
     intensity = source_photons / omega
-    T = mi.ScalarTransform4f
     lens_bsdf = {"type": "dielectric", "int_ior": float(obj.n), "ext_ior": 1.0}
     if not lens_ghosts:
         lens_bsdf["specular_reflectance"] = 0.0
@@ -310,28 +326,35 @@ def autocollimator_scene(rig: Rig, real: Realization | None, pose_rad: dict, tar
             "type": "perspective",
             "fov": _fov_deg(optics, window_px), "fov_axis": "x",
             "near_clip": 1.0, "far_clip": 10.0 * CAMERA_STANDOFF_MM,
-            "to_world": T(_camera_matrix(optics, window[:2], window_px).tolist()),
+            "to_world": placed(_camera_matrix(optics, window[:2], window_px)),
             "film": {"type": "hdrfilm", "width": int(window_px), "height": int(window_px),
                      "rfilter": {"type": "box"}, "pixel_format": "luminance", "component_format": "float32"},
             "sampler": {"type": sampler, "sample_count": int(spp)},
         },
         "reticle": {"type": "spot", "intensity": float(intensity), "cutoff_angle": cone_deg,
-                    "beam_width": cone_deg, "to_world": T(reticle.tolist())},
-        "objective": {"type": "ply", "filename": str(files["objective"]), "face_normals": False,
-                      "bsdf": lens_bsdf},
+                    "beam_width": cone_deg, "to_world": placed(reticle)},
+        # the lens in its own shapegroup: a mirror update then rebuilds only the top-level BVH
+        "objective_group": {"type": "shapegroup",
+                            "objective": {"type": "ply", "filename": str(files["objective"]), "face_normals": False,
+                                          "bsdf": lens_bsdf}},
+        "objective": {"type": "instance", "shapegroup": {"type": "ref", "id": "objective_group"},
+                      "to_world": placed(np.eye(4))},
         "stop": {"type": "ply", "filename": str(files["stop"]), "face_normals": True,
                  "bsdf": {"type": "diffuse", "reflectance": 0.0}},
-        "detector": {"type": "rectangle", "to_world": T(det.tolist()),
+        "detector": {"type": "rectangle", "to_world": placed(det),
                      "bsdf": {"type": "diffuse", "reflectance": 1.0}},
         "mirror_group": {"type": "shapegroup",
                          "mirror": {"type": "ply", "filename": str(files["mirror"]), "face_normals": True,
                                     "bsdf": mirror_bsdf}},
         "mirror": {"type": "instance", "shapegroup": {"type": "ref", "id": "mirror_group"},
-                   "to_world": T().translate(anchor.tolist())},
+                   "to_world": placed(np.array([[1, 0, 0, anchor[0]], [0, 1, 0, anchor[1]], [0, 0, 1, anchor[2]],
+                                                [0, 0, 0, 1]], float))},
     }
+    if world_origin == "mirror":
+        d["stop"]["to_world"] = placed(np.eye(4))
     # a Lambertian detector of reflectance 1 shows radiance E/π: photons per pixel = π·L·pitch²
     return AutocollimatorScene(d, optics, layout, mirror, window, math.pi * optics.pitch_mm ** 2,
-                               float(source_photons), anchor, files)
+                               float(source_photons), anchor, files, shift)
 
 
 def build_autocollimator_scene_dict(rig: Rig, real: Realization | None, pose_rad: dict, target: str = "face",
@@ -404,7 +427,7 @@ class AutocollimatorRenderer:
                  lens_ghosts: bool = False,
                  optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
                  mirror_reflectance: float = 1.0, plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
-                 max_depth: int | None = None):
+                 max_depth: int | None = None, world_origin: str = "objective"):
         import mitsuba as _mi  # noqa: F401  (ensure_variant happens in autocollimator_scene)
 
         self.rig = rig
@@ -425,11 +448,13 @@ class AutocollimatorRenderer:
             source_photons = self.auto_source_photons(peak_fraction)
         self.source_photons = float(source_photons)
         self.lens_ghosts = bool(lens_ghosts)
+        self.world_origin = world_origin
         self.variant = ensure_variant()
         sc = autocollimator_scene(rig, self.real, self.layout.reference_pose_rad, self.layout.target, self.layout.face,
                                   spp=spp, mesh_dir=mesh_dir, window_px=window_px, optics=self.optics,
                                   layout=self.layout, source_photons=self.source_photons, sampler=sampler,
-                                  lens_ghosts=lens_ghosts, max_depth=max_depth, mirror_reflectance=mirror_reflectance)
+                                  lens_ghosts=lens_ghosts, max_depth=max_depth, mirror_reflectance=mirror_reflectance,
+                                  world_origin=world_origin)
         self.scene_info = sc
         import mitsuba as mi
 
@@ -448,8 +473,9 @@ class AutocollimatorRenderer:
             raise RuntimeError("mirror mesh topology changed")  # cannot happen: same builder
         local = (V - self.scene_info.anchor_A).astype(np.float32)
         self._params["mirror_group.mirror.vertex_positions"] = mi.Float(local.ravel())
-        self._params["sensor.to_world"] = mi.ScalarTransform4f(
-            _camera_matrix(self.optics, window_origin, self.window_px).tolist())
+        M = _camera_matrix(self.optics, window_origin, self.window_px)
+        M[:3, 3] -= self.scene_info.world_shift_A
+        self._params["sensor.to_world"] = mi.ScalarTransform4f(M.tolist())
         self._params.update()
 
     def warm_up(self, seed: int = 0) -> float:
@@ -585,6 +611,7 @@ class AutocollimatorRenderer:
             "z_detector_mm": o.z_detector,
             "cone_half_angle_deg": math.degrees(o.cone_half_angle_rad),
             "camera_standoff_mm": CAMERA_STANDOFF_MM,
+            "world_origin": self.world_origin,
             "units": "mm",
         }
 
