@@ -584,6 +584,9 @@ def build_diaphragm_scene_dict(rig: Rig, real: Realization | None, pose_rad: dic
     normal to the beam); the spot's radiance is ρE/π (:func:`spot_radiance`), the hole glow's
     ``hole_glow_ratio`` times that. The dict only uses built-in plugins.
     """
+    from rigsim.render.backend import ensure_variant
+
+    ensure_variant()
     import mitsuba as mi
 
     from rigsim.render.scenes.meshes import mesh_ply
@@ -651,13 +654,14 @@ def build_diaphragm_scene_dict(rig: Rig, real: Realization | None, pose_rad: dic
             name = "beam" if n_beam == 1 else f"beam_{k:04d}"
             # null BSDF: light returning through the hole passes into the void (the simulator
             # is not modelled: black), and divergent pencils never block one another
+            # nested keys become XML ids on export: keep them unique (not just "emitter")
             d[name] = {"type": "disk", "to_world": T(_disk_matrix(c, -dk, geom.hole_radius_mm)),
-                       "emitter": {"type": "directionalarea",
+                       f"{name}_emitter": {"type": "directionalarea",
                                    "radiance": {"type": "uniform", "value": float(beam_irradiance * wk)}},
                        "bsdf": {"type": "null"}}
     if content in ("hole", "both") and hole_glow_ratio > 0:
         d["hole_glow"] = {"type": "disk", "to_world": T(_disk_matrix(geom.hole_scene, -_EZ, geom.hole_radius_mm)),
-                          "emitter": {"type": "area", "radiance": {"type": "uniform",
+                          "hole_glow_emitter": {"type": "area", "radiance": {"type": "uniform",
                                                                    "value": float(hole_glow_ratio * L_spot)}},
                           "bsdf": {"type": "null"}}
     return d
@@ -1015,3 +1019,39 @@ def preview_png(dn: np.ndarray, path, *, low_pct: float = 1.0, high_pct: float =
     if not cv2.imwrite(str(path), np.round(255.0 * x).astype(np.uint8)):
         raise OSError(f"cv2.imwrite could not write {path}")
     return path
+
+
+DEMO_TILT_ARCSEC = {"X": -260.0, "Y": 330.0}
+"""Offset of the demo pose from face 0's null: the spot lands 2.6 mm from the hole, both whole."""
+
+
+def export_diaphragm(rig: Rig, real: Realization | None = None, pose_rad: dict | None = None, *,
+                     spp: int = 64, face_index: int = 0, mesh_dir=None):
+    """(scene dict, XML comments) for ``rigsim scene export``: beam, cube, screen and hole glow at
+    ``pose_rad`` (default: the face's exact null pose + :data:`DEMO_TILT_ARCSEC`, so that the
+    spot lies beside the hole). ``None`` if the rig has no diaphragm screen."""
+    if rig.diaphragm_screen is None or rig.aiming_camera is None:
+        return None
+    real = real if real is not None else realization_from_rig(rig)
+    geom = diaphragm_geometry(rig, real, face_index)
+    demo = pose_rad is None
+    if demo:
+        pose_rad = dict(geom.layout.null_pose_rad)
+        for k, v in DEMO_TILT_ARCSEC.items():
+            pose_rad[k] = pose_rad.get(k, 0.0) + math.radians(v / 3600.0)
+    d = build_diaphragm_scene_dict(rig, real, pose_rad, face_index, spp=spp, content="both",
+                                   sampler="multijitter", mesh_dir=mesh_dir, geometry=geom)
+    tr = geom.trace(pose_rad)
+    pose_txt = ", ".join(f"{k} = {math.degrees(v):.6f} deg" for k, v in pose_rad.items())
+    notes = [
+        f"rigsim diaphragm screen (seed 000), face {geom.face}; millimetres; origin = the face centre at "
+        f"its exact null pose (lab point {np.round(geom.shift_mm, 6).tolist()} mm)",
+        f"turntable pose (true angles) {pose_txt}" + (" = null pose + demo tilt "
+                                                       f"{DEMO_TILT_ARCSEC} arcsec" if demo else ""),
+        f"exact trace: spot offset from the hole {np.round(1e3 * tr.offset_mm, 4).tolist()} um (lab X', Y'); "
+        f"hole at pixel {np.round(tr.hole_uv, 4).tolist()}, spot at {np.round(tr.spot_uv, 4).tolist()}",
+        "integrator ptracer: the beam -> mirror -> screen path is a caustic (path tracing returns zero)",
+        "sensor: the aiming camera (pinhole, no distortion); pixel values are screen radiance; the spot's "
+        "radiance is reflectance * irradiance / pi, the hole glow's the same (paper: equally bright)",
+    ]
+    return d, notes
