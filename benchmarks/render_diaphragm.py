@@ -24,7 +24,6 @@ camera 768 x 576 px, 15 µm object pixel. Prints:
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import sys
@@ -37,7 +36,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from rigsim.detector import apply_detector  # noqa: E402
 from rigsim.frames import from_arcsec  # noqa: E402
-from rigsim.optics.placement import trace_return_spot  # noqa: E402
 from rigsim.render.scenes import diaphragm as D  # noqa: E402
 from rigsim.rig import load_rig  # noqa: E402
 from rigsim.truth import realization_from_rig  # noqa: E402

@@ -17,14 +17,14 @@ Scene content (:func:`build_diaphragm_scene_dict`):
   256-gon *circumscribing* the circle, so the circle itself (beam, glow) is never clipped;
   the slivers between the polygon and the circle are 0.094 µm deep.
 * **beam**: ``directionalarea`` emitter(s) on a disk of the hole's diameter emitting along
-  −d_sun. ``return_into_hole="absorb"`` (physical): the disk sits 10 µm behind the hole (inside
-  the simulator side) with a black BSDF, so light that returns into the hole is lost, as on the
-  real screen. ``return_into_hole="diffuse"`` (fidelity mode): the screen has no hole and the disk
-  floats ``beam_standoff_mm`` in front of the screen on the beam axis with a ``null`` BSDF, so
-  the whole returned disk lands on diffuse screen at any tilt, including 0 (with a real hole the
-  spot disappears into the hole at the null). Mitsuba's shadow rays are blocked by ``null``
-  surfaces (measured), so the standoff keeps the disk out of the camera's sight lines; a flag
-  reports when it is not.
+  −d_sun, with a ``null`` BSDF. ``return_into_hole="absorb"`` (physical, default): the disk sits
+  10 µm behind the hole (simulator side), so light that returns into the hole passes into the
+  void (the simulator is not modelled: black), as on the real screen.
+  ``return_into_hole="diffuse"`` (fidelity mode): the screen has no hole and the disk floats
+  ``beam_standoff_mm`` in front of the screen on the beam axis, so the whole returned disk lands
+  on diffuse screen at any tilt, including 0 (with a real hole the collimated spot disappears
+  into the hole at the null). Mitsuba's shadow rays are blocked by ``null`` surfaces (measured),
+  so the standoff keeps the disk out of the camera's sight lines; a flag reports when it is not.
 * **hole glow** (``content="hole"`` or ``"both"``): a Lambertian ``area`` emitter filling the hole
   in the screen plane (``null`` BSDF). The paper says the light leaving the hole is about as
   bright as the reflected spot (§3, Figs 2–3), so its radiance defaults to the spot's.
@@ -39,10 +39,11 @@ Scene content (:func:`build_diaphragm_scene_dict`):
 
 Sun-simulator divergence (``beam``): ``"collimated"`` (default) is a single parallel pencil —
 what the fidelity test needs. ``"divergent"`` models the simulator's full angle (rig: 32′) as a
-sunflower quadrature of ``divergence_directions`` parallel pencils, each through the hole, of
-equal power (one ``directionalarea`` disk each). Over the 1.3 m return path 32′ spreads the spot
-to ~12 mm more than the hole (~15 mm in all), larger than the default aiming camera's
-11.5 × 8.6 mm field, which the flags then report.
+point-symmetric sunflower quadrature of ``divergence_directions`` parallel pencils, each through
+the hole, of equal power (one ``directionalarea`` disk each; the spot is their sum, lumpy for few
+directions). Over the 1.3 m return path 32′ spreads the spot to ~12 mm more than the hole
+(~14.6 mm in all), larger than the default aiming camera's 12.7 × 8.6 mm field on the screen,
+which the flags then report.
 
 The numpy twin of the camera (:class:`AimingCameraModel`) and the screen homography are written
 independently of Mitsuba; the truth in every sidecar is the exact placement trace projected
@@ -59,7 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rigsim.optics.cube import FACE_NORMALS, reflect
+from rigsim.optics.cube import FACE_NORMALS
 from rigsim.optics.placement import (
     DiaphragmLayout,
     cube_pose,
@@ -92,6 +93,10 @@ __all__ = [
     "RETURN_MODES",
     "SaturationWarning",
     "preview_png",
+    "export_diaphragm",
+    "DEMO_TILT_ARCSEC",
+    "spot_radiance",
+    "cube_to_scene_matrix",
 ]
 
 BEAM_MODES = ("collimated", "divergent")
