@@ -49,3 +49,12 @@ def test_exported_sun_sensor_scene_renders_with_plain_mitsuba(tmp_path):
     c = np.array([(img * u).sum(), (img * v).sum()]) / img.sum()
     # independent sampler at 1024 spp on a ~2.7 px disk: ~0.03 px noise, plus the disk's own bias
     assert np.linalg.norm(c - expected) < 0.15
+
+
+def test_nested_objects_get_no_duplicate_ids():
+    xml = scene_dict_to_xml({
+        "type": "scene",
+        "a": {"type": "disk", "emitter": {"type": "area", "radiance": {"type": "uniform", "value": 1.0}}},
+        "b": {"type": "disk", "emitter": {"type": "area", "radiance": {"type": "uniform", "value": 2.0}}},
+    })
+    assert xml.count('id="emitter"') == 0 and 'id="a"' in xml and 'id="b"' in xml

@@ -76,8 +76,8 @@ def _object_xml(name: str | None, d: dict, indent: str, comments: list[str]) -> 
     attrs = f" type={quoteattr(t)}"
     if name is not None and tag in ("bsdf", "spectrum", "texture", "rfilter", "film", "sampler") and not name.startswith("_"):
         attrs += f" name={quoteattr(name)}"
-    elif name is not None and tag in ("shape", "emitter", "sensor", "integrator"):
-        attrs += f" id={quoteattr(name)}"
+    elif name is not None and tag in ("shape", "emitter", "sensor", "integrator") and indent == "    ":
+        attrs += f" id={quoteattr(name)}"  # ids only at the top level: nested keys need not be unique
     body = ""
     for k, v in d.items():
         if k == "type":
