@@ -54,21 +54,22 @@ def pose_of(ref, dy, dx):
 
 
 def run_poses(r: AutocollimatorRenderer, poses, seed0: int, frames: bool = False):
-    errs, t_win, t_frame = [], [], []
+    errs, t_win, t_frame, t_mi = [], [], [], []
     for k, (dy, dx) in enumerate(poses):
         p = pose_of(r.layout.reference_pose_rad, dy, dx)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GeometryWarning)
             w = r.render_window(p, seed=seed0 + k)
-        errs.append(w.centroid() - w.truth.pixel_centroid_uv)
+        errs.append(w.centroid_geometric() - w.truth.pixel_centroid_uv)
         t_win.append(w.seconds)
+        t_mi.append(w.seconds_mitsuba)
         if frames:
             t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", GeometryWarning)
                 r.render_frame(p, seed=seed0 + k)
             t_frame.append(time.perf_counter() - t0)
-    return np.array(errs), t_win, t_frame
+    return np.array(errs), t_win, t_frame, t_mi
 
 
 def stats(e: np.ndarray) -> tuple[float, float]:
@@ -113,24 +114,26 @@ def main() -> None:
     print(f"exact truth ({r.truth_rays} rays): {truth_seconds(r, poses[:3]):.2f} s per pose (median)\n")
 
     print("cube face +Z, poses (Y', X') arcmin:", poses)
-    print(f"{'spp':>6} {'light paths':>12} {'warm-up s':>10} {'s/window':>9} {'s/frame':>8} {'rms err px':>11} {'max err px':>11}")
+    print(f"{'spp':>6} {'light paths':>12} {'warm-up s':>10} {'mitsuba s':>10} {'s/window':>9} {'s/frame':>8} "
+          f"{'rms err px':>11} {'max err px':>11}")
     for spp in spps:
         r = AutocollimatorRenderer(rig, real, "face", spp=spp)
         tw = r.warm_up()
-        e, t_win, t_frame = run_poses(r, poses, 100 * spp, frames=(spp == 1024))
+        e, t_win, t_frame, t_mi = run_poses(r, poses, 100 * spp, frames=(spp == 1024))
         rms, mx = stats(e)
         tf = f"{statistics.median(t_frame):8.2f}" if t_frame else f"{'-':>8}"
-        print(f"{spp:>6} {spp * r.window_px ** 2:>12,d} {tw:>10.2f} {statistics.median(t_win):>9.2f} {tf} {rms:>11.4f} {mx:>11.4f}",
-              flush=True)
+        print(f"{spp:>6} {spp * r.window_px ** 2:>12,d} {tw:>10.2f} {statistics.median(t_mi):>10.2f} "
+              f"{statistics.median(t_win):>9.2f} {tf} {rms:>11.4f} {mx:>11.4f}", flush=True)
         if spp == 1024:
             r1024 = r
-    print("  (s/window = exact truth + window render; s/frame adds the 1280x1024 detector model)\n")
+    print("  (mitsuba s = traverse update + mi.render; s/window adds the exact truth (numpy) and the diffraction\n"
+          "   convolution; s/frame adds the 1280x1024 detector model; errors: Mitsuba's window vs the exact trace)\n")
 
     # plane mirror, step A
     rp = AutocollimatorRenderer(rig, real, "plane_mirror", spp=1024)
     rp.warm_up()
     pm_poses = [(0.0, 0.0), (0.5, -0.4), (2.0, 1.5)]
-    e, t_win, _ = run_poses(rp, pm_poses, 7000)
+    e, t_win, _, _ = run_poses(rp, pm_poses, 7000)
     rms, mx = stats(e)
     print(f"plane mirror (Ø50 mm, step A), 1024 spp, poses {pm_poses}: rms {rms:.4f} px, max {mx:.4f} px, "
           f"{statistics.median(t_win):.2f} s/window")
@@ -169,14 +172,14 @@ def main() -> None:
         p = pose_of(rm.layout.reference_pose_rad, dy, dx)
         w = rm.render_window(p, seed=500 + k)
         off = w.truth.mean_uv - [rm.optics.cx, rm.optics.cy]
-        err = w.centroid() - w.truth.pixel_centroid_uv
+        err = w.centroid_geometric() - w.truth.pixel_centroid_uv
         print(f"  ({dy:+.1f}', {dx:+.1f}') spot offset {off.round(1).tolist()} px: error {err.round(4).tolist()} px"
               f"  (error/offset {np.dot(err, off) / max(np.dot(off, off), 1e-9):+.2e})")
     # study 2: Fresnel ghosts on
     print("\nstudy: Fresnel reflections (ghosts) kept, 4096 spp (the truth has none)")
     rg = AutocollimatorRenderer(rig, real, "face", spp=4096, lens_ghosts=True)
     rg.warm_up()
-    e, _, _ = run_poses(rg, [(0.0, 0.0), (0.3, 0.2), (5.0, 0.0), (-9.0, 0.0)], 600)
+    e, _, _, _ = run_poses(rg, [(0.0, 0.0), (0.3, 0.2), (5.0, 0.0), (-9.0, 0.0)], 600)
     rms, mx = stats(e)
     print(f"  rms {rms:.4f} px, max {mx:.4f} px")
 

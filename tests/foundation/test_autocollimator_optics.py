@@ -213,6 +213,47 @@ def test_binned_image_is_consistent_with_the_binned_centroid(optics):
     assert img.sum() == pytest.approx(sp.flux_on_detector, rel=1e-12)
 
 
+def _pixel_integrated(fun, half_px, sub=16):
+    """Independent pixel integration of a PSF given as a function of (x, y) in pixels."""
+    o = (np.arange(sub) + 0.5) / sub - 0.5
+    k = np.arange(-half_px, half_px + 1)
+    X = (k[None, :, None, None] + o[None, None, None, :])
+    Y = (k[:, None, None, None] + o[None, None, :, None])
+    return fun(X, Y).mean(axis=(2, 3))
+
+
+def test_diffraction_kernel_square_face_and_disk(optics):
+    """Kernel = pixel-integrated Fraunhofer PSF: sinc² for the 25 mm cube face, Airy for the
+    full 50 mm stop (a large flat mirror), against closed forms integrated independently."""
+    from scipy.special import j1
+    lam = optics.objective.wavelength_nm * 1e-6
+    f, p = optics.efl_mm, optics.pitch_mm
+    z = optics.distance_mm + optics.objective.z_vertex
+    h = 16
+    # square 25 mm face, edges along x_A / y_A
+    sq = flat_mirror(z, (0.0, 0.0), 1.0)
+    from dataclasses import replace
+    sq = replace(sq, shape="square", half_size_mm=12.5, e1=np.array([1.0, 0, 0]), e2=np.array([0, -1.0, 0]))
+    K = optics.diffraction_kernel(sq, half_px=h)
+    x0 = lam * f / 25.0 / p   # first zero, px
+    ref = _pixel_integrated(lambda X, Y: np.sinc(X / x0) ** 2 * np.sinc(Y / x0) ** 2, h)
+    ref /= ref.sum()
+    assert np.max(np.abs(K - ref)) < 2e-3 * K.max()
+    # disk: the stop (Ø50 mm) with a mirror larger than the beam
+    K = optics.diffraction_kernel(flat_mirror(z, (0.0, 0.0), 60.0), half_px=h)
+    D = optics.objective.clear_aperture_mm
+
+    def airy(X, Y):
+        rho = np.pi * D * np.hypot(X, Y) * p / (lam * f)
+        rho = np.where(rho == 0, 1e-12, rho)
+        return (2 * j1(rho) / rho) ** 2
+    ref = _pixel_integrated(airy, h)
+    ref /= ref.sum()
+    assert np.max(np.abs(K - ref)) < 5e-3 * K.max()
+    v, u = np.indices(K.shape)
+    assert abs((K * u).sum() - h) < 1e-12 and abs((K * v).sum() - h) < 1e-12
+
+
 def test_bad_parameters_are_rejected():
     with pytest.raises(ValueError, match="focus"):
         AutocollimatorOptics(AC, focus="sharp")

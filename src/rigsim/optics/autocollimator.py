@@ -592,6 +592,49 @@ class AutocollimatorOptics:
         return (int(math.floor(center_uv[0] + 0.5)) - half, int(math.floor(center_uv[1] + 0.5)) - half,
                 int(window_px), int(window_px))
 
+    # -- diffraction -------------------------------------------------------------------------
+    def return_pupil(self, mirror: MirrorTarget, dp_mm: float, half_extent_mm: float | None = None):
+        """Mask of the returning beam's cross-section at the stop plane on a square grid of pitch
+        ``dp_mm`` centred on the axis: a point q is lit if it is inside the stop, the return ray
+        through it (direction of the mirror-reflected axial beam) meets the mirror inside its
+        outline at m, and the outgoing axial ray to m passed the stop. Returns (mask, coords)."""
+        ob = self.objective
+        h = ob.stop_radius_mm + 0.5 if half_extent_mm is None else half_extent_mm
+        m = int(math.ceil(h / dp_mm))
+        c = np.arange(-m, m + 1) * dp_mm
+        X, Y = np.meshgrid(c, c)
+        q = np.stack([X.ravel(), Y.ravel(), np.full(X.size, ob.z_stop)], -1)
+        n = mirror.normal
+        r = np.array([0.0, 0.0, 1.0]) - 2.0 * n[2] * n
+        t = ((q - mirror.centre) @ n) / (r @ n)
+        mp = q - t[:, None] * r
+        lit = (np.hypot(q[:, 0], q[:, 1]) <= ob.stop_radius_mm) & mirror.inside(mp) \
+            & (np.hypot(mp[:, 0], mp[:, 1]) <= ob.stop_radius_mm)
+        return lit.reshape(X.shape), c
+
+    def diffraction_kernel(self, mirror: MirrorTarget, half_px: int = 32, samples_per_px: int = 2,
+                           n_fft: int = 512) -> np.ndarray:
+        """Pixel-integrated Fraunhofer PSF of the return pupil (uniform amplitude, no aberration),
+        ``(2·half_px + 1)²`` kernel normalised to 1, ``K[j, i]`` = offset (i − half_px,
+        j − half_px) px. Centrosymmetric (|FT|² of a real pupil), so convolving with it keeps
+        an image's centroid. Scale: λ at ``wavelength_nm``, angles → detector with the EFL."""
+        lam = self.objective.wavelength_nm * 1e-6
+        dp = lam * self.efl_mm * samples_per_px / (n_fft * self.pitch_mm)
+        mask, c = self.return_pupil(mirror, dp)
+        if len(c) > n_fft:
+            raise ValueError("n_fft too small for the pupil at this sampling")
+        P = np.zeros((n_fft, n_fft))
+        k0 = n_fft // 2 - len(c) // 2
+        P[k0:k0 + len(c), k0:k0 + len(c)] = mask
+        psf = np.abs(np.fft.fft2(P)) ** 2  # index 0 = on axis; spacing 1/samples_per_px px
+        nu = np.fft.fftfreq(n_fft, d=1.0 / samples_per_px)  # cycles per pixel
+        otf = np.fft.fft2(psf) * np.sinc(nu)[:, None] * np.sinc(nu)[None, :]  # × pixel aperture
+        psf_pix = np.real(np.fft.ifft2(otf))
+        idx = (np.arange(-half_px, half_px + 1) * samples_per_px) % n_fft
+        K = np.clip(psf_pix[np.ix_(idx, idx)], 0.0, None)
+        K = 0.5 * (K + K[::-1, ::-1])  # exact centrosymmetry (removes float round-off)
+        return K / K.sum()
+
     # -- reading ---------------------------------------------------------------------------
     def calibration(self, n_rays: int = 400_000) -> dict:
         """The instrument's factory calibration, fitted on the exact model: a flat mirror larger

@@ -366,6 +366,14 @@ def build_autocollimator_scene_dict(rig: Rig, real: Realization | None, pose_rad
 
 
 # ------------------------------------------------------------------------------ renderer
+def _centroid(img: np.ndarray, origin) -> np.ndarray:
+    s = img.sum()
+    if not s > 0:
+        return np.array([np.nan, np.nan])
+    v, u = np.indices(img.shape)
+    return np.array([(img * u).sum() / s + origin[0], (img * v).sum() / s + origin[1]])
+
+
 @dataclass
 class AutocollimatorWindow:
     """One rendered window: ``image[j, i]`` is detector pixel (origin_uv[0] + i, origin_uv[1] + j),
@@ -380,14 +388,18 @@ class AutocollimatorWindow:
     seed: int
     seconds: float
     rendered: bool
+    image_geometric: np.ndarray | None = None  # Mitsuba's ray-optics window (before diffraction)
+    origin_geometric: tuple[int, int] | None = None
+    seconds_mitsuba: float = 0.0  # of ``seconds``: parameter update + mi.render only
+
+    def centroid_geometric(self) -> np.ndarray:
+        if self.image_geometric is None:
+            return self.centroid()
+        return _centroid(self.image_geometric, self.origin_geometric)
 
     def centroid(self) -> np.ndarray:
-        img = self.image
-        s = img.sum()
-        if not s > 0:
-            return np.array([np.nan, np.nan])
-        v, u = np.indices(img.shape)
-        return np.array([(img * u).sum() / s + self.origin_uv[0], (img * v).sum() / s + self.origin_uv[1]])
+        """First moment of ``image`` in detector pixel coordinates."""
+        return _centroid(self.image, self.origin_uv)
 
     def paste_into(self, frame: np.ndarray) -> np.ndarray:
         H, W = frame.shape
@@ -427,7 +439,8 @@ class AutocollimatorRenderer:
                  lens_ghosts: bool = False,
                  optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
                  mirror_reflectance: float = 1.0, plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
-                 max_depth: int | None = None, world_origin: str = "objective"):
+                 max_depth: int | None = None, world_origin: str = "objective", diffraction: bool = True,
+                 diffraction_half_px: int = 32):
         import mitsuba as _mi  # noqa: F401  (ensure_variant happens in autocollimator_scene)
 
         self.rig = rig
@@ -444,11 +457,14 @@ class AutocollimatorRenderer:
         self.window_px = int(window_px)
         self.sampler = sampler
         self.mirror_reflectance = float(mirror_reflectance)
+
+        self.lens_ghosts = bool(lens_ghosts)
+        self.world_origin = world_origin
+        self.diffraction = bool(diffraction)
+        self.diffraction_half_px = int(diffraction_half_px)
         if source_photons is None:
             source_photons = self.auto_source_photons(peak_fraction)
         self.source_photons = float(source_photons)
-        self.lens_ghosts = bool(lens_ghosts)
-        self.world_origin = world_origin
         self.variant = ensure_variant()
         sc = autocollimator_scene(rig, self.real, self.layout.reference_pose_rad, self.layout.target, self.layout.face,
                                   spp=spp, mesh_dir=mesh_dir, window_px=window_px, optics=self.optics,
@@ -496,7 +512,12 @@ class AutocollimatorRenderer:
         sp = self.optics.spot(m, n_rays=self.truth_rays, emitted_photons=1.0, window_px=self.window_px)
         if not sp.valid:
             raise ValueError("no light comes back at the reference pose; pass source_photons explicitly")
-        peak = self.optics.binned_image(sp.bundle, sp.window).max()
+        img = self.optics.binned_image(sp.bundle, sp.window)
+        if self.diffraction:
+            from scipy.signal import fftconvolve
+
+            img = fftconvolve(img, self.optics.diffraction_kernel(m, half_px=self.diffraction_half_px))
+        peak = img.max()
         cfg = self.rig.autocollimator.detector
         return float(peak_fraction * cfg.full_well_e / cfg.quantum_efficiency / peak)
 
@@ -535,15 +556,31 @@ class AutocollimatorRenderer:
             origin = self.optics.window_for(tr.paraxial_uv, W)[:2]
         _warn(flags, tr)
         if flags["beam_misses_face"] or flags["spot_off_detector"] or not tr.valid:
-            return AutocollimatorWindow(np.zeros((W, W)), origin, tr, flags, dict(pose_rad), spp, int(seed),
-                                        time.perf_counter() - t0, False)
+            return AutocollimatorWindow(np.zeros((W, W)), tuple(origin), tr, flags, dict(pose_rad), spp, int(seed),
+                                        time.perf_counter() - t0, False, np.zeros((W, W)), tuple(origin))
+        t1 = time.perf_counter()
         self._set(pose_rad, origin)
         img = mi.render(self._scene, seed=int(seed), spp=spp)
         arr = np.array(img, dtype=np.float64)
         arr = arr[..., 0] if arr.ndim == 3 else arr
-        arr = arr[:, ::-1] * (self.scene_info.photons_per_unit * photons / self.scene_info.source_photons)
-        return AutocollimatorWindow(np.ascontiguousarray(arr), origin, tr, flags, dict(pose_rad), spp,
-                                    int(seed), time.perf_counter() - t0, True)
+        t_mi = time.perf_counter() - t1
+        arr = np.ascontiguousarray(arr[:, ::-1]) * (self.scene_info.photons_per_unit * photons
+                                                    / self.scene_info.source_photons)
+        geo, geo_origin = arr, tuple(origin)
+        if self.diffraction:
+            from scipy.signal import fftconvolve
+
+            m = mirror_target(self.rig, self.real, self.layout, pose_rad, self.mirror_reflectance)
+            K = self.optics.diffraction_kernel(m, half_px=self.diffraction_half_px)
+            h = self.diffraction_half_px
+            arr = np.clip(fftconvolve(arr, K, mode="full"), 0.0, None)
+            origin = (origin[0] - h, origin[1] - h)
+            v, u = np.indices(arr.shape)
+            off = ((u + origin[0] < 0) | (u + origin[0] >= self.optics.width)
+                   | (v + origin[1] < 0) | (v + origin[1] >= self.optics.height))
+            arr[off] = 0.0  # light spread beyond the detector's edge is not recorded
+        return AutocollimatorWindow(arr, tuple(origin), tr, flags, dict(pose_rad), spp, int(seed),
+                                    time.perf_counter() - t0, True, geo, geo_origin, t_mi)
 
     def render_frame(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False,
                      source_photons: float | None = None, spp: int | None = None) -> AutocollimatorFrame:
@@ -564,7 +601,8 @@ class AutocollimatorRenderer:
                                 geometry_flags=win.flags, pose=_pose_dict(pose_rad), seed=int(seed),
                                 extra={"window_origin_uv": list(win.origin_uv), "rendered": win.rendered,
                                        "render_seconds": win.seconds,
-                                       "window_centroid_uv": win.centroid().tolist()})
+                                       "window_centroid_uv": win.centroid().tolist(),
+                                       "window_centroid_geometric_uv": win.centroid_geometric().tolist()})
         return AutocollimatorFrame(photons, det, sidecar, win)
 
     def write(self, path, frame: AutocollimatorFrame):
@@ -612,6 +650,8 @@ class AutocollimatorRenderer:
             "cone_half_angle_deg": math.degrees(o.cone_half_angle_rad),
             "camera_standoff_mm": CAMERA_STANDOFF_MM,
             "world_origin": self.world_origin,
+            "diffraction": (f"window convolved with the pixel-integrated Fraunhofer PSF of the return pupil "
+                            f"(±{self.diffraction_half_px} px)") if self.diffraction else "none (ray optics only)",
             "units": "mm",
         }
 
