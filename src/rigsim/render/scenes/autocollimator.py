@@ -81,8 +81,9 @@ CAMERA_STANDOFF_MM = 50.0
 DEFAULT_WINDOW_PX = 32
 DEFAULT_SOURCE_PHOTONS = 1.8e6
 """Photons the reticle emits per exposure (scene dicts). With the seed-001 rig (50 mm beam on a
-25 mm cube face, the rig's default detector) the brightest pixel of the nulled spot gets about
-half the full well; the renderer sets its own from ``peak_fraction`` unless told."""
+25 mm cube face, the rig's default detector) the brightest pixel of the nulled *geometric* spot
+gets about half the full well (the diffraction blur lowers the peak ~2.5×); the renderer sets its
+own from ``peak_fraction`` (diffraction included) unless told."""
 
 MAIN_PATH_DEPTH = 7  # Mitsuba counts the emitter vertex: reticle, flat, convex, mirror, convex, flat, detector
 
