@@ -64,6 +64,47 @@ def fixed_pattern(cfg: DetectorConfig, detector_shape: tuple[int, int],
     return np.maximum(gain, 0.0), dsnu
 
 
+def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0) -> np.ndarray:
+    """Poisson(λ) variates from uniforms ``u`` by inverting the CDF (one uniform per value).
+
+    λ ≤ ``small``: exact — a vectorised walk up the CDF over the still-undecided pixels (cost ∝ Σλ).
+    λ > ``small``: the Cornish–Fisher quantile of the Poisson distribution to O(1/λ) (skewness and
+    kurtosis terms), rounded to an integer: mean and variance are right to < 0.5 % at λ = 30 and
+    better above (tested); the exact inverse (scipy's ppf) costs ~1 s per megapixel.
+    """
+    from scipy import special
+
+    lam = np.asarray(lam, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    out = np.zeros(lam.shape, dtype=np.float64)
+    lo = lam <= small
+    if np.any(lo):
+        lam_s = lam[lo]
+        u_s = u[lo]
+        k = np.zeros(lam_s.shape)
+        p = np.exp(-lam_s)
+        cdf = p.copy()
+        idx = np.nonzero(u_s > cdf)[0]
+        step = 0
+        while idx.size:
+            step += 1
+            p[idx] *= lam_s[idx] / step
+            cdf[idx] += p[idx]
+            k[idx] += 1
+            idx = idx[u_s[idx] > cdf[idx]]
+            if step > 200:  # cdf rounding at 1 - 1e-16: the remaining u are within rounding of 1
+                break
+        out[lo] = k
+    hi = ~lo
+    if np.any(hi):
+        lh = lam[hi]
+        z = special.ndtri(np.clip(u[hi], 1e-300, 1 - 1e-16))
+        g1, g2 = 1.0 / np.sqrt(lh), 1.0 / lh
+        x = z + g1 * (z * z - 1) / 6 + g2 * (z**3 - 3 * z) / 24 - g1 * g1 * (2 * z**3 - 5 * z) / 36
+        out[hi] = np.maximum(np.floor(lh + np.sqrt(lh) * x + 0.5), 0.0)
+    return out
+
+
 def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | None = None, *,
                    noiseless: bool = False, origin_uv: tuple[int, int] = (0, 0),
                    detector_shape: tuple[int, int] | None = None) -> DetectorFrame:
@@ -98,16 +139,21 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         expected = electrons
     else:
         gain_map, dsnu_map = fixed_pattern(cfg, det_shape, origin_uv, ph.shape)
-        rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x7E4D_0A11]))
+        # Exactly one uniform per pixel for the shot noise, and a separate stream for the read
+        # noise: the draws of one pixel never depend on another pixel's value. Renderers that add
+        # samples with atomic float adds (ptracer) reproduce photon images only to ~1e-7; with
+        # numpy's Poisson sampler (a value-dependent number of draws per pixel) that would
+        # reshuffle the noise of every later pixel, with an inverse CDF it changes nothing.
+        ss_shot, ss_read = np.random.SeedSequence([int(seed), 0x7E4D_0A11]).spawn(2)
         sig_mean = eta * ph * gain_map
         dark_px = np.maximum(dark_mean + dsnu_map, 0.0)
-        n = rng.poisson(np.minimum(sig_mean, 1e15)).astype(np.float64)
-        if dark_mean > 0 or cfg.dsnu_e > 0:
-            n += rng.poisson(dark_px)
+        # photo-electrons and dark electrons are independent Poisson: their sum is Poisson
+        lam = np.minimum(sig_mean, 1e15) + dark_px
+        n = poisson_inverse_cdf(lam, np.random.default_rng(ss_shot).random(ph.shape))
         well_clip = n >= cfg.full_well_e
         electrons = np.minimum(n, cfg.full_well_e)
         if cfg.read_noise_e > 0:
-            electrons = electrons + rng.normal(0.0, cfg.read_noise_e, ph.shape)
+            electrons = electrons + np.random.default_rng(ss_read).normal(0.0, cfg.read_noise_e, ph.shape)
         expected = np.minimum(sig_mean + dark_px, cfg.full_well_e)
 
     K = cfg.gain_dn_per_e
