@@ -694,3 +694,25 @@ def _warn(flags: dict, tr: SpotTruth) -> None:
     if flags.get("spot_exceeds_window"):
         warnings.warn("the return spot does not fit the render window; flux is lost", GeometryWarning,
                       stacklevel=3)
+
+
+def export_autocollimator(rig: Rig, real: Realization | None = None, pose_rad: dict | None = None, *,
+                          spp: int = 64, mesh_dir=None):
+    """(scene dict, XML comments) for ``rigsim scene export``: the autocollimator looking at the
+    procedure's first face at ``pose_rad`` (default: that face's exact null pose). ``None`` if the
+    rig has no autocollimator."""
+    if rig.autocollimator is None:
+        return None
+    real = real if real is not None else realization_from_rig(rig)
+    optics = AutocollimatorOptics(rig.autocollimator)
+    layout = autocollimator_layout(rig, real, "face", None, objective_vertex_z_mm=optics.objective.z_vertex)
+    if not pose_rad:
+        pose_rad = dict(layout.reference_pose_rad)  # the face's exact null: the spot on the axis
+    sc = autocollimator_scene(rig, real, pose_rad, "face", None, spp=spp, mesh_dir=mesh_dir, optics=optics, layout=layout)
+    u0, v0, w, _ = sc.window
+    notes = [
+        f"rigsim autocollimator (seed 001), rig '{rig.name}', target {sc.layout.target}; millimetres; origin at the objective",
+        "turntable pose (true angles, deg): " + ", ".join(f"{k}={math.degrees(v):.6f}" for k, v in pose_rad.items()),
+        f"the film is a {w}x{w} px window whose pixel (0,0) is detector pixel ({u0}, {v0}); ptracer (caustic path)",
+    ]
+    return sc.scene_dict, notes

@@ -10,93 +10,59 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
-
-_TAG_BY_TYPE = {
-    # shapes
-    "ply": "shape", "obj": "shape", "serialized": "shape", "disk": "shape", "rectangle": "shape",
-    "sphere": "shape", "cube": "shape", "cylinder": "shape",
-    # bsdfs
-    "diffuse": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "dielectric": "bsdf",
-    "thindielectric": "bsdf", "roughdielectric": "bsdf", "twosided": "bsdf", "null": "bsdf", "mask": "bsdf",
-    # emitters
-    "area": "emitter", "point": "emitter", "spot": "emitter", "directional": "emitter",
-    "directionalarea": "emitter", "constant": "emitter", "envmap": "emitter",
-    # sensors, films, samplers, filters, integrators
-    "perspective": "sensor", "orthographic": "sensor", "thinlens": "sensor", "irradiancemeter": "sensor",
-    "hdrfilm": "film", "specfilm": "film",
-    "independent": "sampler", "ldsampler": "sampler", "stratified": "sampler", "multijitter": "sampler",
-    "box": "rfilter", "gaussian": "rfilter", "tent": "rfilter",
-    "path": "integrator", "ptracer": "integrator", "direct": "integrator", "volpath": "integrator",
-    # spectra and textures
-    "uniform": "spectrum", "regular": "spectrum", "d65": "spectrum", "blackbody": "spectrum",
-    "bitmap": "texture", "checkerboard": "texture",
-}
-
 
 class ExportError(ValueError):
     pass
 
 
-def _matrix(m) -> np.ndarray | None:
-    if isinstance(m, np.ndarray) and m.shape == (4, 4):
-        return m
-    if hasattr(m, "matrix"):  # mi.ScalarTransform4f
-        return np.array(m.matrix, dtype=float).reshape(4, 4)
-    return None
-
-
-def _value_xml(name: str, v, indent: str) -> str:
-    q = quoteattr(name)
-    M = _matrix(v)
-    if M is not None:
-        vals = " ".join(f"{x:.17g}" for x in M.ravel())
-        return f"{indent}<transform name={q}>\n{indent}    <matrix value=\"{vals}\"/>\n{indent}</transform>\n"
-    if isinstance(v, bool):
-        return f"{indent}<boolean name={q} value=\"{str(v).lower()}\"/>\n"
-    if isinstance(v, (int, np.integer)):
-        return f"{indent}<integer name={q} value=\"{int(v)}\"/>\n"
-    if isinstance(v, (float, np.floating)):
-        return f"{indent}<float name={q} value=\"{float(v):.17g}\"/>\n"
-    if isinstance(v, (str, Path)):
-        return f"{indent}<string name={q} value={quoteattr(str(v))}/>\n"
-    if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
-        return f"{indent}<point name={q} value=\"{', '.join(f'{float(x):.17g}' for x in v)}\"/>\n"
-    raise ExportError(f"cannot export property {name!r} = {v!r} to Mitsuba XML")
-
-
-def _object_xml(name: str | None, d: dict, indent: str, comments: list[str]) -> str:
-    t = d.get("type")
-    if t not in _TAG_BY_TYPE:
-        raise ExportError(f"plugin type {t!r} (entry {name!r}) has no built-in Mitsuba equivalent; "
-                          "the plain mitsuba command cannot load rigsim's Python plugins")
-    tag = _TAG_BY_TYPE[t]
-    attrs = f" type={quoteattr(t)}"
-    if name is not None and tag in ("bsdf", "spectrum", "texture", "rfilter", "film", "sampler") and not name.startswith("_"):
-        attrs += f" name={quoteattr(name)}"
-    elif name is not None and tag in ("shape", "emitter", "sensor", "integrator") and indent == "    ":
-        attrs += f" id={quoteattr(name)}"  # ids only at the top level: nested keys need not be unique
-    body = ""
+def _check_builtin(d, where="scene"):
     for k, v in d.items():
-        if k == "type":
-            continue
-        body += _object_xml(k, v, indent + "    ", comments) if isinstance(v, dict) else _value_xml(k, v, indent + "    ")
-    return f"{indent}<{tag}{attrs}>\n{body}{indent}</{tag}>\n"
+        if isinstance(v, dict):
+            t = v.get("type", "")
+            if isinstance(t, str) and t.startswith("rigsim_"):
+                raise ExportError(f"plugin type {t!r} (entry {k!r}) is one of rigsim's Python plugins: "
+                                  "the plain mitsuba command cannot load Python plugins")
+            _check_builtin(v, k)
+
+
+def _to_mitsuba(x):
+    import mitsuba as mi
+
+    if isinstance(x, dict):
+        return {k: _to_mitsuba(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray) and x.shape == (4, 4):
+        return mi.ScalarTransform4f(x.tolist())
+    if isinstance(x, Path):
+        return str(x)
+    return x
 
 
 def scene_dict_to_xml(scene: dict, comments: list[str] | None = None) -> str:
-    """Serialise a Mitsuba scene dict (built-in plugins only) as Mitsuba 3 XML."""
+    """Serialise a scene dict of built-in plugins as Mitsuba XML, with Mitsuba's own writer
+    (``mi.parser.parse_dict`` + ``mi.parser.write_file``); ``comments`` go on top."""
+    import os
+    import tempfile
+
+    from rigsim.render.backend import ensure_variant
+
     if scene.get("type") != "scene":
         raise ExportError("the top-level dict must have type 'scene'")
-    comments = list(comments or [])
-    body = "".join(
-        _object_xml(k, v, "    ", comments) if isinstance(v, dict) else _value_xml(k, v, "    ")
-        for k, v in scene.items() if k != "type"
-    )
-    head = "".join(f"<!-- {c.replace('--', '—')} -->\n" for c in comments)
-    return f"<?xml version=\"1.0\" encoding=\"utf-8\"?>\n{head}<scene version=\"3.0.0\">\n{body}</scene>\n"
+    _check_builtin(scene)
+    variant = ensure_variant()
+    import mitsuba as mi
+
+    state = mi.parser.parse_dict(mi.parser.ParserConfig(variant), _to_mitsuba(scene))
+    fd, tmp = tempfile.mkstemp(suffix=".xml")
+    os.close(fd)
+    try:
+        mi.parser.write_file(state, tmp)
+        body = Path(tmp).read_text()
+    finally:
+        os.unlink(tmp)
+    head = "".join(f"<!-- {c.replace('--', '—')} -->\n" for c in (comments or []))
+    return head + body
 
 
 def cv_to_mitsuba_camera(R_world_from_cv: np.ndarray, position) -> np.ndarray:
