@@ -25,6 +25,7 @@ class RenderedSweep:
     readings: dict[str, np.ndarray]
     uv: np.ndarray  # measured centroids (N, 2)
     uv_truth: np.ndarray  # exact pixel-binned centroid of each spot (N, 2)
+    uv_centre: np.ndarray  # exact projection of the sun's centre (what the calibration model predicts) (N, 2)
     n_rendered: int
     n_rejected: int  # frames whose spot was flagged (edge, saturated, …) and left out
     seconds: float
@@ -38,7 +39,18 @@ def render_sweep(
     *,
     spp: int = 256,
     progress: Callable[[int], None] | None = None,
+    noiseless: bool = False,
+    step_deg: float | None = None,
+    centroider: str = "scurve",
 ) -> RenderedSweep:
+    """Render, centroid and record the sweep (module docstring). ``noiseless``: detector noise off
+    (rendering noise and quantisation stay). ``step_deg`` overrides the procedure's sweep step.
+    ``centroider``: ``"scurve"`` (default: first moment with the disk's pixel-phase correction,
+    :mod:`rigsim.imaging.scurve`) or ``"tcom"`` (thresholded first moment, biased by up to 0.02 px
+    on this 2.5 px sun disk)."""
+    if centroider not in ("scurve", "tcom"):
+        raise ValueError(f"centroider = {centroider!r}: must be 'scurve' or 'tcom'")
+    from rigsim.imaging.scurve import centroid_disk_scurve
     import time
 
     from rigsim.render.scenes.sun_sensor import SunSensorScene
@@ -47,11 +59,12 @@ def render_sweep(
     rng = np.random.default_rng(seed)
     proc = rig.procedure
     fixed = {a.label: 0.0 for a in rig.turntable.axes if a.label not in proc.sweep_axes}
-    poses = sweep_poses(proc.sweep_axes, proc.sweep_range_deg, proc.sweep_step_deg, fixed)
+    step = proc.sweep_step_deg if step_deg is None else float(step_deg)
+    poses = sweep_poses(proc.sweep_axes, proc.sweep_range_deg, step, fixed)
     n = len(next(iter(poses.values())))
     scene = SunSensorScene(rig, real, spp=spp)
     offset = rig.sun_sensor.detector.offset_dn
-    keep, uv, uv_true = [], [], []
+    keep, uv, uv_true, uv_centre = [], [], [], []
     rejected = 0
     rendered = 0
     for i in range(n):
@@ -66,7 +79,8 @@ def render_sweep(
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            fr = scene.render(pose, seed=int(rng.integers(2**31)), truth_points=200_000, full_frame=False)
+            fr = scene.render(pose, seed=int(rng.integers(2**31)), truth_points=200_000, full_frame=False,
+                                 noiseless=noiseless)
         rendered += 1
         f = fr.sidecar["flags"]
         roi = fr.dn.astype(float) - offset  # the crop window, at fr.dn_origin_uv on the detector
@@ -76,8 +90,15 @@ def render_sweep(
             rejected += 1
         else:
             keep.append(i)
-            uv.append([cen.u, cen.v])
+            if centroider == "scurve":
+                det = rig.sun_sensor.detector
+                thr = max(3.0, 5.0 * det.read_noise_e * det.gain_dn_per_e)
+                c, _w = centroid_disk_scurve(roi, fr.dn_origin_uv, threshold=thr)
+                uv.append([float(c[0]), float(c[1])])
+            else:
+                uv.append([cen.u, cen.v])
             uv_true.append(fr.sidecar["truth"]["spot"]["pixel_centroid_uv"])
+            uv_centre.append(fr.sidecar["truth"]["spot"]["center_uv"])
         if progress:
             progress(1)
     keep = np.array(keep, dtype=int)
@@ -85,7 +106,7 @@ def render_sweep(
         k: v[keep] + real.encoder_bias_rad.get(k, 0.0) + rng.normal(0.0, noise.encoder_sigma_rad.get(k, 0.0), keep.size)
         for k, v in poses.items()
     }
-    return RenderedSweep(readings, np.array(uv), np.array(uv_true), rendered, rejected, time.perf_counter() - t0)
+    return RenderedSweep(readings, np.array(uv), np.array(uv_true), np.array(uv_centre), rendered, rejected, time.perf_counter() - t0)
 
 
 def calibrate_from_sweep(rig: Rig, sweep: RenderedSweep, axis_order: str | None = None) -> SunCalibration:

@@ -164,6 +164,8 @@ class Autocollimator(_Model):
     pixel_pitch_um: float = Field(gt=0.0, le=100.0)
     resolution_arcsec: float = Field(gt=0.0, le=60.0, description="reading resolution / accuracy (1σ): 0.1″ for CZ-2")
     distance_mm: float = Field(500.0, gt=0.0, le=100000.0, description="objective to the mirror")
+    null_threshold_arcsec: float = Field(0.1, gt=0.0, le=600.0, description="rendered campaign: a null search stops when both readings are below this")
+    setup_error_arcsec: float = Field(30.0, ge=0.0, le=600.0, description="rendered step A: 1σ per axis of the instrument's pointing before it is adjusted on the plane mirror")
     detector: DetectorConfig = Field(default_factory=DetectorConfig)
 
 
@@ -227,12 +229,22 @@ class CubeProcedure(_Model):
     sweep_range_deg: float = Field(60.0, gt=0.0, le=90.0)
     sweep_step_deg: float = Field(5.0, gt=0.0, le=45.0)
     sweep_axes: Annotated[list[AxisLabel], Field(min_length=2, max_length=2)] = ["X", "Y"]
+    search_start_deg: Annotated[list[dict[str, float]], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="rendered campaign: turntable readings where the fine null search of each face starts "
+                          "(coarse acquisition by eye is not modelled); default nominal_poses_deg")
+    command_resolution_deg: float = Field(0.0, ge=0.0, le=1.0, description="rendered campaign: turntable commands are "
+                                          "rounded to this step (Table 1: 0.001°); 0 = continuous")
+    max_search_iterations: int = Field(15, ge=1, le=200, description="rendered campaign: give up a null search after this many frames")
 
     @model_validator(mode="after")
     def _faces(self):
         if self.faces[0] == self.faces[1] or self.faces[0][1] == self.faces[1][1]:
             raise ValueError(f"faces must be two non-parallel faces, got {self.faces}")
         return self
+
+    @property
+    def search_start(self) -> list[dict[str, float]]:
+        return self.search_start_deg if self.search_start_deg is not None else self.nominal_poses_deg
 
 
 class Rig(_Model):
