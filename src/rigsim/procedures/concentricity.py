@@ -128,8 +128,22 @@ class OffsetMeasurer:
         self.bias_px = null_bias_offset_px(rig, real, face_index)
         self.layout = diaphragm_layout(rig, real, face_index)
         self.calls = 0
+        self._geom = None
         self.keep_frames = keep_frames
         self.frames: list = []
+
+    def _in_view(self, offset_px: np.ndarray) -> bool:
+        """Does the divergent spot (radius hole + path·tan(α/2)) lie inside the camera's field?"""
+        if self._geom is None:
+            from rigsim.render.scenes.diaphragm import diaphragm_geometry
+
+            self._geom = diaphragm_geometry(self.rig, self.real, self.face_index)
+        g = self._geom
+        R = g.hole_radius_mm + 2.0 * self.rig.diaphragm_screen.distance_to_cube_mm * math.tan(
+            0.5 * math.radians(self.rig.sun_simulator.collimation_full_angle_arcmin / 60.0))
+        c = np.asarray(offset_px, float) * self.rig.aiming_camera.object_pixel_mm
+        pts = c + R * np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+        return bool(np.all(g.camera.on_detector(g.screen_to_uv(pts))))
 
     def exact_px(self, true_pose_rad: dict) -> np.ndarray:
         from rigsim.optics.placement import trace_return_spot
@@ -146,6 +160,11 @@ class OffsetMeasurer:
                 exact = self.exact_px(true_pose_rad)
             except Exception as e:  # GeometryError from the trace
                 raise SearchError(f"face {self.face}: no return spot at true pose {pose_txt}: {e}") from e
+            if not self._in_view(exact):
+                raise SearchError(
+                    f"face {self.face}: the returned spot ({exact[0]:.0f}, {exact[1]:.0f}) px from the hole is not wholly "
+                    f"in the aiming camera's view at true pose {pose_txt}. Start the search closer to the null "
+                    "(procedure.search_start_deg) or widen the aiming camera's field.")
             return exact + self.rng.normal(0.0, self.sigma_px, 2) - self.bias_px, exact, {}
         fr = self.renderer.render(true_pose_rad, seed=int(np.random.SeedSequence([self.seed, k]).generate_state(1)[0]),
                                   hole_seed=self.seed, noiseless=self.noiseless, warn=False)

@@ -1,0 +1,108 @@
+"""Seeds 000/001 end to end on rendered frames: noise-free accuracy, the report, the budget."""
+
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+from rigsim.procedures.rendered_campaign import rendered_error_budget, run_rendered_campaign
+from rigsim.rig import load_rig
+from rigsim.truth import Noise, realization_from_rig
+
+RIG0 = load_rig("sun_sensor_2axis_diaphragm")
+
+
+def _ideal(rig):
+    return rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"command_resolution_deg": 0.0})})
+
+
+@pytest.fixture(scope="module")
+def coarse_ideal_000():
+    rig = _ideal(RIG0)
+    real = realization_from_rig(rig, ideal=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = run_rendered_campaign(rig, real, seed=3, noise=Noise(), noiseless=True, threshold=0.01,
+                                  sweep_step_deg=10.0, sweep_spp=256)
+    return rig, c
+
+
+@pytest.mark.render
+def test_noise_free_cube_chain_is_exact_to_a_hundredth_of_an_arcsecond(coarse_ideal_000):
+    """Ideal rig, noise-free detector: rendered aiming frames + search + TRIAD recover R(cube←rot)
+    to ≤ 0.05″ (measured 0.03″: the rendered offset is good to ~0.03 px = 0.07″ of face tilt / 2)."""
+    rig, c = coarse_ideal_000
+    assert all(s.converged for s in c.searches)
+    assert np.all(np.abs(c.result.cube_error_arcsec) < 0.05), c.result.cube_error_arcsec
+    # the search ends within the 0.01 px threshold of the true null (exact offsets)
+    for s in c.searches:
+        assert np.all(np.abs(s.steps[-1].true) < 0.05), s.steps[-1].true
+
+
+@pytest.mark.render
+def test_noise_free_sweep_error_matches_its_own_uncertainty(coarse_ideal_000):
+    """The sun-sensor step on a coarse (10°) noise-free sweep: the error of R(sun←rot) is within 4σ
+    of the fit's covariance (σ from its residuals: S-curve-corrected centroids, 0.002–0.003 px)."""
+    rig, c = coarse_ideal_000
+    sd = np.sqrt(np.diag(c.calibration.rotation_covariance_rad2)) * 206264.806
+    e = c.result.sun_error_arcsec
+    assert np.all(np.abs(e) < 4 * sd + 0.02), (e, sd)
+    assert c.measured_noise["sun_centroid_rms_px"] < 0.004
+
+
+@pytest.mark.render
+def test_report_has_the_table_and_the_plots(coarse_ideal_000, tmp_path):
+    from rigsim.procedures.report import write_report
+
+    rig, c = coarse_ideal_000
+    files = write_report(tmp_path, c, rig, budget=None, wall_times=c.times)
+    md = files["report"].read_text()
+    assert "| **R(cube←sun)** (the product) |" in md and "Null search log" in md
+    for k in ("calibration_residuals", "search_path"):
+        data = files[k].read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+@pytest.mark.slow
+@pytest.mark.render
+def test_noise_free_ideal_campaign_recovers_r_pm_sun_within_a_tenth_of_an_arcsecond():
+    """The acceptance target: noise-free ideal rig → R(pm←sun) within 0.1″ per axis. The limit is
+    the sun-sensor sweep (a 2.5 px sun disk: 1 px = 756″ on this wide-field sensor); it needs the
+    dense 2.5° sweep at 1024 spp (measured −0.096, −0.079, +0.004″; at the default 5°/256 spp
+    the sun step alone is 0.17–0.25″, docs/campaign.md)."""
+    rig = _ideal(RIG0)
+    real = realization_from_rig(rig, ideal=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = run_rendered_campaign(rig, real, seed=1, noise=Noise(), noiseless=True, threshold=0.01,
+                                  sweep_step_deg=2.5, sweep_spp=1024)
+    assert np.all(np.abs(c.result.cube_error_arcsec) < 0.05)
+    assert np.all(np.abs(c.error_arcsec) <= 0.1), c.error_arcsec
+
+
+def test_budget_with_the_papers_sources_matches_their_rss():
+    """Monte-Carlo budget (surrogate of the rendered procedure): the paper's four sources together
+    give a per-axis σ within 20 % of the RSS of the same sources simulated one at a time."""
+    b = rendered_error_budget(RIG0, 120, 7, null_sigma=0.05, centroid_sigma_px=0.008)
+    rss, tog = b.rss_of_sources(), b.together().sigma_arcsec
+    assert np.all(np.abs(tog / rss - 1) < 0.2), (tog, rss)
+    rows = {r.source.split(" (")[0].split(":")[0]: r.sigma_arcsec for r in b.rows}
+    # σ3 (mounting, drawn at 2″ per axis as an equivalent null bias) passes through almost 1:1
+    assert np.all(np.abs(rows["σ3 aiming-camera mounting"] - 2.0) < 0.5)
+    # σ1 from the search: below the paper's 2.34″ (1 px as 1σ): the search stops at the first
+    # pose below 1 px on a 1.5 px lattice of 0.001° steps → ~0.43 px rms → ~1″ (docs/campaign.md)
+    s1 = next(r.sigma_arcsec for r in b.rows if r.source.startswith("σ1"))
+    assert 0.5 < s1[0] < 1.6 and 0.5 < s1[1] < 1.6 and s1[2] < 0.5
+
+
+@pytest.mark.parametrize("args,msg", [
+    (["--sweep-spp", "0"], "--sweep-spp = 0: allowed range is 1 to 65536"),
+    (["--threshold", "-1"], "--threshold = -1.0: allowed range is (0, 1000]"),
+    (["--repeat-frames", "500"], "--repeat-frames = 500: allowed range is 0 to 100"),
+])
+def test_cli_rendered_bad_arguments(args, msg):
+    r = subprocess.run([sys.executable, "-m", "rigsim.cli", "run", "cube-mirror", *args], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert msg in r.stderr
