@@ -148,8 +148,8 @@ def _run_cube_mirror_rendered(args) -> int:
 
     if camp.step_a is not None:
         sa = camp.step_a
-        print(f"\nStep A  autocollimator on the plane mirror: {len(sa.readings_arcsec)} frames, last reading "
-              f"({sa.readings_arcsec[-1][0]:+.3f}″, {sa.readings_arcsec[-1][1]:+.3f}″)")
+        print(f"\nStep A  autocollimator on the plane mirror: {len(sa.measured_arcsec)} frames, last reading "
+              f"({sa.measured_arcsec[-1][0]:+.3f}″, {sa.measured_arcsec[-1][1]:+.3f}″)")
     print(f"\n{'Steps 2-3' if rig.procedure.method == 'diaphragm' else 'Step C'}  null search log "
           f"({'Table 1 form: θ in degrees, hole/spot offset in aiming-camera px' if camp.null_unit == 'px' else 'readings in arcsec'}):")
     print(table1_text(camp.searches))
@@ -186,7 +186,9 @@ def _run_cube_mirror_rendered(args) -> int:
             print("paper: RSS of σ1..σ4 = 3.69″ (eq 14), claim < 4″ (1σ); docs/campaign.md compares.")
     wall["total"] = time.perf_counter() - t_all
     try:
-        rig_path = str(resolve_rig_path(args.rig))
+        import os
+
+        rig_path = os.path.relpath(resolve_rig_path(args.rig))
     except Exception:
         rig_path = args.rig
     files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall,

@@ -212,7 +212,8 @@ def table1_text(results: list[SearchResult]) -> str:
     for res in results:
         a, b = res.free_axes
         lines.append(f"face {res.face} ({'converged' if res.converged else 'NOT converged: ' + res.message})")
-        lines.append(f"  {'#':>2} {a + ' (°)':>11} {b + ' (°)':>10} {'x (px)':>8} {'y (px)':>8}   {'exact x':>8} {'exact y':>8}")
+        u = "″" if res.unit == "arcsec" else " px"
+        lines.append(f"  {'#':>2} {a + ' (°)':>11} {b + ' (°)':>10} {'x' + u:>8} {'y' + u:>8}   {'exact x':>8} {'exact y':>8}")
         for row in res.table_rows():
             lines.append(f"  {row[0]:>2} {row[1]:>11.4f} {row[2]:>10.4f} {row[3]:>8.3f} {row[4]:>8.3f}   {row[5]:>8.3f} {row[6]:>8.3f}")
     return "\n".join(lines)

@@ -171,20 +171,22 @@ def run_rendered_campaign(rig: Rig, real: Realization, *, seed: int = 0, axis_or
         step_a = step_a_align(rig, real, rng, rendered=True, threshold_arcsec=threshold, progress=pb.update,
                               noiseless=noiseless)
         times["step A (plane mirror)"] = time.perf_counter() - t0
-        resid = [np.asarray(m) - np.asarray(e) for m, e in zip(step_a.readings_arcsec, step_a.exact_arcsec)]
+        resid = [np.asarray(m) - np.asarray(e) for m, e in zip(step_a.measured_arcsec, step_a.exact_arcsec)]
+        rig_c = rig if threshold is None else rig.model_copy(update={
+            "autocollimator": rig.autocollimator.model_copy(update={"null_threshold_arcsec": float(threshold)})})
         for fi, face in enumerate(rig.procedure.faces):
             pb.set_description(f"step C: autocollimator null, face {face}")
             t0 = time.perf_counter()
-            res = autocollimator_face_search(rig, real, fi, step_a.axis_rot_true, _encoder_errors(rig, noise, rng),
-                                             rendered=True, seed=search_seed + fi, threshold_arcsec=threshold,
-                                             noiseless=noiseless, progress=pb.update)
+            res = autocollimator_face_search(rig_c, real, fi, step_a.axis_rot, _encoder_errors(rig, noise, rng),
+                                             rendered=True, seed=search_seed + fi, noiseless=noiseless,
+                                             axis_order=order, progress=pb.update)
             times[f"step C search, face {face}"] = time.perf_counter() - t0
             searches.append(res)
             resid += [s.measured - s.true for s in res.steps]
             if repeat_frames and fi == 0:
                 pb.set_description("autocollimator repeatability")
                 t0 = time.perf_counter()
-                meas = FaceReadingMeasurer(rig, real, face, step_a.axis_rot_true, rendered=True,
+                meas = FaceReadingMeasurer(rig, real, face, step_a.axis_rot, rendered=True,
                                            seed=search_seed + 1000, noiseless=noiseless)
                 for _ in range(int(repeat_frames)):
                     m, ex, _f = meas(res.final_true_pose_rad)
@@ -265,8 +267,9 @@ def surrogate_campaign(rig: Rig, real: Realization, noise: Noise, rng: np.random
 
         sa = step_a_align(r, real, rng, rendered=False, reading_sigma_arcsec=sig)
         for fi in range(2):
-            res = autocollimator_face_search(r, real, fi, sa.axis_rot_true, _encoder_errors(rig, noise, rng),
-                                             rendered=False, seed=int(rng.integers(2**31)), reading_sigma_arcsec=sig)
+            res = autocollimator_face_search(r, real, fi, sa.axis_rot, _encoder_errors(rig, noise, rng),
+                                             rendered=False, seed=int(rng.integers(2**31)), reading_sigma_arcsec=sig,
+                                             axis_order=order)
             if not res.converged:
                 raise SearchError(f"face {res.face}: surrogate search did not converge ({res.message})")
             null_readings.append(res.final_reading_rad)

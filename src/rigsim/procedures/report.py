@@ -179,7 +179,7 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
     for k, tv in truth.items():
         if k in cal.param_names:
             v = float(cal.params[cal.param_names.index(k)])
-            L.append(f"| {k} | {tv:.6g} | {v:.6g} | {sig[k]:.2g} | {(v - tv) / sig[k]:+.2f} |")
+            L.append(f"| {k} | {tv:.9g} | {v:.9g} | {sig[k]:.2g} | {(v - tv) / sig[k]:+.2f} |")
     L += ["", "Null readings (turntable, degrees):", "", "| face | " + " | ".join(sorted(r.null_poses_deg[0])) + " |",
           "|---|" + "---:|" * len(r.null_poses_deg[0])]
     for f, p in zip(rig.procedure.faces, r.null_poses_deg):
@@ -187,8 +187,8 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
     L += ["", "## Null search log (the form of the paper's Table 1)", ""]
     if campaign.step_a is not None:
         sa = campaign.step_a
-        L += [f"Step A (plane mirror): {len(sa.readings_arcsec)} frames, readings (arcsec): "
-              + ", ".join(f"({m[0]:+.3f}, {m[1]:+.3f})" for m in sa.readings_arcsec), ""]
+        L += [f"Step A (plane mirror): {len(sa.measured_arcsec)} frames, readings (arcsec): "
+              + ", ".join(f"({m[0]:+.3f}, {m[1]:+.3f})" for m in sa.measured_arcsec), ""]
     for s in campaign.searches:
         L += [f"Face {s.face}: {'converged' if s.converged else 'NOT converged — ' + s.message} in {len(s.steps)} frames "
               f"(threshold {s.threshold:g} {s.unit}).", ""] + _search_table_md(s) + [""]
