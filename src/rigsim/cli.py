@@ -12,6 +12,9 @@ import numpy as np
 import rigsim
 
 DEFAULT_RIG = "sun_sensor_2axis_diaphragm"
+# modules with an ``add_cli(run_subparsers, top=top_level_subparsers)`` function (optional)
+PLUGIN_MODULES = ("rigsim.procedures.boresight_cli", "rigsim.procedures.star_calibration_cli",
+                  "rigsim.dataset.cli")
 
 EPILOG = """\
 examples:
@@ -428,6 +431,19 @@ def build_parser() -> argparse.ArgumentParser:
     cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
     cmr.add_argument("--quiet", action="store_true", help="no progress bar")
     cmr.set_defaults(func=cmd_run_cube_mirror)
+
+    # procedures that live in their own modules register their `rigsim run NAME` subcommand
+    # through `add_cli(subparsers)` (keeps this file free of per-procedure code)
+    import importlib
+
+    for mod in PLUGIN_MODULES:
+        try:
+            m = importlib.import_module(mod)
+        except ModuleNotFoundError as e:
+            if not (e.name and mod.startswith(e.name)):
+                raise
+            continue
+        m.add_cli(rs, top=sub)
 
     rd = sub.add_parser("render", help="render frames of a rig (Mitsuba + detector model)")
     rds = rd.add_subparsers(dest="frame_type", metavar="FRAME")
