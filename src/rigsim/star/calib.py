@@ -1,0 +1,326 @@
+"""Seed 004 calibration: angular-distance (AD) and angular-distance-subtraction (ADS) models, an
+EKF over an image sequence, batch least squares of (f, u0, v0, k1, k2), all with Jacobians.
+
+Every equation is a reconstruction (the patent's formulas were lost); docs/star_calibration.md
+gives the reasoning. Notation: a star's measured centroid (u, v) px; intrinsics θ = (f, u0, v0,
+k1, k2) (square pixels, fx = fy = f; tangential p1, p2 known and fixed); normalised distorted
+coordinates x_d = ((u − u0)/f, (v − v0)/f); undistorted x = D⁻¹(x_d; k1, k2, p1, p2) (OpenCV's
+Brown model, inverted by Newton); the patent's eq 5 direction w = (x, y, 1)/|(x, y, 1)|
+= (X, Y, f)/D with X = f x, D = √(X² + Y² + f²); catalogue directions v (eq 6; ICRS at the
+observation epoch).
+
+Measurement models (one frame, stars ordered by brightness, (a, b) the pair farthest apart):
+
+* ``ad`` — eq 7-8: z = vₐ·v_b, h = wₐ·w_b, over the 2N − 3 pairs (a, b), (a, j), (b, j): the
+  edges of a rigid framework, so the equations are independent and their covariance has full
+  rank (all N(N−1)/2 pairs carry no more information: they are functions of the 2N centroids
+  and 3 attitude angles drop out).
+* ``ads`` (exact subtraction, eq 10) — triplets (i, j, k): z = vᵢ·v_j − v_j·v_k,
+  h = wᵢ·w_j − w_j·w_k, over the 2N − 4 triplets (a, j, b) and (j, a, b).
+* ``ads_improved`` (eq 11-12, the patent's improved ADS) — with D_iD_j ≈ D_jD_k ≈ D_aD_b the f²
+  terms of the numerators cancel: h = (N_ij − N_jk)/(D_iD_k), N_ij = X_iX_j + Y_iY_j; in
+  normalised terms h = (xᵢ·x_j − x_j·x_k)/(|pᵢ||p_k|), p = (x, y, 1). The approximation drops
+  f²(1/(D_iD_j) − 1/(D_jD_k)) ≈ (r_k² − r_i²)/(2f²), which is of the same order as h itself:
+  this model is biased by construction (measured in the docs).
+
+Noise: ``weighting='propagated'`` — R = G Σ Gᵀ with G = ∂h/∂(centroids) and Σ the centroid
+covariance (from the centroider); ``'diagonal'`` — only the diagonal of that R (each equation
+treated as independent, the usual reading of "R is the measurement noise covariance").
+
+EKF (eqs 13-19): state a subset of θ (default (u0, v0); the patent's state is the principal point),
+identity transition, process noise Q = q²I, one update per frame with the frame's vector of
+equations, Joseph-form covariance update.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
+
+from rigsim.optics.camera import brown_jacobian, brown_undistort
+
+__all__ = ["THETA_NAMES", "MODELS", "FrameObs", "FrameSystem", "frame_system", "EKFResult", "run_ekf",
+           "BatchResult", "batch_lsq", "normalized_with_jacobians", "pair_sets"]
+
+THETA_NAMES = ("f", "u0", "v0", "k1", "k2")
+MODELS = ("ad", "ads", "ads_improved")
+
+
+@dataclass(frozen=True)
+class FrameObs:
+    """Identified stars of one frame: measured centroids (px), their 1σ, catalogue unit vectors."""
+
+    uv: np.ndarray
+    sigma_uv: np.ndarray
+    dirs_icrs: np.ndarray
+    flux: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.uv.shape[0])
+
+    def brightest(self, n: int) -> "FrameObs":
+        if len(self) <= n:
+            return self
+        order = np.argsort(-self.flux)[:n] if self.flux is not None else np.argsort(
+            np.hypot(*self.sigma_uv.T))[:n]
+        return FrameObs(self.uv[order], self.sigma_uv[order], self.dirs_icrs[order],
+                        None if self.flux is None else self.flux[order])
+
+
+def normalized_with_jacobians(uv, theta, p12=(0.0, 0.0)):
+    """Undistorted normalised coordinates x (N, 2) and ∂x/∂θ (N, 2, 5), ∂x/∂(u, v) (N, 2, 2), valid."""
+    f, u0, v0, k1, k2 = (float(t) for t in theta)
+    p1, p2 = (float(p) for p in p12)
+    uv = np.asarray(uv, dtype=float)
+    xd = (uv[:, 0] - u0) / f
+    yd = (uv[:, 1] - v0) / f
+    x, y, ok = brown_undistort(xd, yd, k1, k2, p1, p2, 0.0)
+    a, b, c, d = brown_jacobian(x, y, k1, k2, p1, p2, 0.0)
+    det = a * d - b * c
+    Jinv = np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det[:, None, None]  # (N,2,2)
+    r2 = x * x + y * y
+    A = np.zeros((uv.shape[0], 2, 5))
+    A[:, 0, 0], A[:, 1, 0] = -xd / f, -yd / f
+    A[:, 0, 1] = -1.0 / f
+    A[:, 1, 2] = -1.0 / f
+    A[:, 0, 3], A[:, 1, 3] = -x * r2, -y * r2
+    A[:, 0, 4], A[:, 1, 4] = -x * r2 * r2, -y * r2 * r2
+    dx_dtheta = Jinv @ A
+    dx_duv = Jinv / f
+    return np.stack([x, y], -1), dx_dtheta, dx_duv, ok & (det > 0)
+
+
+def pair_sets(uv: np.ndarray):
+    """(a, b) = the two stars farthest apart; AD pairs (2N−3, 2); ADS triplets (2N−4, 3)."""
+    n = uv.shape[0]
+    d2 = np.sum((uv[:, None, :] - uv[None, :, :]) ** 2, axis=-1)
+    a, b = np.unravel_index(int(np.argmax(d2)), d2.shape)
+    others = np.array([j for j in range(n) if j not in (a, b)], dtype=np.int64)
+    pairs = np.concatenate([[[a, b]], np.stack([np.full_like(others, a), others], 1),
+                            np.stack([np.full_like(others, b), others], 1)]).astype(np.int64)
+    trip = np.concatenate([np.stack([np.full_like(others, a), others, np.full_like(others, b)], 1),
+                           np.stack([others, np.full_like(others, a), np.full_like(others, b)], 1)]).astype(np.int64)
+    return pairs, trip
+
+
+@dataclass
+class FrameSystem:
+    """One frame's equations at θ: z, h, H = ∂h/∂θ (M, 5), G = ∂h/∂centroids (M, 2N), R."""
+
+    z: np.ndarray
+    h: np.ndarray
+    H: np.ndarray
+    G: np.ndarray
+    R: np.ndarray
+    valid: bool
+
+
+def _model_terms(model: str, x: np.ndarray, pairs, trip):
+    """h (M,), star indices (M, 3) and ∂h/∂x per star (M, 3, 2)."""
+    p = np.concatenate([x, np.ones((x.shape[0], 1))], 1)
+    n = np.linalg.norm(p, axis=1)
+    w = p / n[:, None]
+    # ∂w/∂x (N, 3, 2) = (I − w wᵀ)[:, :2] / n
+    dw = (np.eye(3)[None, :, :2] - w[:, :, None] * w[:, None, :2]) / n[:, None, None]
+    if model == "ad":
+        ia, ib = pairs[:, 0], pairs[:, 1]
+        h = np.einsum("mi,mi->m", w[ia], w[ib])
+        ca = np.einsum("mic,mi->mc", dw[ia], w[ib])
+        cb = np.einsum("mic,mi->mc", dw[ib], w[ia])
+        idx = np.stack([ia, ib, ia], 1)
+        coef = np.stack([ca, cb, np.zeros_like(ca)], 1)
+        return h, idx, coef
+    i, j, k = trip[:, 0], trip[:, 1], trip[:, 2]
+    idx = trip
+    if model == "ads":
+        h = np.einsum("mi,mi->m", w[i], w[j]) - np.einsum("mi,mi->m", w[j], w[k])
+        ci = np.einsum("mic,mi->mc", dw[i], w[j])
+        cj = np.einsum("mic,mi->mc", dw[j], w[i] - w[k])
+        ck = -np.einsum("mic,mi->mc", dw[k], w[j])
+        return h, idx, np.stack([ci, cj, ck], 1)
+    if model == "ads_improved":
+        den = n[i] * n[k]
+        g = np.einsum("mc,mc->m", x[i], x[j]) - np.einsum("mc,mc->m", x[j], x[k])
+        h = g / den
+        ci = x[j] / den[:, None] - h[:, None] * x[i] / (n[i] ** 2)[:, None]
+        cj = (x[i] - x[k]) / den[:, None]
+        ck = -x[j] / den[:, None] - h[:, None] * x[k] / (n[k] ** 2)[:, None]
+        return h, idx, np.stack([ci, cj, ck], 1)
+    raise ValueError(f"model = {model!r}: allowed {MODELS}")
+
+
+def _measurement(model: str, V: np.ndarray, pairs, trip) -> np.ndarray:
+    if model == "ad":
+        return np.einsum("mi,mi->m", V[pairs[:, 0]], V[pairs[:, 1]])
+    i, j, k = trip[:, 0], trip[:, 1], trip[:, 2]
+    return np.einsum("mi,mi->m", V[i], V[j]) - np.einsum("mi,mi->m", V[j], V[k])
+
+
+def frame_system(fo: FrameObs, theta, model: str = "ad", weighting: str = "propagated",
+                 p12=(0.0, 0.0), sets=None) -> FrameSystem:
+    """All of one frame's equations at intrinsics ``theta`` (see the module docstring)."""
+    if weighting not in ("propagated", "diagonal"):
+        raise ValueError(f"weighting = {weighting!r}: allowed 'propagated' or 'diagonal'")
+    N = len(fo)
+    pairs, trip = sets if sets is not None else pair_sets(fo.uv)
+    x, dx_dth, dx_duv, ok = normalized_with_jacobians(fo.uv, theta, p12)
+    h, idx, coef = _model_terms(model, x, pairs, trip)
+    z = _measurement(model, fo.dirs_icrs, pairs, trip)
+    H = np.einsum("msc,mscp->mp", coef, dx_dth[idx])
+    gs = np.einsum("msc,mscq->msq", coef, dx_duv[idx])  # (M, 3, 2)
+    M = h.shape[0]
+    G = np.zeros((M, N, 2))
+    rows = np.repeat(np.arange(M), 3)
+    np.add.at(G, (rows, idx.ravel()), gs.reshape(-1, 2))
+    G = G.reshape(M, 2 * N)
+    var = (np.asarray(fo.sigma_uv, float) ** 2).reshape(-1)
+    R = (G * var[None, :]) @ G.T
+    if weighting == "diagonal":
+        R = np.diag(np.diag(R))
+    return FrameSystem(z, h, H, G, R, bool(np.all(ok)))
+
+
+# ------------------------------------------------------------------------------ EKF
+
+@dataclass
+class EKFResult:
+    model: str
+    names: tuple[str, ...]
+    x: np.ndarray
+    P: np.ndarray
+    history_x: np.ndarray       # (K+1, n): prior, then after each frame
+    history_sigma: np.ndarray   # (K+1, n)
+    nis: np.ndarray             # (K,) normalised innovation squared per frame
+    n_eq: np.ndarray            # (K,) equations per frame
+    theta: np.ndarray           # full θ with the estimated entries replaced
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.P))
+
+
+def run_ekf(frames, theta0, *, model: str = "ad", estimate=("u0", "v0"), prior_sigma=None,
+            process_sigma: float = 0.0, weighting: str = "propagated", p12=(0.0, 0.0),
+            max_stars: int | None = None) -> EKFResult:
+    """EKF over a sequence of :class:`FrameObs` (eqs 13-19). θ entries not in ``estimate`` stay at
+    ``theta0`` (known or assumed). ``prior_sigma`` per estimated entry (default 10 px / 10 px…)."""
+    if model not in MODELS:
+        raise ValueError(f"model = {model!r}: allowed {MODELS}")
+    est = [THETA_NAMES.index(e) for e in estimate]
+    theta = np.asarray(theta0, dtype=float).copy()
+    n = len(est)
+    ps = np.full(n, 10.0) if prior_sigma is None else np.asarray(prior_sigma, float)
+    P = np.diag(ps**2)
+    Q = np.eye(n) * process_sigma**2
+    hx = [theta[est].copy()]
+    hs = [np.sqrt(np.diag(P))]
+    nis, neq = [], []
+    for fo in frames:
+        if max_stars is not None:
+            fo = fo.brightest(max_stars)
+        if len(fo) < 4:
+            nis.append(np.nan)
+            neq.append(0)
+            hx.append(theta[est].copy())
+            hs.append(np.sqrt(np.diag(P)))
+            continue
+        P = P + Q
+        sysm = frame_system(fo, theta, model, weighting, p12)
+        H = sysm.H[:, est]
+        nu = sysm.z - sysm.h
+        S = H @ P @ H.T + sysm.R
+        cf = cho_factor(S, lower=True)
+        K = cho_solve(cf, H @ P).T  # P Hᵀ S⁻¹
+        theta[est] = theta[est] + K @ nu
+        IKH = np.eye(n) - K @ H
+        P = IKH @ P @ IKH.T + K @ sysm.R @ K.T
+        nis.append(float(nu @ cho_solve(cf, nu)))
+        neq.append(nu.size)
+        hx.append(theta[est].copy())
+        hs.append(np.sqrt(np.diag(P)))
+    return EKFResult(model, tuple(estimate), theta[est].copy(), P, np.array(hx), np.array(hs),
+                     np.array(nis), np.array(neq), theta)
+
+
+# ------------------------------------------------------------------------------ batch LSQ
+
+@dataclass
+class BatchResult:
+    model: str
+    names: tuple[str, ...]
+    theta: np.ndarray       # full θ
+    x: np.ndarray           # estimated entries
+    cov: np.ndarray         # covariance of the estimated entries (inverse normal matrix)
+    chi2: float             # whitened residual sum of squares
+    n_eq: int
+    success: bool
+    message: str
+    residuals: list = field(default_factory=list)   # per frame: (z − h) at the solution
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+    @property
+    def chi2_reduced(self) -> float:
+        return self.chi2 / max(1, self.n_eq - len(self.names))
+
+
+def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weighting: str = "propagated",
+              p12=(0.0, 0.0), max_stars: int | None = None, passes: int = 2) -> BatchResult:
+    """Weighted least squares of the chosen θ entries over all frames' equations (Gauss–Newton
+    through ``scipy.optimize.least_squares``), whitened by each frame's R (re-evaluated at the
+    solution for a second pass). Covariance = (Jᵀ R⁻¹ J)⁻¹ at the solution."""
+    from scipy.optimize import least_squares
+
+    est = [THETA_NAMES.index(e) for e in estimate]
+    fos = [fo.brightest(max_stars) if max_stars else fo for fo in frames]
+    fos = [fo for fo in fos if len(fo) >= 4]
+    sets = [pair_sets(fo.uv) for fo in fos]
+    theta = np.asarray(theta0, dtype=float).copy()
+    scale = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3])[est]
+
+    def whiteners(th):
+        Ls = []
+        for fo, st in zip(fos, sets):
+            R = frame_system(fo, th, model, weighting, p12, st).R
+            Ls.append(np.linalg.cholesky(R + np.eye(R.shape[0]) * 1e-30))
+        return Ls
+
+    def full(xe):
+        th = theta.copy()
+        th[est] = xe
+        return th
+
+    res = None
+    for _ in range(passes):
+        Ls = whiteners(theta)
+
+        def fun(xe):
+            th = full(xe)
+            out = []
+            for fo, st, L in zip(fos, sets, Ls):
+                s = frame_system(fo, th, model, weighting, p12, st)
+                out.append(solve_triangular(L, s.h - s.z, lower=True))
+            return np.concatenate(out)
+
+        def jac(xe):
+            th = full(xe)
+            out = []
+            for fo, st, L in zip(fos, sets, Ls):
+                s = frame_system(fo, th, model, weighting, p12, st)
+                out.append(solve_triangular(L, s.H[:, est], lower=True))
+            return np.concatenate(out)
+
+        res = least_squares(fun, theta[est], jac=jac, method="lm", x_scale=scale, xtol=1e-12, ftol=1e-12)
+        theta = full(res.x)
+    J = res.jac
+    cov = np.linalg.inv(J.T @ J)
+    resid = []
+    for fo, st in zip(fos, sets):
+        s = frame_system(fo, theta, model, weighting, p12, st)
+        resid.append(s.z - s.h)
+    return BatchResult(model, tuple(estimate), theta, theta[est].copy(), cov, float(res.fun @ res.fun),
+                       int(res.fun.size), bool(res.success), str(res.message), resid)
