@@ -179,10 +179,27 @@ def frame_system(fo: FrameObs, theta, model: str = "ad", weighting: str = "propa
     R = (G * var[None, :]) @ G.T
     if weighting == "diagonal":
         R = np.diag(np.diag(R))
+    else:
+        # 1e-9 relative floor: a nearly degenerate framework (near-collinear stars) must not make
+        # R numerically singular; it changes no weight by more than 1e-9 of the mean variance
+        R[np.diag_indices_from(R)] += 1e-9 * np.mean(np.diag(R))
     return FrameSystem(z, h, H, G, R, bool(np.all(ok)))
 
 
 # ------------------------------------------------------------------------------ EKF
+
+def _cho(S: np.ndarray):
+    """Cholesky factor (lower) of a symmetric PSD matrix, with growing diagonal jitter if needed."""
+    S = 0.5 * (S + S.T)
+    jitter = 0.0
+    scale = float(np.mean(np.diag(S))) or 1.0
+    for _ in range(8):
+        try:
+            return cho_factor(S + np.eye(S.shape[0]) * jitter, lower=True)
+        except np.linalg.LinAlgError:
+            jitter = scale * (1e-9 if jitter == 0.0 else jitter / scale * 100.0)
+    raise np.linalg.LinAlgError("measurement covariance is not positive definite even with jitter")
+
 
 @dataclass
 class EKFResult:
@@ -231,7 +248,7 @@ def run_ekf(frames, theta0, *, model: str = "ad", estimate=("u0", "v0"), prior_s
         H = sysm.H[:, est]
         nu = sysm.z - sysm.h
         S = H @ P @ H.T + sysm.R
-        cf = cho_factor(S, lower=True)
+        cf = _cho(S)
         K = cho_solve(cf, H @ P).T  # P Hᵀ S⁻¹
         theta[est] = theta[est] + K @ nu
         IKH = np.eye(n) - K @ H
@@ -286,7 +303,9 @@ def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weight
         Ls = []
         for fo, st in zip(fos, sets):
             R = frame_system(fo, th, model, weighting, p12, st).R
-            Ls.append(np.linalg.cholesky(R + np.eye(R.shape[0]) * 1e-30))
+            L = _cho(R)[0]
+            L = np.tril(L)
+            Ls.append(solve_triangular(L, np.eye(R.shape[0]), lower=True))  # L⁻¹: whitening matrix
         return Ls
 
     def full(xe):
@@ -298,21 +317,30 @@ def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weight
     for _ in range(passes):
         Ls = whiteners(theta)
 
+        cache: dict = {}
+
+        def evaluate(xe):
+            key = tuple(np.asarray(xe, float))
+            if cache.get("key") != key:
+                th = full(xe)
+                r_out, j_out = [], []
+                for fo, st, L in zip(fos, sets, Ls):
+                    x, dx_dth, _dx_duv, _ok = normalized_with_jacobians(fo.uv, th, p12)
+                    h, idx, coef = _model_terms(model, x, *st)
+                    z = _measurement(model, fo.dirs_icrs, *st)
+                    H = np.einsum("msc,mscp->mp", coef, dx_dth[idx])[:, est]
+                    r_out.append(h - z)
+                    j_out.append(H)
+                r = np.concatenate([Li @ ri for Li, ri in zip(Ls, r_out)])
+                J = np.concatenate([Li @ ji for Li, ji in zip(Ls, j_out)])
+                cache.update(key=key, r=r, J=J)
+            return cache
+
         def fun(xe):
-            th = full(xe)
-            out = []
-            for fo, st, L in zip(fos, sets, Ls):
-                s = frame_system(fo, th, model, weighting, p12, st)
-                out.append(solve_triangular(L, s.h - s.z, lower=True))
-            return np.concatenate(out)
+            return evaluate(xe)["r"]
 
         def jac(xe):
-            th = full(xe)
-            out = []
-            for fo, st, L in zip(fos, sets, Ls):
-                s = frame_system(fo, th, model, weighting, p12, st)
-                out.append(solve_triangular(L, s.H[:, est], lower=True))
-            return np.concatenate(out)
+            return evaluate(xe)["J"]
 
         res = least_squares(fun, theta[est], jac=jac, method="lm", x_scale=scale, xtol=1e-12, ftol=1e-12)
         theta = full(res.x)
