@@ -481,6 +481,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     from rigsim.rig.load import RigError
+    from rigsim.dataset.store import DatasetError
     from rigsim.procedures.search import SearchError
     from rigsim.rig.turntable import GeometryError
 
@@ -491,7 +492,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (RigError, CliError, GeometryError, SearchError) as exc:
+    except (RigError, CliError, GeometryError, SearchError, DatasetError) as exc:
         print(f"rigsim: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,0 +1,344 @@
+"""``rigsim dataset generate``: plan, render in parallel (process pool or Dask), resume, finish.
+
+Reproducibility: every frame's parameters and seed come from ``SeedSequence([seed, index])`` in
+the plan, which is written to ``plan.json`` before anything is rendered. Workers, their number,
+their order, retries and restarts therefore cannot change a frame.
+
+Resume: a rerun of the same command reads ``plan.json``, checks that it describes the same
+dataset (rig file checksum, generator, seed, frames/sweep, options), and renders only the frames
+that are not complete. A frame is complete when its sidecar exists and holds the SHA-256 of its
+image (store.frame_complete). Both files are written atomically, image first.
+
+Faults: a task that raises, or a worker process that dies, is resubmitted (``retries`` times per
+chunk; a broken process pool is rebuilt). A half-done chunk resumes at its first incomplete frame.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from rigsim.dataset.generators import GENERATORS, make_generator, worker_generator
+from rigsim.dataset.store import (
+    FORMAT,
+    DatasetError,
+    atomic_write_json,
+    frame_complete,
+    frame_files,
+    read_json,
+    sha256_file,
+    write_frame_atomic,
+)
+
+PLAN_KEYS = ("generator", "rig_sha256", "seed", "frames", "sweep", "options")
+FAIL_ENV = "RIGSIM_DATASET_INJECT_FAULT"  # tests: "crash:INDEX" or "raise:INDEX" (once per dataset)
+
+
+def software_versions() -> dict:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for p in ("rigsim", "mitsuba", "drjit", "numpy", "scipy", "opencv-python-headless", "pyarrow", "dask",
+              "distributed", "astropy"):
+        try:
+            out[p] = md.version(p)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+def _maybe_inject_fault(root: Path, index: int) -> None:
+    spec = os.environ.get(FAIL_ENV)
+    if not spec:
+        return
+    mode, idx = spec.split(":")
+    if int(idx) != index:
+        return
+    marker = root / f".fault-injected-{index}"
+    if marker.exists():
+        return
+    marker.write_text(mode)
+    if mode == "crash":
+        os._exit(3)  # the worker process dies mid-task, before writing the frame
+    raise RuntimeError(f"injected fault at frame {index}")
+
+
+def render_chunk(kind: str, rig_text: str, rig_source: str, opts: dict, root: str, fmt: str,
+                 items: list[tuple[int, dict]]) -> list[tuple[int, str]]:
+    """Worker task: render and write every frame of ``items`` that is not complete yet."""
+    root_p = Path(root)
+    gen = worker_generator(kind, rig_text, rig_source, opts)
+    done = []
+    for index, params in items:
+        if frame_complete(root_p, index, fmt):
+            ip, _ = frame_files(root_p, index, fmt)
+            done.append((index, sha256_file(ip)))
+            continue
+        _maybe_inject_fault(root_p, index)
+        img, sidecar, row = gen.render(index, params)
+        sidecar = dict(sidecar)
+        sidecar.setdefault("dataset", {})["truth_row"] = row
+        done.append((index, write_frame_atomic(root_p, index, img, sidecar, fmt)))
+    return done
+
+
+@dataclass
+class GenerateResult:
+    root: Path
+    n_frames: int
+    n_rendered: int
+    n_resumed: int
+    seconds: float
+    frames_per_second: float
+    retries: int
+    manifest: dict
+
+
+def _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, params) -> dict:
+    from rigsim.dataset.store import sha256_bytes
+
+    return {"format": FORMAT, "generator": kind, "rig_file": str(rig_path), "rig_sha256": sha256_bytes(rig_text.encode()),
+            "rig_toml": rig_text, "seed": int(seed), "frames": frames, "sweep": sweep, "options": opts,
+            "image_format": GENERATORS[kind].image_format, "n_frames": len(params), "frame_params": params,
+            "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "software": software_versions()}
+
+
+def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = None, seed: int = 0,
+             generator: str | None = None, workers: int | None = None, scheduler: str | None = None,
+             spp: int = 1024, retries: int = 2, chunk: int = 4, progress: bool = True) -> GenerateResult:
+    from rigsim.rig.load import resolve_rig_path
+
+    t0 = time.perf_counter()
+    rig_path = resolve_rig_path(rig)
+    rig_text = Path(rig_path).read_text()
+    kind = generator or "sun-sensor"
+    if kind not in GENERATORS:
+        raise DatasetError(f"--generator {kind!r}: allowed {', '.join(sorted(GENERATORS))}")
+    if (frames is None) == (sweep is None):
+        raise DatasetError("give exactly one of --frames N or --sweep SPEC")
+    if frames is not None and not (1 <= frames <= 10_000_000):
+        raise DatasetError(f"--frames = {frames}: allowed range is 1 to 10000000")
+    if not (1 <= spp <= 65536):
+        raise DatasetError(f"--spp = {spp}: allowed range is 1 to 65536")
+    if workers is not None and not (1 <= workers <= 512):
+        raise DatasetError(f"--workers = {workers}: allowed range is 1 to 512")
+    if not (0 <= retries <= 20):
+        raise DatasetError(f"--retries = {retries}: allowed range is 0 to 20")
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    opts = {"spp": int(spp)}
+    gen = make_generator(kind, rig_text, str(rig_path), **opts)
+    fmt = gen.image_format
+    plan_path = root / "plan.json"
+    if plan_path.exists():
+        plan = read_json(plan_path, "the dataset's plan")
+        new = {"generator": kind, "rig_sha256": _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, [])["rig_sha256"],
+               "seed": int(seed), "frames": frames, "sweep": sweep, "options": opts}
+        diff = [k for k in PLAN_KEYS if plan.get(k) != new[k]]
+        if diff:
+            k = diff[0]
+            raise DatasetError(f"{root} already holds a different dataset ({k}: existing {plan.get(k)!r}, requested "
+                               f"{new[k]!r}); rerun the original command to resume, or choose another --out")
+        params = plan["frame_params"]
+    else:
+        params = gen.plan(frames, sweep, seed)
+        if not params:
+            raise DatasetError("the plan has no frame whose spot lands on the detector (check --sweep)")
+        atomic_write_json(plan_path, _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, params))
+    n = len(params)
+    for stale in (root / "frames").glob(".*.tmp-*") if (root / "frames").exists() else []:
+        stale.unlink(missing_ok=True)  # temporary files of a killed run (never under a final name)
+    todo = [i for i in range(n) if not frame_complete(root, i, fmt)]
+    n_resumed = n - len(todo)
+    chunks = [[(i, params[i]) for i in todo[k:k + chunk]] for k in range(0, len(todo), chunk)]
+    from tqdm import tqdm
+
+    bar = tqdm(total=n, initial=n_resumed, desc=f"dataset {kind}", unit="frame", disable=None if progress else True)
+    n_retries = 0
+    t_render = time.perf_counter()
+    try:
+        if chunks:
+            if scheduler:
+                n_retries = _run_dask(scheduler, kind, rig_text, str(rig_path), opts, root, fmt, chunks, retries, bar)
+            else:
+                w = workers or min(os.cpu_count() or 1, 8)
+                n_retries = _run_pool(w, kind, rig_text, str(rig_path), opts, root, fmt, chunks, retries, bar)
+    finally:
+        bar.close()
+    dt_render = time.perf_counter() - t_render
+    missing = [i for i in range(n) if not frame_complete(root, i, fmt)]
+    if missing:
+        raise DatasetError(f"{len(missing)} frames could not be generated after {retries} retries "
+                           f"(first: {missing[:5]}); rerun the same command to resume")
+    manifest = finish(root)
+    dt = time.perf_counter() - t0
+    return GenerateResult(root, n, len(todo), n_resumed, dt, len(todo) / dt_render if todo else 0.0, n_retries, manifest)
+
+
+def _init_worker(threads: int | None) -> None:
+    if threads:
+        try:
+            import drjit as dr
+
+            dr.set_thread_count(int(threads))
+        except Exception:
+            pass
+
+
+def _run_pool(workers, kind, rig_text, rig_source, opts, root, fmt, chunks, retries, bar) -> int:
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    threads = 1 if workers > 1 else None
+    attempts = {k: 0 for k in range(len(chunks))}
+    pending = set(range(len(chunks)))
+    n_retries = 0
+    while pending:
+        ctx = mp.get_context("spawn")  # Mitsuba/Dr.Jit state must not be forked
+        with ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx, initializer=_init_worker,
+                                 initargs=(threads,)) as ex:
+            futs = {ex.submit(render_chunk, kind, rig_text, rig_source, opts, str(root), fmt, chunks[k]): k
+                    for k in sorted(pending)}
+            broken = False
+            while futs:
+                done, _ = wait(futs, return_when=FIRST_COMPLETED)
+                for f in done:
+                    k = futs.pop(f)
+                    try:
+                        res = f.result()
+                        pending.discard(k)
+                        bar.update(sum(1 for _ in res))
+                    except BrokenProcessPool:
+                        broken = True
+                    except Exception as e:  # the task raised: retry it
+                        attempts[k] += 1
+                        n_retries += 1
+                        if attempts[k] > retries:
+                            raise DatasetError(f"frames {[i for i, _ in chunks[k]]}: failed {attempts[k]} times: {e}") from e
+                        futs[ex.submit(render_chunk, kind, rig_text, rig_source, opts, str(root), fmt, chunks[k])] = k
+                if broken:
+                    break
+        if broken:  # a worker died: every unfinished chunk is retried in a fresh pool
+            n_retries += 1
+            for k in pending:
+                attempts[k] += 1
+                if attempts[k] > retries + 1:
+                    raise DatasetError(f"worker processes keep dying (frames {[i for i, _ in chunks[k]]})")
+            chunks = [[(i, p) for i, p in c if not frame_complete(root, i, fmt)] for c in chunks]
+            pending = {k for k in pending if chunks[k]}
+            bar.n = bar.total - sum(len(chunks[k]) for k in pending)
+            bar.refresh()
+    return n_retries
+
+
+def _dask_task(kind, rig_text, rig_source, opts, root, fmt, items):
+    _init_worker(1)
+    return render_chunk(kind, rig_text, rig_source, opts, root, fmt, items)
+
+
+def _run_dask(scheduler, kind, rig_text, rig_source, opts, root, fmt, chunks, retries, bar) -> int:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:  # pragma: no cover
+        raise DatasetError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from None
+    client = scheduler if not isinstance(scheduler, str) else None
+    own = False
+    if client is None:
+        try:
+            client = Client(scheduler, timeout="10s")
+            own = True
+        except OSError as e:
+            raise DatasetError(f"--scheduler {scheduler!r}: cannot connect ({e})") from None
+    try:
+        futs = client.map(_dask_task, [kind] * len(chunks), [rig_text] * len(chunks), [rig_source] * len(chunks),
+                          [opts] * len(chunks), [str(root)] * len(chunks), [fmt] * len(chunks), chunks,
+                          retries=retries, pure=False)
+        for f in as_completed(futs):
+            res = f.result()
+            bar.update(len(res))
+    finally:
+        if own:
+            client.close()
+    return 0
+
+
+# ------------------------------------------------------------------ finish: truth table + manifest
+
+def collect_rows(root: Path, n: int, fmt: str) -> list[dict]:
+    rows = []
+    for i in range(n):
+        _, jp = frame_files(root, i, fmt)
+        sc = read_json(jp, f"sidecar of frame {i}")
+        try:
+            rows.append(sc["dataset"]["truth_row"])
+        except KeyError:
+            raise DatasetError(f"{jp}: no dataset.truth_row (not written by rigsim dataset generate)") from None
+    return rows
+
+
+def write_truth_table(root: Path, rows: list[dict]) -> tuple[Path, Path]:
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+    import pyarrow.parquet as pq
+
+    cols = list(rows[0].keys())
+    for r in rows[1:]:
+        for k in r:
+            if k not in cols:
+                cols.append(k)
+    table = pa.table({c: [r.get(c) for r in rows] for c in cols})
+    pq_path, csv_path = root / "truth.parquet", root / "truth.csv"
+    tmp = root / f".truth.parquet.tmp-{os.getpid()}"
+    pq.write_table(table, tmp)
+    os.replace(tmp, pq_path)
+    tmp = root / f".truth.csv.tmp-{os.getpid()}"
+    pcsv.write_csv(table, tmp)
+    os.replace(tmp, csv_path)
+    return pq_path, csv_path
+
+
+def finish(root) -> dict:
+    """Write truth.parquet, truth.csv and manifest.json from the complete frames."""
+    root = Path(root)
+    plan = read_json(root / "plan.json", "the dataset's plan")
+    n, fmt = int(plan["n_frames"]), plan["image_format"]
+    rows = collect_rows(root, n, fmt)
+    write_truth_table(root, rows)
+    files = {}
+    for p in sorted([root / "plan.json", root / "truth.parquet", root / "truth.csv"]
+                    + [q for i in range(n) for q in frame_files(root, i, fmt)]):
+        files[str(p.relative_to(root))] = sha256_file(p)
+    man = {"format": FORMAT, "generator": plan["generator"], "rig_file": plan["rig_file"], "rig_sha256": plan["rig_sha256"],
+           "seed": plan["seed"], "frames": plan["frames"], "sweep": plan["sweep"], "options": plan["options"],
+           "n_frames": n, "image_format": fmt, "software": software_versions(),
+           "frame_seeds": [p["seed"] for p in plan["frame_params"]],
+           "truth_columns": list(rows[0].keys()), "files_sha256": files,
+           "finished_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+    atomic_write_json(root / "manifest.json", man)
+    return man
+
+
+def verify(root) -> list[str]:
+    """Problems found (empty: every file present with its manifest checksum)."""
+    root = Path(root)
+    man = read_json(root / "manifest.json", "the dataset's manifest")
+    bad = []
+    for rel, want in man.get("files_sha256", {}).items():
+        p = root / rel
+        if not p.exists():
+            bad.append(f"{rel}: missing")
+        elif sha256_file(p) != want:
+            bad.append(f"{rel}: checksum mismatch (corrupt or modified)")
+    return bad
+
+
+def describe(root) -> str:
+    man = read_json(Path(root) / "manifest.json", "the dataset's manifest")
+    return json.dumps({k: man[k] for k in ("generator", "rig_file", "seed", "frames", "sweep", "n_frames", "image_format")})

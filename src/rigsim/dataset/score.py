@@ -1,0 +1,173 @@
+"""``rigsim dataset score DIR predictions.csv``: score an external pipeline against the truth.
+
+Predictions CSV (header row required, one row per frame, extra columns ignored):
+
+=================  ==========================================================================
+mode               columns
+=================  ==========================================================================
+``centroid``       ``frame, u, v`` — the spot centre in pixels (OpenCV convention: the centre
+                   of pixel (0, 0) is (0, 0), u right, v down)
+``direction``      ``frame, x, y, z`` — the sun's direction in the sensor frame (any length;
+                   normalised here)
+=================  ==========================================================================
+
+The mode is detected from the columns (``--mode`` forces it). ``frame`` is the index in the
+dataset (``truth.csv``'s ``frame``). Centroids are compared with ``spot_u, spot_v`` — the exact
+projection of the sun's centre — or, with ``--truth-ref pixel-centroid``, with the exact first
+moment of the pixel-integrated spot (what a perfect centre-of-mass returns on these pixels).
+Frames whose truth is not valid (spot cut by the edge, saturated) are left out and counted.
+
+Reported: n, RMS, mean (bias), percentiles 50/90/95/99, max, the outliers (error > max(5 × the robust
+2-D rms = 6.0 × the median error, ``--outlier``)), and the frames with no prediction.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rigsim.dataset.reader import open_dataset
+from rigsim.dataset.store import DatasetError
+
+MODES = {"centroid": ("frame", "u", "v"), "direction": ("frame", "x", "y", "z")}
+TRUTH_REFS = {"centre": ("spot_u", "spot_v"), "pixel-centroid": ("spot_centroid_u", "spot_centroid_v")}
+
+
+@dataclass
+class Score:
+    mode: str
+    unit: str
+    n: int
+    rms: float
+    mean: list[float]
+    percentiles: dict[str, float]
+    max: float
+    outliers: list[tuple[int, float]]
+    missing: list[int]
+    excluded_invalid: int
+    outlier_threshold: float
+    per_frame: dict = field(repr=False, default_factory=dict)
+
+    def text(self) -> str:
+        p = self.percentiles
+        lines = [f"{self.mode} errors over {self.n} frames ({self.unit}):",
+                 f"  RMS {self.rms:.4g}   mean {', '.join(f'{m:+.4g}' for m in self.mean)}   max {self.max:.4g}",
+                 "  percentiles " + "  ".join(f"{k} {v:.4g}" for k, v in p.items()),
+                 f"  outliers (> {self.outlier_threshold:.3g} {self.unit}): {len(self.outliers)}"
+                 + ("" if not self.outliers else " — " + ", ".join(f"frame {i}: {e:.3g}" for i, e in self.outliers[:10]))]
+        if self.missing:
+            lines.append(f"  frames without a prediction: {len(self.missing)} (first {self.missing[:10]})")
+        if self.excluded_invalid:
+            lines.append(f"  frames left out (truth not valid: spot cut by the edge or saturated): {self.excluded_invalid}")
+        return "\n".join(lines)
+
+
+def read_predictions(path, mode: str | None = None) -> tuple[str, dict[int, np.ndarray]]:
+    path = Path(path)
+    if not path.exists():
+        raise DatasetError(f"{path}: no such predictions file")
+    with open(path, newline="") as f:
+        rd = csv.reader(f)
+        try:
+            header = [h.strip() for h in next(rd)]
+        except StopIteration:
+            raise DatasetError(f"{path}: empty file (expected a header row)") from None
+        if mode is None:
+            found = [m for m, cols in MODES.items() if all(c in header for c in cols)]
+            if not found:
+                raise DatasetError(f"{path}: columns {header} match no mode; expected "
+                                   + " or ".join(f"'{', '.join(c)}' ({m})" for m, c in MODES.items()))
+            mode = found[0]
+        elif mode not in MODES:
+            raise DatasetError(f"--mode {mode!r}: allowed {', '.join(MODES)}")
+        cols = MODES[mode]
+        missing = [c for c in cols if c not in header]
+        if missing:
+            raise DatasetError(f"{path}: missing column(s) {missing} for mode '{mode}' (need {', '.join(cols)})")
+        idx = [header.index(c) for c in cols]
+        out: dict[int, np.ndarray] = {}
+        for line, row in enumerate(rd, start=2):
+            if not row or all(not x.strip() for x in row):
+                continue
+            try:
+                vals = [row[i] for i in idx]
+            except IndexError:
+                raise DatasetError(f"{path}:{line}: {len(row)} fields, header has {len(header)}") from None
+            try:
+                fr = int(vals[0])
+            except ValueError:
+                raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0]!r} is not an integer") from None
+            try:
+                v = np.array([float(x) for x in vals[1:]])
+            except ValueError:
+                bad = next(c for c, x in zip(cols[1:], vals[1:]) if not _isfloat(x))
+                raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols[1:].index(bad)]!r} is not a number") from None
+            if not np.all(np.isfinite(v)):
+                raise DatasetError(f"{path}:{line}: non-finite value in {cols[1:]}")
+            if fr in out:
+                raise DatasetError(f"{path}:{line}: frame {fr} appears twice")
+            out[fr] = v
+    if not out:
+        raise DatasetError(f"{path}: no prediction rows")
+    return mode, out
+
+
+def _isfloat(x) -> bool:
+    try:
+        float(x)
+        return True
+    except ValueError:
+        return False
+
+
+def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centre",
+          outlier: float | None = None) -> Score:
+    ds = open_dataset(root)
+    mode, pred = read_predictions(predictions, mode)
+    t = ds.truth_numpy()
+    n = len(ds)
+    unknown = sorted(k for k in pred if not (0 <= k < n))
+    if unknown:
+        raise DatasetError(f"{predictions}: frame(s) {unknown[:10]} not in the dataset (0 to {n - 1})")
+    valid = t["valid"].astype(bool) if "valid" in t else np.ones(n, bool)
+    if mode == "centroid":
+        if truth_ref not in TRUTH_REFS:
+            raise DatasetError(f"--truth-ref {truth_ref!r}: allowed {', '.join(TRUTH_REFS)}")
+        cu, cv = TRUTH_REFS[truth_ref]
+        if cu not in t:
+            raise DatasetError(f"{ds.root}: truth has no '{cu}' column (generator {ds.manifest['generator']})")
+        truth = np.stack([t[cu], t[cv]], axis=1)
+        unit = "px"
+    else:
+        if "sun_x" not in t:
+            raise DatasetError(f"{ds.root}: truth has no sun direction (generator {ds.manifest['generator']})")
+        truth = np.stack([t["sun_x"], t["sun_y"], t["sun_z"]], axis=1)
+        unit = "arcsec"
+    frames = [i for i in sorted(pred) if valid[i]]
+    excluded = sum(1 for i in pred if not valid[i])
+    missing = [i for i in range(n) if valid[i] and i not in pred]
+    if not frames:
+        raise DatasetError("no prediction for any valid frame")
+    P = np.array([pred[i] for i in frames])
+    T = truth[frames]
+    if mode == "centroid":
+        d = P - T
+        err = np.hypot(d[:, 0], d[:, 1])
+        mean = d.mean(axis=0).tolist()
+    else:
+        Pn = P / np.linalg.norm(P, axis=1, keepdims=True)
+        Tn = T / np.linalg.norm(T, axis=1, keepdims=True)
+        err = np.degrees(np.arctan2(np.linalg.norm(np.cross(Pn, Tn), axis=1), np.sum(Pn * Tn, axis=1))) * 3600.0
+        mean = [float(err.mean())]
+    # robust scale: for a 2-D Gaussian error of σ per axis the error *magnitude* has median
+    # 1.1774 σ; an outlier is beyond 5 × the 2-D rms (5·√2·σ ≈ 6.0 × the median)
+    med = float(np.median(err))
+    thr = max(5.0 * math.sqrt(2.0) * med / 1.1774, outlier or 0.0)
+    outl = sorted(((fr, float(e)) for fr, e in zip(frames, err) if e > thr), key=lambda x: -x[1])
+    pct = {f"p{q}": float(np.percentile(err, q)) for q in (50, 90, 95, 99)}
+    return Score(mode, unit, len(frames), float(math.sqrt(np.mean(err**2))), [float(m) for m in mean], pct,
+                 float(err.max()), outl, missing, excluded, thr, dict(zip(frames, err.tolist())))
