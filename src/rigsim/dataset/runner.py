@@ -182,11 +182,18 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
 
 
 def _init_worker(threads: int | None) -> None:
+    """One thread per worker process when several share the machine (no oversubscription)."""
     if threads:
         try:
             import drjit as dr
 
             dr.set_thread_count(int(threads))
+        except Exception:
+            pass
+        try:
+            import cv2
+
+            cv2.setNumThreads(int(threads))
         except Exception:
             pass
 
@@ -248,7 +255,7 @@ def _run_dask(scheduler, kind, rig_text, rig_source, opts, root, fmt, chunks, re
         from distributed import Client, as_completed
     except ImportError:  # pragma: no cover
         raise DatasetError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from None
-    client = scheduler if not isinstance(scheduler, str) else None
+    client = scheduler if not isinstance(scheduler, str) else None  # a Client object is used as is
     own = False
     if client is None:
         try:
