@@ -67,11 +67,10 @@ def _plot_residuals(path, res):
     for ax, (title, th) in zip(axes, panels):
         uv, r = per_star_residuals(res.frames_obs, th, (s.p1, s.p2), W, H)
         rms = np.sqrt(np.mean(r**2, axis=0))
-        scale = 100.0 if np.max(np.abs(r)) > 0.5 else 2000.0
-        q = ax.quiver(uv[:, 0], uv[:, 1], r[:, 0], r[:, 1], angles="xy", scale_units="xy", scale=1.0 / scale,
-                      width=0.0025, color="tab:blue")
-        ax.quiverkey(q, 0.80, 1.02, 1.0 if scale == 100.0 else 0.05,
-                     "1 px" if scale == 100.0 else "0.05 px", labelpos="E", coordinates="axes")
+        mag = 10.0 ** np.floor(np.log10(60.0 / max(3.0 * float(np.sqrt(np.mean(r**2))), 1e-6)))
+        ax.quiver(uv[:, 0], uv[:, 1], r[:, 0], r[:, 1], angles="xy", scale_units="xy", scale=1.0 / mag,
+                  width=0.002, color="tab:blue")
+        title = f"{title}\narrows magnified {mag:g}×"
         ax.set_xlim(-0.5, W - 0.5)
         ax.set_ylim(H - 0.5, -0.5)
         ax.set_aspect("equal")
@@ -115,6 +114,7 @@ def _plot_ekf(path, res):
             ax.grid(alpha=0.3)
             if i == 1:
                 ax.set_xlabel("frames processed")
+            ax.xaxis.set_major_locator(plt.MaxNLocator(integer=True))
     axes[0, 0].legend(fontsize=8, loc="upper right")
     fig.suptitle("EKF convergence over the image sequence (band: ±1σ predicted by the filter); prior = detector centre", fontsize=11)
     fig.tight_layout()
@@ -161,7 +161,7 @@ def _plot_observability(path, res):
             for xi, v in zip(x + (i - 1) * 0.27, sv):
                 ax.text(xi, v * 1.1, f"{v:.3g}", ha="center", fontsize=7)
         ax.set_yscale("log")
-        ax.set_xticks(x, ["σ1", "σ2"])
+        ax.set_xticks(x, ["σ1 (largest)", "σ2"])
         if kind == "raw":
             ax.set_title("raw SVD of H (the patent's measure; units of the equations)", fontsize=10)
             ax.set_ylabel("singular value [equation units per px]")
