@@ -274,18 +274,22 @@ def _run_cube_mirror_analytic(args) -> int:
 # ------------------------------------------------------------------------------ rig / doctor
 
 def cmd_rig_check(args) -> int:
-    from rigsim.rig import load_rig
+    from rigsim.rig.load import load_any_rig
 
-    rig = load_rig(args.rig)
-    print(f"{args.rig}: OK — '{rig.name}' (seed {rig.seed_document}, {rig.turntable.kind} turntable, method {rig.procedure.method})")
+    rig = load_any_rig(args.rig)
+    extra = ""
+    if hasattr(rig, "turntable") and hasattr(rig, "procedure"):
+        extra = f", {rig.turntable.kind} turntable, method {rig.procedure.method}"
+    print(f"{args.rig}: OK — '{rig.name}' (seed {rig.seed_document}{extra})")
     return 0
 
 
 def cmd_rig_list(args) -> int:
-    from rigsim.rig import default_rigs, load_rig
+    from rigsim.rig import default_rigs
+    from rigsim.rig.load import load_any_rig
 
     for p in default_rigs():
-        r = load_rig(p)
+        r = load_any_rig(p)
         print(f"{p.stem:40s} seed {r.seed_document}  {r.description}")
     return 0
 

@@ -131,3 +131,12 @@ def test_fuzz_loader_only_ever_returns_a_rig_or_a_rig_error(mutations):
         assert all(("`" in p) or p.startswith("in the rig: ") for p in exc.problems), msg
     else:
         assert isinstance(rig, Rig)
+
+
+def test_rig_families_dispatch_and_refuse_clearly():
+    from rigsim.rig.load import load_any_rig
+
+    assert load_any_rig("star_sensor").seed_document == "004"
+    assert isinstance(load_any_rig("sun_sensor_2axis_diaphragm"), Rig)
+    with pytest.raises(RigError, match="seed_document = '004': this command needs a turntable/cube-mirror rig"):
+        load_rig("star_sensor")

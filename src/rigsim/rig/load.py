@@ -155,18 +155,52 @@ def resolve_rig_path(name_or_path: str | Path) -> Path:
     raise RigError(name_or_path, [f"no such rig file; give a path or one of the default rigs: {known}"])
 
 
-def load_rig(name_or_path: str | Path) -> Rig:
-    path = resolve_rig_path(name_or_path)
+def _read_toml(path: Path) -> dict:
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise RigError(path, [f"cannot read file: {exc.strerror}"]) from None
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        return tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise RigError(path, [f"not UTF-8 text (byte {exc.start})"]) from None
     except tomllib.TOMLDecodeError as exc:
         raise RigError(path, [f"TOML syntax error: {exc}"]) from None
+
+
+# Rig families with their own schema, by ``seed_document`` → "module:parser(data, source)".
+# Seeds 000/001 (turntable + cube mirror) use :class:`Rig`.
+RIG_FAMILIES = {
+    "003": "rigsim.boresight.schema:parse_boresight_rig",
+    "004": "rigsim.star.schema:parse_star_rig",
+}
+
+
+def load_any_rig(name_or_path: str | Path):
+    """Load a rig file of any family (dispatch on its ``seed_document``)."""
+    import importlib
+
+    path = resolve_rig_path(name_or_path)
+    data = _read_toml(path)
+    fam = RIG_FAMILIES.get(str(data.get("seed_document", "")))
+    if fam is None:
+        return parse_rig(data, path)
+    mod, fn = fam.split(":")
+    try:
+        parser = getattr(importlib.import_module(mod), fn)
+    except (ImportError, AttributeError):
+        raise RigError(path, [f"seed_document = {data.get('seed_document')!r}: this rigsim has no loader for it ({fam})"]) from None
+    return parser(data, path)
+
+
+def load_rig(name_or_path: str | Path) -> Rig:
+    """A turntable/cube-mirror rig (seeds 000, 001). Other families: :func:`load_any_rig`."""
+    path = resolve_rig_path(name_or_path)
+    data = _read_toml(path)
+    sd = str(data.get("seed_document", ""))
+    if sd in RIG_FAMILIES:
+        raise RigError(path, [f"seed_document = {sd!r}: this command needs a turntable/cube-mirror rig "
+                              "(seed_document '000' or '001')"])
     return parse_rig(data, path)
 
 
