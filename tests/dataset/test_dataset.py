@@ -185,3 +185,35 @@ def test_dask_scheduler_gives_the_same_frames(clean, tmp_path):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
         generate(RIG, tmp_path, frames=3, seed=11, spp=SPP, scheduler=cl.scheduler_address, progress=False)
     assert _pngs(tmp_path) == {k: v for k, v in _pngs(root).items() if int(k[13:19]) < 3}
+
+
+def test_star_frames_are_fits_with_one_truth_row_per_star_and_scored_by_matching(tmp_path):
+    """Seed-004 rig: FITS frames; the truth has one row per star; a prediction list with 0.05 px
+    Gaussian noise per axis scores √2·0.05 = 0.071 px rms (±15 %: ~100–400 stars), one false detection."""
+    from astropy.io import fits
+
+    r = generate("star_sensor", tmp_path, frames=3, seed=2, progress=False)
+    assert r.n_frames == 3
+    ds = open_dataset(tmp_path, verify=True)
+    assert ds.fmt == "fits" and ds.rows_per_frame
+    img = ds.frame(0)
+    with fits.open(tmp_path / "frames" / "frame_000000.fits") as h:
+        assert np.array_equal(h[0].data, img)
+    t = ds.truth_numpy()
+    row0 = ds.row(0)
+    assert len(row0["hip"]) == row0["n_stars"][0] > 10
+    # the true star positions are where the light is: mean DN at the brightest true stars ≫ background
+    bright = np.argsort(row0["photons"])[-5:]
+    for k in bright:
+        u, v = int(round(row0["u"][k])), int(round(row0["v"][k]))
+        if 2 < u < img.shape[1] - 3 and 2 < v < img.shape[0] - 3:
+            assert img[v - 1:v + 2, u - 1:u + 2].mean() > np.median(img) + 20
+    rng = np.random.default_rng(0)
+    sel = t["star"] >= 0
+    lines = ["frame,u,v"] + [f"{f},{u + rng.normal(0, 0.05)},{v + rng.normal(0, 0.05)}"
+                             for f, u, v in zip(t["frame"][sel], t["u"][sel], t["v"][sel])] + ["1,3.0,3.0"]
+    p = tmp_path / "stars.csv"
+    p.write_text("\n".join(lines) + "\n")
+    s = score(tmp_path, p)
+    assert s.detection["false_detections"] == 1 and s.detection["missed"] == 0
+    assert s.rms == pytest.approx(np.sqrt(2) * 0.05, rel=0.15)

@@ -12,6 +12,7 @@ examples:
   rigsim dataset generate sun_sensor_2axis_diaphragm --out data/grid --sweep "X=-60:60:10 Y=-60:60:10"
   rigsim dataset generate sun_sensor_2axis_diaphragm --out data/sun --frames 200 --scheduler tcp://head:8786
   rigsim dataset score data/sun my_centroids.csv          # columns: frame,u,v  (or frame,x,y,z)
+  rigsim dataset generate star_sensor --out data/stars --frames 500      # FITS, one truth row per star
   rigsim dataset verify data/sun
 
 Rerunning the same generate command resumes an interrupted run. Format and CSV columns: docs/datasets.md.
@@ -34,12 +35,18 @@ def _gen(args) -> int:
 def _score(args) -> int:
     from rigsim.dataset.score import score
 
-    s = score(args.dataset, args.predictions, mode=args.mode, truth_ref=args.truth_ref, outlier=args.outlier)
+    if not (0 < args.match_radius <= 50):
+        from rigsim.dataset.store import DatasetError
+
+        raise DatasetError(f"--match-radius = {args.match_radius}: allowed range is (0, 50] px")
+    s = score(args.dataset, args.predictions, mode=args.mode, truth_ref=args.truth_ref, outlier=args.outlier,
+              match_radius_px=args.match_radius)
     print(s.text())
     if args.json_out:
         from pathlib import Path
 
-        Path(args.json_out).write_text(json.dumps({k: v for k, v in s.__dict__.items() if k != "per_frame"}, indent=1))
+        Path(args.json_out).write_text(json.dumps({k: v for k, v in s.__dict__.items() if k != "per_frame"}, indent=1,
+                                                  default=float))
     return 0
 
 
@@ -94,6 +101,7 @@ def add_cli(run_subparsers, top=None) -> None:
     s.add_argument("--truth-ref", choices=["centre", "pixel-centroid"], default="centre",
                    help="centroid truth: the sun centre's projection, or the exact pixel first moment")
     s.add_argument("--outlier", type=float, default=None, help="outlier threshold (px or arcsec); default 5 robust σ")
+    s.add_argument("--match-radius", type=float, default=2.0, help="star frames: match radius (px)")
     s.add_argument("--json-out", default=None, metavar="FILE")
     s.set_defaults(func=_score)
     v = ds.add_parser("verify", help="check every file against the manifest's checksums")

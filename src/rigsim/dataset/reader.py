@@ -40,8 +40,11 @@ class Dataset:
             self.truth = pq.read_table(tp)
         except Exception as e:
             raise DatasetError(f"{tp}: corrupt Parquet file ({e})") from None
-        if self.truth.num_rows != self.n:
-            raise DatasetError(f"{tp}: {self.truth.num_rows} rows, manifest says {self.n} frames")
+        if "frame" not in self.truth.column_names:
+            raise DatasetError(f"{tp}: no 'frame' column")
+        fr = self.truth.column("frame").to_numpy()
+        if len(np.unique(fr)) != self.n or (self.n and (fr.min() != 0 or fr.max() != self.n - 1)):
+            raise DatasetError(f"{tp}: rows cover {len(np.unique(fr))} frames, manifest says {self.n}")
         if verify:
             from rigsim.dataset.runner import verify as _verify
 
@@ -59,8 +62,17 @@ class Dataset:
     def truth_numpy(self) -> dict[str, np.ndarray]:
         return {c: self.truth.column(c).to_numpy(zero_copy_only=False) for c in self.truth.column_names}
 
+    @property
+    def rows_per_frame(self) -> bool:
+        """False when the truth has one row per frame; True for star frames (one row per star)."""
+        return self.truth.num_rows != self.n
+
     def row(self, index: int) -> dict:
-        return {c: self.truth.column(c)[index].as_py() for c in self.truth.column_names}
+        """The truth row of frame ``index`` (for star frames: a dict of lists, one entry per star)."""
+        if not self.rows_per_frame:
+            return {c: self.truth.column(c)[index].as_py() for c in self.truth.column_names}
+        sel = np.flatnonzero(self.truth.column("frame").to_numpy() == index)
+        return {c: [self.truth.column(c)[int(i)].as_py() for i in sel] for c in self.truth.column_names}
 
     def frame(self, index: int, *, check: bool = True) -> np.ndarray:
         if not (0 <= index < self.n):

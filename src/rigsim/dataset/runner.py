@@ -117,7 +117,9 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
     t0 = time.perf_counter()
     rig_path = resolve_rig_path(rig)
     rig_text = Path(rig_path).read_text()
-    kind = generator or "sun-sensor"
+    from rigsim.dataset.generators import generator_for_rig
+
+    kind = generator or generator_for_rig(rig_text)
     if kind not in GENERATORS:
         raise DatasetError(f"--generator {kind!r}: allowed {', '.join(sorted(GENERATORS))}")
     if (frames is None) == (sweep is None):
@@ -284,7 +286,8 @@ def collect_rows(root: Path, n: int, fmt: str) -> list[dict]:
         _, jp = frame_files(root, i, fmt)
         sc = read_json(jp, f"sidecar of frame {i}")
         try:
-            rows.append(sc["dataset"]["truth_row"])
+            r = sc["dataset"]["truth_row"]
+            rows.extend(r if isinstance(r, list) else [r])
         except KeyError:
             raise DatasetError(f"{jp}: no dataset.truth_row (not written by rigsim dataset generate)") from None
     return rows
@@ -316,7 +319,7 @@ def finish(root) -> dict:
     root = Path(root)
     plan = read_json(root / "plan.json", "the dataset's plan")
     n, fmt = int(plan["n_frames"]), plan["image_format"]
-    rows = collect_rows(root, n, fmt)
+    rows = collect_rows(root, n, fmt)  # one row per frame, or per star for star frames
     write_truth_table(root, rows)
     files = {}
     for p in sorted([root / "plan.json", root / "truth.parquet", root / "truth.csv"]

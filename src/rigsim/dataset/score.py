@@ -54,19 +54,25 @@ class Score:
 
     def text(self) -> str:
         p = self.percentiles
-        lines = [f"{self.mode} errors over {self.n} frames ({self.unit}):",
+        what = "matched stars" if self.mode.startswith("star") else "frames"
+        lines = [f"{self.mode} errors over {self.n} {what} ({self.unit}):",
                  f"  RMS {self.rms:.4g}   mean {', '.join(f'{m:+.4g}' for m in self.mean)}   max {self.max:.4g}",
                  "  percentiles " + "  ".join(f"{k} {v:.4g}" for k, v in p.items()),
                  f"  outliers (> {self.outlier_threshold:.3g} {self.unit}): {len(self.outliers)}"
                  + ("" if not self.outliers else " — " + ", ".join(f"frame {i}: {e:.3g}" for i, e in self.outliers[:10]))]
         if self.missing:
             lines.append(f"  frames without a prediction: {len(self.missing)} (first {self.missing[:10]})")
+        det = getattr(self, "detection", None)
+        if det:
+            lines.append(f"  stars: {det['matched']} of {det['valid_stars']} valid stars matched within "
+                         f"{det['match_radius_px']:g} px, {det['missed']} missed, {det['false_detections']} false detections")
         if self.excluded_invalid:
             lines.append(f"  frames left out (truth not valid: spot cut by the edge or saturated): {self.excluded_invalid}")
         return "\n".join(lines)
 
 
-def read_predictions(path, mode: str | None = None) -> tuple[str, dict[int, np.ndarray]]:
+def read_predictions(path, mode: str | None = None, multi: bool = False) -> tuple[str, dict[int, np.ndarray]]:
+    """{frame: values} — with ``multi`` (star frames) several rows per frame: {frame: (k, d) array}."""
     path = Path(path)
     if not path.exists():
         raise DatasetError(f"{path}: no such predictions file")
@@ -108,9 +114,14 @@ def read_predictions(path, mode: str | None = None) -> tuple[str, dict[int, np.n
                 raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols[1:].index(bad)]!r} is not a number") from None
             if not np.all(np.isfinite(v)):
                 raise DatasetError(f"{path}:{line}: non-finite value in {cols[1:]}")
+            if multi:
+                out.setdefault(fr, []).append(v)
+                continue
             if fr in out:
                 raise DatasetError(f"{path}:{line}: frame {fr} appears twice")
             out[fr] = v
+    if multi:
+        out = {k: np.array(v) for k, v in out.items()}
     if not out:
         raise DatasetError(f"{path}: no prediction rows")
     return mode, out
@@ -125,8 +136,10 @@ def _isfloat(x) -> bool:
 
 
 def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centre",
-          outlier: float | None = None) -> Score:
+          outlier: float | None = None, match_radius_px: float = 2.0) -> Score:
     ds = open_dataset(root)
+    if ds.rows_per_frame:
+        return _score_stars(ds, predictions, outlier, match_radius_px)
     mode, pred = read_predictions(predictions, mode)
     t = ds.truth_numpy()
     n = len(ds)
@@ -163,11 +176,65 @@ def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centr
         Tn = T / np.linalg.norm(T, axis=1, keepdims=True)
         err = np.degrees(np.arctan2(np.linalg.norm(np.cross(Pn, Tn), axis=1), np.sum(Pn * Tn, axis=1))) * 3600.0
         mean = [float(err.mean())]
+    return _summary(mode, unit, frames, err, mean, outlier, missing, excluded)
+
+
+def _summary(mode, unit, frames, err, mean, outlier, missing, excluded, extra: dict | None = None) -> Score:
     # robust scale: for a 2-D Gaussian error of σ per axis the error *magnitude* has median
     # 1.1774 σ; an outlier is beyond 5 × the 2-D rms (5·√2·σ ≈ 6.0 × the median)
     med = float(np.median(err))
     thr = max(5.0 * math.sqrt(2.0) * med / 1.1774, outlier or 0.0)
     outl = sorted(((fr, float(e)) for fr, e in zip(frames, err) if e > thr), key=lambda x: -x[1])
     pct = {f"p{q}": float(np.percentile(err, q)) for q in (50, 90, 95, 99)}
-    return Score(mode, unit, len(frames), float(math.sqrt(np.mean(err**2))), [float(m) for m in mean], pct,
-                 float(err.max()), outl, missing, excluded, thr, dict(zip(frames, err.tolist())))
+    sc = Score(mode, unit, len(frames), float(math.sqrt(np.mean(err**2))), [float(m) for m in mean], pct,
+               float(err.max()), outl, missing, excluded, thr, dict(zip(frames, err.tolist())))
+    if extra:
+        sc.per_frame.update({"_detection": extra})
+    return sc
+
+
+def _score_stars(ds, predictions, outlier, match_radius_px: float) -> Score:
+    """Star frames: each predicted (u, v) is matched to the nearest true star of its frame within
+    ``match_radius_px``; the unmatched predictions are false detections, the unmatched valid stars
+    are missed. Errors are over the matched valid stars (px)."""
+    from scipy.spatial import cKDTree
+
+    mode, pred = read_predictions(predictions, "centroid", multi=True)
+    t = ds.truth_numpy()
+    n = len(ds)
+    unknown = sorted(k for k in pred if not (0 <= k < n))
+    if unknown:
+        raise DatasetError(f"{predictions}: frame(s) {unknown[:10]} not in the dataset (0 to {n - 1})")
+    fr_col = t["frame"].astype(int)
+    errs, labels, d_all = [], [], []
+    false_det = missed = n_valid = 0
+    for f in range(n):
+        sel = np.flatnonzero((fr_col == f) & (t["star"] >= 0))
+        truth_uv = np.stack([t["u"][sel], t["v"][sel]], axis=1) if len(sel) else np.zeros((0, 2))
+        valid = t["valid"][sel].astype(bool)
+        n_valid += int(valid.sum())
+        P = pred.get(f, np.zeros((0, 2)))
+        matched = np.zeros(len(sel), bool)
+        if len(P) and len(sel):
+            dist, j = cKDTree(truth_uv).query(P, distance_upper_bound=match_radius_px)
+            for p_i, (dd, jj) in enumerate(zip(dist, j)):
+                if np.isfinite(dd) and not matched[jj]:
+                    matched[jj] = True
+                    if valid[jj]:
+                        errs.append(dd)
+                        d_all.append(P[p_i] - truth_uv[jj])
+                        labels.append(f)
+                else:
+                    false_det += 1
+        else:
+            false_det += len(P)
+        missed += int((valid & ~matched).sum())
+    if not errs:
+        raise DatasetError(f"no predicted centroid lies within {match_radius_px} px of a valid true star")
+    d_all = np.array(d_all)
+    extra = {"valid_stars": n_valid, "matched": len(errs), "missed": missed, "false_detections": false_det,
+             "match_radius_px": match_radius_px}
+    sc = _summary("star centroid", "px", labels, np.array(errs), d_all.mean(axis=0).tolist(), outlier,
+                  [f for f in range(n) if f not in pred], 0, extra)
+    sc.detection = extra
+    return sc
