@@ -1,0 +1,288 @@
+"""Put a :class:`~rigsim.view.scene.RigScene` on a ``pyvista.Plotter``; screenshots and exports.
+
+Layout: the overview takes the top of the window; the other views (close-ups) share the bottom
+row. Each viewport gets the items and labels tagged for it, a title, a scale bar in the plane
+of the view (true millimetres) and, in the overview, the legend and the notes.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from rigsim.view.display import has_display, prepare_offscreen
+from rigsim.view.scene import COLOURS, RigScene, ViewError, ViewSpec
+
+__all__ = ["make_plotter", "populate", "screenshot", "export_scene", "show", "EXPORT_SUFFIXES",
+           "html_available"]
+
+EXPORT_SUFFIXES = (".gltf", ".vtkjs", ".vtm", ".html")
+BACKGROUND = ("#FFFFFF", "#E4EAF1")  # bottom, top
+
+
+def _layout(n: int, size) -> dict:
+    import numpy as np  # noqa: F811
+
+    if n == 1:
+        return {"shape": (1, 1)}
+    if n == 2:
+        return {"shape": (1, 2), "col_weights": [3, 2]}
+    return {"shape": (2, n - 1), "groups": [(0, np.s_[:])], "row_weights": [3, 2]}
+
+
+def _subplots(n: int) -> list[tuple[int, int]]:
+    if n == 1:
+        return [(0, 0)]
+    if n == 2:
+        return [(0, 0), (0, 1)]
+    return [(0, 0)] + [(1, k) for k in range(n - 1)]
+
+
+def make_plotter(scene: RigScene, *, off_screen: bool = True, size=(1200, 800), views: list[str] | None = None,
+                 labels: bool = True):
+    """A plotter showing ``views`` (default: all of the scene's, overview first)."""
+    if off_screen:
+        prepare_offscreen()
+    import pyvista as pv
+
+    specs = scene.views if views is None else [scene.view(v) for v in views]
+    if not specs:
+        raise ViewError("the scene has no views")
+    theme = pv.themes.DocumentTheme()
+    theme.font.color = COLOURS["text"]
+    pl = pv.Plotter(off_screen=off_screen, window_size=[int(size[0]), int(size[1])], theme=theme,
+                    border=True, border_color="#9AA5B1", border_width=1.0, **_layout(len(specs), size))
+    for spec, (i, j) in zip(specs, _subplots(len(specs))):
+        pl.subplot(i, j)
+        populate(pl, scene, spec, labels=labels, overview=spec is specs[0])
+    pl.subplot(0, 0)
+    return pl
+
+
+def _viewport_aspect(pl) -> float:
+    vp = pl.renderer.GetViewport()  # (xmin, ymin, xmax, ymax) fractions
+    w, h = pl.window_size
+    return max((vp[2] - vp[0]) * w, 1.0) / max((vp[3] - vp[1]) * h, 1.0)
+
+
+def _frame_axes(spec: ViewSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    back = spec.direction / np.linalg.norm(spec.direction)  # focus → eye
+    up = spec.up - (spec.up @ back) * back
+    up /= np.linalg.norm(up)
+    right = np.cross(up, back)
+    return right, up, back
+
+
+def set_camera(pl, spec: ViewSpec, scene: RigScene | None = None) -> dict:
+    """Aim the current renderer's camera; returns the visible half-width/height at the focus."""
+    right, up, back = _frame_axes(spec)
+    aspect = _viewport_aspect(pl)
+    half = 0.5 * spec.extent_mm
+    focus = np.asarray(spec.focus, float)
+    if scene is not None and spec.name == scene.views[0].name:
+        # fit the overview's bounding box as projected on the view plane
+        pts = scene.points(spec.name)
+        pr = (pts - focus) @ np.column_stack([right, up])
+        cmin, cmax = pr.min(0), pr.max(0)
+        focus = focus + 0.5 * (cmin[0] + cmax[0]) * right + 0.5 * (cmin[1] + cmax[1]) * up
+        hw, hh = 0.5 * (cmax[0] - cmin[0]), 0.5 * (cmax[1] - cmin[1])
+        half_h = max(hh, hw / aspect) * 1.04
+        if not spec.parallel:  # perspective: the eye distance at which every point is inside the frustum
+            q = pts - focus
+            t = math.tan(0.5 * math.radians(spec.view_angle_deg)) / 1.06  # 6 % margin
+            dist = float(np.max(q @ back + np.maximum(np.abs(q @ up) / t, np.abs(q @ right) / (t * aspect))))
+            half_h = dist * math.tan(0.5 * math.radians(spec.view_angle_deg))
+    else:
+        half_h = half * max(1.0, 1.0 / aspect)
+    cam = pl.camera
+    if spec.parallel:
+        pl.enable_parallel_projection()
+        dist = spec.eye_distance_mm if spec.eye_distance_mm else 10.0 * half_h + 100.0
+        cam.parallel_scale = half_h
+    else:
+        va = math.radians(spec.view_angle_deg)
+        cam.view_angle = spec.view_angle_deg
+        dist = half_h / math.tan(0.5 * va)
+    cam.focal_point = tuple(focus)
+    cam.position = tuple(focus + dist * back)
+    cam.up = tuple(up)
+    pl.renderer.ResetCameraClippingRange()
+    return {"focus": focus, "half_h": half_h, "half_w": half_h * aspect, "right": right, "up": up, "back": back,
+            "dist": dist}
+
+
+def _scale_bar(pl, spec: ViewSpec, cam: dict) -> None:
+    import pyvista as pv
+
+    L = spec.scale_bar_mm
+    if not L:
+        return
+    right, up = cam["right"], cam["up"]
+    hw, hh = cam["half_w"], cam["half_h"]
+    while L > 0.6 * hw and L > 1e-3:
+        L /= 2.0
+    # lower-right corner, in the plane through the focus (true length there)
+    p0 = cam["focus"] + (hw * 0.85 - L) * right - hh * 0.86 * up
+    p1 = p0 + L * right
+    tick = 0.04 * hh * up
+    pts = np.array([p0, p1, p0 - tick, p0 + tick, p1 - tick, p1 + tick])
+    bar = pv.PolyData(pts, lines=np.array([2, 0, 1, 2, 2, 3, 2, 4, 5]))
+    pl.add_mesh(bar, color="#202020", line_width=3, name=f"scale_bar:{spec.name}", lighting=False)
+    txt = f"{L:g} mm" if L >= 1 else f"{L * 1000:g} \u00b5m"
+    pl.add_point_labels([0.5 * (p0 + p1) + 0.07 * hh * up], [txt], font_size=12, show_points=False,
+                        shape_opacity=0.0, always_visible=True, bold=False, text_color="#202020",
+                        name=f"scale_bar_label:{spec.name}")
+
+
+def populate(pl, scene: RigScene, spec: ViewSpec, *, labels: bool = True, overview: bool = False,
+             all_items: bool = False) -> dict:
+    """Add the items, labels, title (and for the overview: legend, notes) of one view to the
+    current renderer, and aim its camera."""
+    pl.set_background(BACKGROUND[0], top=BACKGROUND[1])
+    for it in scene.items:
+        if all_items or it.shown_in(spec.name):
+            actor = pl.add_mesh(it.mesh, name=it.name, **it.style)
+            if it.on_top:  # drawn over coincident geometry (a reflected ray on its incident ray)
+                m = actor.GetMapper()
+                m.SetResolveCoincidentTopologyToPolygonOffset()
+                m.SetRelativeCoincidentTopologyLineOffsetParameters(0.0, -66000.0)
+    if labels:
+        for k, lab in enumerate(scene.labels):
+            if lab.shown_in(spec.name):
+                pl.add_point_labels([lab.point], [lab.text], font_size=lab.font_size, text_color=lab.colour,
+                                    show_points=False, shape_color="#FFFFFF", shape_opacity=0.72, margin=2,
+                                    always_visible=True, bold=False, name=f"label:{spec.name}:{k}")
+    cam = set_camera(pl, spec, scene)
+    if labels:
+        _scale_bar(pl, spec, cam)
+    w, h = pl.window_size
+    fs_small = max(8, int(round(min(w, 1.6 * h) / 130)))
+    if overview:
+        pl.add_text(scene.title, position="upper_left", font_size=fs_small + 1, color=COLOURS["text"], name="title")
+        lines = list(scene.notes) + [f"WARNING: {x}" for x in scene.warnings]
+        lines.append(scene.frame + "; positions and angles true, housings schematic (docs/view.md)")
+        pl.add_text("\n".join(lines), position="lower_left", font_size=fs_small, color="#303030", name="notes")
+        entries = [(it.legend, it.style.get("color", "#000000")) for it in scene.items
+                   if it.legend and (it.shown_in(spec.name) or all_items)]
+        entries += scene.info.get("legend_extra", [])
+        _legend(pl, entries, fs_small + 1)
+    else:
+        pl.add_text(spec.title, position="upper_left", font_size=fs_small, color=COLOURS["text"],
+                    name=f"title:{spec.name}")
+    return cam
+
+
+def _legend(pl, entries, font_size: int) -> None:
+    """Legend as coloured text lines in the upper-right corner (pyvista's legend box clips its text
+    in subplot layouts)."""
+    import vtk
+
+    for k, (text, colour) in enumerate(entries):
+        a = pl.add_text(text, position=(0.985, 0.90 - 0.05 * k), viewport=True, font_size=font_size, color=colour,
+                        name=f"legend:{k}")
+        a.SetTextScaleModeToNone()  # pyvista scales viewport-positioned text with the viewport
+        a.GetTextProperty().SetFontSize(int(round(font_size * 1.35)))
+        a.GetTextProperty().SetJustificationToRight()
+        a.GetTextProperty().SetBackgroundColor(1.0, 1.0, 1.0)
+        a.GetTextProperty().SetBackgroundOpacity(0.75)
+    _ = vtk
+
+
+# ------------------------------------------------------------------------------------------
+# outputs
+# ------------------------------------------------------------------------------------------
+
+def screenshot(scene: RigScene, out_png, *, size=(1200, 800), views: list[str] | None = None) -> Path:
+    """Render the scene off screen to a PNG (RGB)."""
+    out = Path(out_png)
+    if out.suffix.lower() != ".png":
+        raise ViewError(f"--screenshot = {str(out_png)!r}: must be a .png file")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    pl = make_plotter(scene, off_screen=True, size=size, views=views)
+    try:
+        pl.screenshot(str(out), return_img=False)
+    finally:
+        pl.close()
+    return out
+
+
+def html_available() -> bool:
+    """pyvista's HTML export needs the ``trame-pyvista`` package (and trame's vtk.js bundle)."""
+    import importlib.util
+
+    return importlib.util.find_spec("trame_pyvista") is not None
+
+
+def _single(scene: RigScene, labels: bool = False):
+    prepare_offscreen()
+    import pyvista as pv
+
+    pl = pv.Plotter(off_screen=True, window_size=[800, 600])
+    populate(pl, scene, scene.views[0], labels=labels, overview=False, all_items=True)
+    return pl
+
+
+def export_scene(scene: RigScene, path) -> Path:
+    """Write the scene to ``path``; the suffix picks the format:
+
+    * ``.gltf`` — glTF 2.0 with the buffers inlined (one self-contained file; Blender, three.js
+      viewers, Windows 3D Viewer); colours and opacity kept, labels not (they are 2D overlays);
+    * ``.vtkjs`` — vtk.js scene archive (zip), opens in ParaView Glance / vtk.js OfflineLocalView;
+    * ``.vtm``  — VTK multiblock of every item as its own named block (float64 points, e.g. for
+      ParaView; no colours);
+    * ``.html`` — pyvista's interactive HTML, only when ``trame-pyvista`` is installed (it is not a
+      rigsim dependency).
+    """
+    out = Path(path)
+    suf = out.suffix.lower()
+    if suf not in EXPORT_SUFFIXES:
+        raise ViewError(f"export file {str(path)!r}: allowed suffixes are {', '.join(EXPORT_SUFFIXES)}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if suf == ".vtm":
+        import pyvista as pv
+
+        mb = pv.MultiBlock()
+        for it in scene.items:
+            mb[it.name] = it.mesh
+        mb.save(str(out))
+        return out
+    if suf == ".html" and not html_available():
+        raise ViewError(
+            "--html needs the Python package 'trame-pyvista' (pyvista 0.49 exports HTML through trame), which is not "
+            "installed and not a rigsim dependency; use --export out.gltf (self-contained glTF 2.0) or "
+            "--export out.vtkjs (vtk.js scene for ParaView Glance) instead, or pip install trame-pyvista")
+    pl = _single(scene)
+    try:
+        if suf == ".gltf":
+            pl.export_gltf(str(out), inline_data=True, rotate_scene=False)
+        elif suf == ".vtkjs":
+            import vtk
+
+            with tempfile.TemporaryDirectory() as tmp:
+                d = Path(tmp) / "scene"
+                ex = vtk.vtkJSONSceneExporter()
+                ex.SetRenderWindow(pl.render_window)
+                ex.SetFileName(str(d))
+                ex.Write()
+                with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+                    for f in sorted(d.rglob("*")):
+                        if f.is_file():
+                            z.write(f, Path("scene") / f.relative_to(d))
+        else:  # .html with trame-pyvista present
+            pl.trame.export_html(str(out))
+    finally:
+        pl.close()
+    return out
+
+
+def show(scene: RigScene, *, size=(1400, 900)) -> None:
+    """Open the interactive window (needs a display)."""
+    if not has_display():
+        raise ViewError("--window needs a display (neither DISPLAY nor WAYLAND_DISPLAY is set); "
+                        "use --screenshot out.png or --export out.gltf on this machine")
+    pl = make_plotter(scene, off_screen=False, size=size)
+    pl.show(title=f"rigsim view: {scene.rig_name}")
