@@ -116,8 +116,8 @@ class OrbitScenario(_Model):
     focal_pp_um: float = Field(4.0, ge=0.0, le=10000.0, description="peak-to-peak of each camera's Δf")
     phase_deg: float = Field(30.0, ge=-360.0, le=360.0)
     reference_frames: int = Field(16, ge=1, le=1000, description="frames averaged into the reference spots")
-    window_px: int = Field(24, ge=12, le=256, description="ROI read from each CMOS")
-    spp: int = Field(1024, ge=16, le=65536, description="light paths per window pixel")
+    window_px: int = Field(48, ge=12, le=256, description="fixed ROI read from each CMOS")
+    spp: int = Field(256, ge=16, le=65536, description="light paths per ROI pixel")
 
 
 class BoresightRig(_Model):
