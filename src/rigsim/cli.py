@@ -14,7 +14,7 @@ import rigsim
 DEFAULT_RIG = "sun_sensor_2axis_diaphragm"
 # modules with an ``add_cli(run_subparsers, top=top_level_subparsers)`` function (optional)
 PLUGIN_MODULES = ("rigsim.procedures.boresight_cli", "rigsim.procedures.star_calibration_cli",
-                  "rigsim.dataset.cli")
+                  "rigsim.dataset.cli", "rigsim.view.cli")
 
 EPILOG = """\
 examples:

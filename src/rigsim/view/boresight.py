@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from rigsim.view import primitives as P
-from rigsim.view.scene import COLOURS, Beam, RigScene, ViewError, ViewSpec
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewError, ViewSpec, _pose_text
 
 __all__ = ["build_boresight_scene", "PAIR_OFFSET_MM", "camera_placement", "laser_loops"]
 
@@ -79,7 +79,7 @@ def laser_loops(geom, E_hrc=None, delta_f_mm: float = 0.0) -> list[tuple[np.ndar
 
 def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
     if pose is not None:
-        raise ViewError(f"--pose = {pose!r}: the boresight rig (seed 003) has no turntable; the view shows the "
+        raise ViewError(f"--pose = {_pose_text(pose)}: the boresight rig (seed 003) has no turntable; the view shows the "
                         "reference state (no camera rotation, no focal change)")
     if face is not None:
         raise ViewError(f"--face = {face!r}: the boresight rig (seed 003) has no mirror cube")

@@ -293,7 +293,7 @@ def _diaphragm(scene: RigScene, rig: Rig, real: Realization, fi: int, pose_rad: 
         spot_r = r / math.cos(inc_angle)
         scene.add("screen:spot", P.disk(sp.spot_mm - 0.03 * ez, -ez, spot_r), group="screen",
                   color=COLOURS["reflected"], opacity=0.85, lighting=False)
-        off = np.asarray(sp.offset_mm, float)
+        off = np.round(np.asarray(sp.offset_mm, float), 9) + 0.0  # no '-0.000'
         tilt = sp.tilt_rad * ARCSEC_PER_RAD
         info.update(spot_mm=np.asarray(sp.spot_mm), offset_mm=off, tilt_arcsec=tilt, on_face=sp.on_face)
         scene.notes.append(f"face {lay.face}: normal {tilt:.1f} arcsec from the beam; return spot "

@@ -27,6 +27,12 @@ class ViewError(ValueError):
     """Bad input to a rig view (the message names the option, the value and what is allowed)."""
 
 
+def _pose_text(pose) -> str:
+    if isinstance(pose, dict):
+        return ",".join(f"{k}={v}" for k, v in pose.items())
+    return repr(pose)
+
+
 # Okabe–Ito colour-blind-safe palette for the roles that matter; RGB for the frame axes.
 COLOURS = {
     "incident": "#E69F00",      # orange: light on its way to the mirror

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from rigsim.view import primitives as P
-from rigsim.view.scene import COLOURS, Beam, RigScene, ViewError, ViewSpec
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewError, ViewSpec, _pose_text
 
 __all__ = ["build_star_scene", "RAY_LENGTH_MM", "first_attitude"]
 
@@ -51,7 +51,7 @@ def image_point_mm(sensor, uv) -> np.ndarray:
 
 def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int = 0, sky=None) -> RigScene:
     if pose is not None:
-        raise ViewError(f"--pose = {pose!r}: the star-sensor rig (seed 004) has no turntable; the view shows the "
+        raise ViewError(f"--pose = {_pose_text(pose)}: the star-sensor rig (seed 004) has no turntable; the view shows the "
                         "first attitude of its sequence")
     if face is not None:
         raise ViewError(f"--face = {face!r}: the star-sensor rig (seed 004) has no mirror cube")
