@@ -35,7 +35,7 @@ def test_consistent_dvad_round_trip_is_exact():
         assert np.abs(est.angles_rad - ang).max() <= 1e-9
         assert np.abs(est.delta_f_mm - df).max() <= 1e-9          # mm
         assert np.abs(est.R_hrc - E).max() <= 1e-9
-        assert np.abs(est.info["rigidity_residual_rad"]).max() < 1e-13
+        assert np.abs(est.info["rigidity_residual_cos"]).max() < 1e-15
 
 
 def test_as_printed_eq14_mixing_puts_sin2w_of_alpha_into_gamma():
@@ -117,3 +117,22 @@ def test_bad_inputs():
         dvad(G, G.reference_uv, np.zeros((3, 2)))
     with pytest.raises(ValueError, match="method"):
         estimate(G, G.reference_uv, G.reference_uv, method="triad")
+
+
+def test_fast_thresholded_com_equals_rigsim_imaging():
+    """The real-time centroider is rigsim.imaging.centroid_tcom without the flags: same numbers."""
+    from rigsim.boresight.pipeline import tcom_fast
+    from rigsim.imaging import NoiseModel, centroid_tcom
+    from rigsim.imaging.synth import disk_image
+
+    rng = np.random.default_rng(4)
+    rois = np.stack([np.round(disk_image((24, 24), 11.3 + 0.3 * k, 12.6 - 0.2 * k, 2.5) * 2500 + 70
+                              + rng.normal(0, 4, (24, 24))).astype(np.uint16) for k in range(5)])
+    org = rng.integers(0, 4000, (5, 2)).astype(float)
+    for noise in (None, NoiseModel.from_detector(RIG.detector)):
+        uv, ok = tcom_fast(rois, org, noise=noise)
+        ref = centroid_tcom(rois, origin_uv=org, noise=noise)
+        assert ok.all()
+        np.testing.assert_allclose(uv, np.column_stack([ref.u, ref.v]), atol=1e-12)
+    rois[2, 5, 5] = 65535                                  # saturated: not for the fast path
+    assert not tcom_fast(rois, org)[1][2]

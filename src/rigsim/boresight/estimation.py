@@ -42,7 +42,7 @@ from rigsim.frames import ARCSEC_PER_RAD
 
 from .geometry import CameraGeometry, euler_xyz, rotation_xyz
 
-__all__ = ["BoresightEstimate", "READINGS", "METHODS", "simplified", "dvad", "estimate", "relative_rotation",
+__all__ = ["BoresightEstimate", "DVADSolver", "READINGS", "METHODS", "simplified", "dvad", "estimate", "relative_rotation",
            "small_angles_arcsec", "triad_columns"]
 
 READINGS = ("consistent", "as_printed")
@@ -135,22 +135,6 @@ def _vectors(P: np.ndarray, Fp) -> np.ndarray:
     return np.stack(np.broadcast_arrays(P[..., 0], P[..., 1], -Fp), axis=-1)
 
 
-def _normals(P: np.ndarray, e: np.ndarray, Fp) -> np.ndarray:
-    """Facet normals (pointing back at the camera, (..., 2, 3)) from spot points P and emitter
-    points e (..., 2, 2) for loop focal length F': n = normalize(û_back − û_out)."""
-    Fp = np.asarray(Fp, float)[..., None]
-    ub = _vectors(P, Fp)
-    ub = ub / np.linalg.norm(ub, axis=-1, keepdims=True)
-    uo = -_vectors(e, Fp)
-    uo = uo / np.linalg.norm(uo, axis=-1, keepdims=True)
-    n = ub - uo
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
-
-
-def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
-
-
 def dvad(geom: CameraGeometry, ref_uv, meas_uv, reading: str = "consistent", *,
          iterations: int = 3) -> BoresightEstimate:
     """Eqs 7–15 (dual-vector attitude). See the module docstring for the two readings.
@@ -178,28 +162,108 @@ def dvad(geom: CameraGeometry, ref_uv, meas_uv, reading: str = "consistent", *,
         return BoresightEstimate(delta_f, alpha, beta, gamma, "dvad", reading, None,
                                  {"M_rot_ota": M})
     # consistent reading
-    e = geom.emitter_mm
-    n0 = _normals(P_ref, e, F)
-    ang0 = _angle(n0[..., 0, :], n0[..., 1, :])
-    # eq 15 with eq 1's form and sign: first guess of the loop focal length
-    dy = (P_meas[..., 0, 1] - P_ref[..., 0, 1]) - (P_meas[..., 1, 1] - P_ref[..., 1, 1])
-    dF = 0.5 * F * dy / (P_ref[..., 0, 1] - P_ref[..., 1, 1])
-    # rigidity: d(angle)/dF' at the reference (the slope hardly changes over the range)
-    h = 1e-3 * F
-    slope = (_angle(*np.moveaxis(_normals(P_ref, e, F + h), -2, 0))
-             - _angle(*np.moveaxis(_normals(P_ref, e, F - h), -2, 0))) / (2.0 * h)
-    for _ in range(int(iterations)):
-        n = _normals(P_meas, e, F + dF)
-        dF = dF - (_angle(n[..., 0, :], n[..., 1, :]) - ang0) / slope
-    n = _normals(P_meas, e, F + dF)
-    M0 = triad_columns(n0[..., 0, :], n0[..., 1, :])
-    Mt = triad_columns(n[..., 0, :], n[..., 1, :])
-    M = Mt @ np.swapaxes(M0, -1, -2)                     # eq 13: M_Rot = E_otaᵀ exactly
-    E_hrc = C.T @ np.swapaxes(M, -1, -2) @ C             # eq 14 as a change of frame
-    ang = euler_xyz(E_hrc)
-    resid = _angle(n[..., 0, :], n[..., 1, :]) - ang0
-    return BoresightEstimate(Kf * dF, ang[..., 0], ang[..., 1], ang[..., 2], "dvad", reading, E_hrc,
-                             {"loop_focal_change_mm": dF, "rigidity_residual_rad": resid})
+    sol = DVADSolver(geom, ref_uv, iterations=iterations)
+    return sol.solve(meas_uv)
+
+
+def _unit3(x, y, z):
+    r = 1.0 / np.sqrt(x * x + y * y + z * z)
+    return x * r, y * r, z * r
+
+
+def _cross3(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+class DVADSolver:
+    """The consistent DVAD with the reference part computed once (real time, vectorised).
+
+    ``ref_uv`` (2, 2) or (..., 2, 2). :meth:`solve` takes measured spots (..., 2, 2) and returns a
+    :class:`BoresightEstimate`. Arithmetic is done on component arrays (x, y, z) — the same algorithm
+    as described in the module docstring:
+
+    1. eqs 8–11: spots → focal-plane points P (nominal tilts, pixel size d);
+    2. facet normals n_j(F') = normalize(û(P_j, F') − û(e_j, F')), û the unit vector from O to the
+       focal-plane point at −F' (return beam) and from the emitter point (outgoing beam, reversed);
+    3. F' from the prism's rigidity, n_A(F')·n_B(F') = n_A⁰·n_B⁰: eq 15 (eq 1's form and sign) as
+       the start, then fixed-point steps with the reference slope d(n_A·n_B)/dF';
+    4. eq 12 (unit columns) in the HRC frame, M_Rot = Mt·M0ᵀ → the camera rotation
+       E = R(ref HRC ← perturbed HRC) = M0_hrc·Mt_hrcᵀ; XYZ Euler angles; Δf = Kf·(F' − F).
+    """
+
+    def __init__(self, geom: CameraGeometry, ref_uv=None, *, iterations: int = 3):
+        self.geom = geom
+        self.iterations = int(iterations)
+        ref = np.asarray(geom.reference_uv if ref_uv is None else ref_uv, dtype=float)
+        if ref.shape[-2:] != (2, 2):
+            raise ValueError(f"ref_uv must have shape (..., 2 detectors, 2 [u, v]), got {ref.shape}")
+        F = geom.F
+        C = geom.R_ota_from_hrc
+        self._CT = C.T                                   # OTA -> HRC
+        e = geom.emitter_mm
+        self._e = e
+        self._ee = (e[0, 0] ** 2 + e[0, 1] ** 2, e[1, 0] ** 2 + e[1, 1] ** 2)
+        P0 = geom.xy_to_focal(geom.uv_to_xy(ref))
+        self._P0y = (P0[..., 0, 1], P0[..., 1, 1])
+        nA, nB = self._normals(P0, F)
+        self._cos0 = nA[0] * nB[0] + nA[1] * nB[1] + nA[2] * nB[2]
+        h = 1e-3 * F
+        cp = self._cos_at(P0, F + h)
+        cm = self._cos_at(P0, F - h)
+        self._slope = (cp - cm) / (2.0 * h)
+        self._A = self._triad_hrc(nA, nB)                # M0 in HRC: columns c1, c2, c3
+
+    # -- pieces ------------------------------------------------------------------------------
+    def _normals(self, P, Fp):
+        out = []
+        for j in (0, 1):
+            px, py = P[..., j, 0], P[..., j, 1]
+            rb = 1.0 / np.sqrt(px * px + py * py + Fp * Fp)
+            ro = 1.0 / np.sqrt(self._ee[j] + Fp * Fp)
+            ex, ey = self._e[j]
+            # n = û_back − û_out, û_back = (px, py, −F')/|.|, û_out = (−ex, −ey, F')/|.|
+            out.append(_unit3(px * rb + ex * ro, py * rb + ey * ro, -Fp * (rb + ro)))
+        return out
+
+    def _cos_at(self, P, Fp):
+        a, b = self._normals(P, Fp)
+        return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+    def _triad_hrc(self, a, b):
+        CT = self._CT
+        def to_hrc(v):
+            return tuple(CT[i, 0] * v[0] + CT[i, 1] * v[1] + CT[i, 2] * v[2] for i in range(3))
+        a, b = to_hrc(a), to_hrc(b)
+        c1 = _unit3(*_cross3(a, b))
+        c2 = _unit3(a[0] + b[0], a[1] + b[1], a[2] + b[2])
+        c3 = _cross3(c1, c2)
+        return (c1, c2, c3)
+
+    # -- solve -------------------------------------------------------------------------------
+    def solve(self, meas_uv) -> BoresightEstimate:
+        g = self.geom
+        meas = np.asarray(meas_uv, dtype=float)
+        if meas.shape[-2:] != (2, 2):
+            raise ValueError(f"meas_uv must have shape (..., 2 detectors, 2 [u, v]), got {meas.shape}")
+        F, Kf = g.F, g.telecentric_factor
+        P = g.xy_to_focal(g.uv_to_xy(meas))
+        # eq 15 with eq 1's form and sign, as the loop focal change dF' = Δf/Kf
+        dy = (P[..., 0, 1] - self._P0y[0]) - (P[..., 1, 1] - self._P0y[1])
+        dF = 0.5 * F * dy / (self._P0y[0] - self._P0y[1])
+        for _ in range(self.iterations):
+            dF = dF - (self._cos_at(P, F + dF) - self._cos0) / self._slope
+        a, b = self._normals(P, F + dF)
+        resid = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] - self._cos0
+        B = self._triad_hrc(a, b)
+        A = self._A
+        # E = M0_hrc · Mt_hrcᵀ: E_ij = Σ_k A_k[i] B_k[j]
+        E = np.empty(np.broadcast_shapes(np.shape(B[0][0]), np.shape(A[0][0])) + (3, 3))
+        for i in range(3):
+            for j in range(3):
+                E[..., i, j] = A[0][i] * B[0][j] + A[1][i] * B[1][j] + A[2][i] * B[2][j]
+        ang = euler_xyz(E)
+        return BoresightEstimate(Kf * dF, ang[..., 0], ang[..., 1], ang[..., 2], "dvad", "consistent", E,
+                                 {"loop_focal_change_mm": dF, "rigidity_residual_cos": resid})
 
 
 def estimate(geom: CameraGeometry, ref_uv, meas_uv, method: str = "dvad", reading: str = "consistent",
