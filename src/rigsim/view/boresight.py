@@ -103,6 +103,12 @@ def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
         r_lens = 1.08 * float(np.max(np.hypot(e[:, 0], e[:, 1])))
         scene.add(f"{cam.name}:lens", P.polyline(to_p(P.circle_points(np.zeros(3), [1, 0, 0], [0, 1, 0], r_lens, 160))),
                   group="camera", views=("overview",), color=col, line_width=3.0)
+        # the light cone of the (unfolded) camera: lens aperture -> focal-plane region
+        ring_lens = P.circle_points(np.zeros(3), [1, 0, 0], [0, 1, 0], r_lens, 96)[:-1]
+        ring_fp = P.circle_points(np.array([g.centers_mm[0, 0], 0.0, -g.F]), [1, 0, 0], [0, 1, 0],
+                                  0.5 * g.L_mm + 0.5 * g.height_px * g.pitch_mm, 96)[:-1]
+        scene.add(f"{cam.name}:envelope", P.transform(P.ruled(ring_lens, ring_fp), R, O), group="camera",
+                  views=("overview",), color=col, opacity=0.10, lighting=False)
         scene.add(f"{cam.name}:axis", P.polyline(to_p(np.array([[0, 0, 0], [0, 0, -g.F]]))), group="camera",
                   views=("overview",), color=col, line_width=1.0, opacity=0.6)
         c = g.centers_mm
@@ -159,7 +165,7 @@ def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
     fa = np.array(facet_all)
     lo, hi = fa.min(0) - 60.0, fa.max(0) + 60.0
     scene.add("prism:body", P.box(0.5 * (lo + hi), np.eye(3), hi - lo), group="prism", color="#B8C9D9", opacity=0.18)
-    scene.label("central prism (schematic body; facets exact)", np.array([0.0, hi[1] + 90.0, 0.0]),
+    scene.label("central prism (schematic body; facets exact)", np.array([hi[0] + 200.0, 0.0, lo[2] - 1100.0]),
                 views=("overview",), font_size=12)
     scene.notes.append("each facet is normal to its own laser beam: at the reference every loop returns onto its "
                        "emitter (autocollimation)")
@@ -169,7 +175,7 @@ def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
 
     lo, hi = scene.bounds("overview")
     scene.views.append(ViewSpec("overview", "cameras and prism (true scale)", 0.5 * (lo + hi),
-                                P.unit(np.array([0.15, 1.0, 0.3])), np.array([0.0, 0.0, -1.0]),
+                                P.unit(np.array([0.15, 1.0, 0.3])), np.array([1.0, 0.0, 0.0]),
                                 float(np.max(hi - lo)), scale_bar_mm=1000.0))
     m1 = fa[0::2]  # the M1 facet of each camera (same end of the prism)
     scene.views.append(ViewSpec("prism", "close-up: the M1 facets of the prism (one per camera), seen from the "

@@ -348,9 +348,8 @@ def _diaphragm(scene: RigScene, rig: Rig, real: Realization, fi: int, pose_rad: 
     scene.add("aiming_camera:footprint", P.polyline(np.vstack([foot, foot[:1]])), group="aiming_camera",
               views=("screen",), color=COLOURS["camera"], line_width=2.5)
     ac = rig.aiming_camera
-    scene.label(f"aiming camera ({ac.resolution_px[0]}\u00d7{ac.resolution_px[1]} px, {ac.view_angle_deg:g}\u00b0 "
-                f"off the screen normal)", C - 100.0 * fwd + np.array([0.0, -30.0, 0.0]), views=("overview",),
-                font_size=13)
+    scene.label(f"aiming camera, {ac.view_angle_deg:g}\u00b0 off the screen normal", C - 60.0 * fwd
+                + np.array([0.0, -75.0, 0.0]), views=("overview",), font_size=13)
     fw = np.linalg.norm(foot[1] - foot[0])
     fh = np.linalg.norm(foot[2] - foot[1])
     scene.label(f"aiming-camera field {fw:.1f}\u00d7{fh:.1f} mm", foot[3] + np.array([0.0, 0.4, -0.5]),
@@ -432,17 +431,19 @@ def _autocollimator(scene: RigScene, rig: Rig, real: Realization, fi: int, pose_
     det_c = to_rot([0.0, 0.0, opt.z_detector])
     scene.add("autocollimator:detector", P.quad(det_c, RA[:, 0], RA[:, 1], hw, hh), group="autocollimator",
               color="#39424E", specular=0.2)
+    # marks in the detector close-up sit just behind the detector plane: that view looks at the
+    # detector from behind, so that it reads like a frame (u to the right, v down)
     scene.add("autocollimator:axis_mark", P.segments(
-        [det_c - 0.4 * RA[:, 0] + 0.01 * zA, det_c - 0.4 * RA[:, 1] + 0.01 * zA],
-        [det_c + 0.4 * RA[:, 0] + 0.01 * zA, det_c + 0.4 * RA[:, 1] + 0.01 * zA]),
+        [det_c - 0.4 * RA[:, 0] - 0.01 * zA, det_c - 0.4 * RA[:, 1] - 0.01 * zA],
+        [det_c + 0.4 * RA[:, 0] - 0.01 * zA, det_c + 0.4 * RA[:, 1] - 0.01 * zA]),
         group="autocollimator", views=("detector",), color="#FFFFFF", line_width=2.0)
     ac = rig.autocollimator
     scene.label(f"autocollimator f {ac.focal_length_mm:g} mm, \u00d8{ac.aperture_mm:g} mm "
                 f"({ac.distance_mm:g} mm from the face)", to_rot([0.0, -tube_r - 25.0, -0.5 * ac.focal_length_mm]),
                 views=("overview",), font_size=13)
     scene.label(f"detector {opt.width}\u00d7{opt.height} px ({2 * hw:.1f}\u00d7{2 * hh:.1f} mm)",
-                to_rot([-hw, hh + 0.45, 0.05]), views=("detector",), font_size=12)
-    scene.label("optical axis", to_rot([-1.7, -0.45, 0.05]), views=("detector",), font_size=11, colour="#404040")
+                to_rot([-0.6 * hw, -hh - 0.3, opt.z_detector - 0.05]), views=("detector",), font_size=12)
+    scene.label("optical axis", to_rot([-1.7, -0.45, opt.z_detector - 0.05]), views=("detector",), font_size=11, colour="#404040")
 
     # the collimated beam (stop-limited) up to the face plane, to scale
     m_mid = to_rot([0.0, 0.0, lay.anchor_A[2]])
@@ -477,11 +478,11 @@ def _autocollimator(scene: RigScene, rig: Rig, real: Realization, fi: int, pose_
                                                                            f"{ac.aperture_mm:g} mm beam)")
     scene.add_beam(Beam("reflected", refl, "reflected", 0.0, "rigsim.optics.autocollimator.AutocollimatorOptics (exact trace)",
                         "reflected axial ray: face → objective → detector"), legend="reflected beam")
-    scene.add("autocollimator:return_spot", P.disk(refl[-1] + 0.03 * zA, zA, 0.07), group="beam",
+    scene.add("autocollimator:return_spot", P.disk(refl[-1] - 0.03 * zA, -zA, 0.07), group="beam",
               views=("detector",), color=COLOURS["reflected"], lighting=False)
-    scene.add("autocollimator:return_ring", P.polyline(P.circle_points(refl[-1] + 0.03 * zA, RA[:, 0], RA[:, 1], 0.16, 64)),
+    scene.add("autocollimator:return_ring", P.polyline(P.circle_points(refl[-1] - 0.03 * zA, RA[:, 0], RA[:, 1], 0.16, 64)),
               group="beam", views=("detector",), color=COLOURS["reflected"], line_width=2.0)
-    scene.label("return of the axial ray", refl[-1] + 0.3 * RA[:, 0] + 0.75 * RA[:, 1] + 0.05 * zA,
+    scene.label("return of the axial ray", refl[-1] + 0.3 * RA[:, 0] + 0.75 * RA[:, 1] - 0.05 * zA,
                 views=("detector",), font_size=12, colour=COLOURS["reflected"])
     th = tr["tilt_rad"] * ARCSEC_PER_RAD
     dxy = tr["detector_xy_mm"]
@@ -561,8 +562,9 @@ def build_cube_rig_scene(rig: Rig, *, pose=None, face=None, real: Realization | 
         det_c = info.get("detector_centre_mm")
         if det_c is not None:
             RA = info["detector_frame"]
-            scene.views.append(ViewSpec("detector", "close-up: the autocollimator detector (return of the axial ray)",
-                                        det_c, RA[:, 2], -RA[:, 1], 1.15 * rig.autocollimator.resolution_px[0]
-                                        * rig.autocollimator.pixel_pitch_um * 1e-3, parallel=True, scale_bar_mm=1.0))
+            scene.views.append(ViewSpec("detector", "close-up: the autocollimator detector, as its frames show it "
+                                        "(u right, v down)", det_c, -RA[:, 2], -RA[:, 1], 1.15 * rig.autocollimator.resolution_px[0]
+                                        * rig.autocollimator.pixel_pitch_um * 1e-3, parallel=True, scale_bar_mm=1.0,
+                                        eye_distance_mm=20.0, depth_mm=5.0))
     return scene
 

@@ -111,6 +111,8 @@ def set_camera(pl, spec: ViewSpec, scene: RigScene | None = None) -> dict:
     cam.position = tuple(focus + dist * back)
     cam.up = tuple(up)
     pl.renderer.ResetCameraClippingRange()
+    if spec.depth_mm:
+        cam.clipping_range = (max(1e-3, dist - spec.depth_mm), dist + spec.depth_mm)
     return {"focus": focus, "half_h": half_h, "half_w": half_h * aspect, "right": right, "up": up, "back": back,
             "dist": dist}
 

@@ -12,7 +12,7 @@ import numpy as np
 import pyvista as pv
 
 __all__ = ["polyline", "tube", "segments", "circle_points", "ring", "arrow", "box", "cylinder", "disk",
-           "annulus", "frustum_lines", "quad", "from_trimesh", "transform", "perp_basis", "unit"]
+           "annulus", "frustum_lines", "quad", "ruled", "from_trimesh", "transform", "perp_basis", "unit"]
 
 
 def unit(v) -> np.ndarray:
@@ -127,6 +127,17 @@ def frustum_lines(apex, corners) -> pv.PolyData:
         lines += [2, 0, 1 + k]
         lines += [2, 1 + k, 1 + (k + 1) % n]
     return pv.PolyData(pts, lines=np.array(lines))
+
+
+def ruled(loop_a, loop_b) -> pv.PolyData:
+    """The surface between two closed loops of the same number of points (quads)."""
+    a = np.asarray(loop_a, float)
+    b = np.asarray(loop_b, float)
+    n = len(a)
+    k = np.arange(n)
+    k1 = (k + 1) % n
+    faces = np.column_stack([np.full(n, 4), k, k1, n + k1, n + k]).ravel()
+    return pv.PolyData(np.vstack([a, b]), faces=faces)
 
 
 def from_trimesh(m) -> pv.PolyData:

@@ -123,6 +123,7 @@ class ViewSpec:
     view_angle_deg: float = 30.0
     scale_bar_mm: float | None = None
     eye_distance_mm: float | None = None  # parallel views: where the eye sits (items behind it are not drawn)
+    depth_mm: float | None = None  # draw only a slab of ± this depth about the focus (None: everything)
 
 
 @dataclass

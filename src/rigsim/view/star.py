@@ -125,7 +125,9 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
                                                     "(drawn at 400 mm)")
     order = np.argsort(mag)[: int(n_bright)]
     img = image_point_mm(s, field.uv)
-    scene.add("stars:images", P.pv.PolyData(img + 0.01 * ez), group="stars", views=("detector",),
+    # the detector close-up looks at the detector from behind so that it reads like a frame (u right,
+    # v down): its marks sit just behind the detector plane
+    scene.add("stars:images", P.pv.PolyData(img - 0.01 * ez), group="stars", views=("detector",),
               color="#FFD24D", point_size=5.0, render_points_as_spheres=True)
     for rank, i in enumerate(order):
         pts = np.vstack([L * d[i], np.zeros(3), img[i]])
@@ -137,7 +139,7 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
                   group="stars", color=COLOURS["star"])
         scene.label(f"HIP {int(field.hip[i])} (Hp {mag[i]:.1f})", L * d[i] + np.array([0.0, -6.0, 0.0]),
                     views=("overview",), font_size=11)
-        scene.label(f"HIP {int(field.hip[i])}", img[i] + np.array([0.0, -0.25, 0.02]), views=("detector",),
+        scene.label(f"HIP {int(field.hip[i])}", img[i] + np.array([0.0, 0.25, -0.02]), views=("detector",),
                     font_size=11)
     scene.notes.append(f"{len(field)} stars with Hp \u2264 {rig.sky.magnitude_limit:g} imaged; brightest Hp "
                        f"{float(mag.min()):.2f}; rays from the {len(order)} brightest")
@@ -149,8 +151,8 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
     lo, hi = scene.bounds("overview")
     scene.views.append(ViewSpec("overview", "star sensor and its field of view", 0.5 * (lo + hi), look,
                                 np.array([0.0, -1.0, 0.0]), float(np.max(hi - lo)), scale_bar_mm=50.0))
-    scene.views.append(ViewSpec("detector", "the detector seen from the lens: true star images (inverted)",
-                                det.mean(0), ez, np.array([0.0, 1.0, 0.0]),
+    scene.views.append(ViewSpec("detector", "the detector as its frames show it (u right, v down): true star images",
+                                det.mean(0), -ez, np.array([0.0, 1.0, 0.0]),
                                 1.08 * max(W, H) * s.pixel_pitch_um * 1e-3, parallel=True, scale_bar_mm=2.0,
-                                eye_distance_mm=0.25 * f))
+                                eye_distance_mm=20.0, depth_mm=5.0))
     return scene
