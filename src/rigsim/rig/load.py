@@ -171,7 +171,7 @@ def _read_toml(path: Path) -> dict:
 # Rig families with their own schema, by ``seed_document`` → "module:parser(data, source)".
 # Seeds 000/001 (turntable + cube mirror) use :class:`Rig`.
 RIG_FAMILIES = {
-    "003": "rigsim.boresight.schema:parse_boresight_rig",
+    "003": "rigsim.boresight.load:parse_boresight_rig",
     "004": "rigsim.star.schema:parse_star_rig",
 }
 
