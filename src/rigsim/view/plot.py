@@ -25,8 +25,6 @@ BACKGROUND = ("#FFFFFF", "#E4EAF1")  # bottom, top
 
 
 def _layout(n: int, size) -> dict:
-    import numpy as np  # noqa: F811
-
     if n == 1:
         return {"shape": (1, 1)}
     if n == 2:
@@ -181,8 +179,6 @@ def populate(pl, scene: RigScene, spec: ViewSpec, *, labels: bool = True, overvi
 def _legend(pl, entries, font_size: int) -> None:
     """Legend as coloured text lines in the upper-right corner (pyvista's legend box clips its text
     in subplot layouts)."""
-    import vtk
-
     for k, (text, colour) in enumerate(entries):
         a = pl.add_text(text, position=(0.985, 0.90 - 0.05 * k), viewport=True, font_size=font_size, color=colour,
                         name=f"legend:{k}")
@@ -191,7 +187,6 @@ def _legend(pl, entries, font_size: int) -> None:
         a.GetTextProperty().SetJustificationToRight()
         a.GetTextProperty().SetBackgroundColor(1.0, 1.0, 1.0)
         a.GetTextProperty().SetBackgroundOpacity(0.75)
-    _ = vtk
 
 
 # ------------------------------------------------------------------------------------------
