@@ -264,8 +264,15 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
            f"True intrinsics: f = {t[0]:.3f} px, (u0, v0) = ({t[1]:.2f}, {t[2]:.2f}) px, k1 = {t[3]}, k2 = {t[4]}; "
            f"PSF σ = {s.psf_sigma_px:.3f} px; FOV {s.fov_deg[0]:.1f}°. Estimators start from the detector centre "
            f"({rig.prior_principal_point()[0]}, {rig.prior_principal_point()[1]}) and, when f is not known, f + {rig.calibration.f_bias_px} px.",
-           "Every equation is a reconstruction documented in docs/star_calibration.md.", "",
-           "## Key numbers", "", "```", *summary_lines(res, study), "```", ""]
+           "Every equation is a reconstruction documented in docs/star_calibration.md.", ""]
+    try:  # the rig in 3D (rigsim.view, off screen); the report goes on without it if OpenGL is unavailable
+        from rigsim.view import rig_picture
+
+        files["rig_picture"] = rig_picture(rig, out / "rig.png", size=(1400, 800))
+        md += ["![the star sensor, its field of view and catalogue stars at the first attitude (rigsim view)](rig.png)", ""]
+    except Exception as e:
+        md += [f"(rig picture unavailable: {type(e).__name__}: {e})", ""]
+    md += ["## Key numbers", "", "```", *summary_lines(res, study), "```", ""]
     md += ["## Sample frame", "", "![](star_frame.png)", ""]
     md += ["## Residuals across the field", "",
            "Per frame the attitude is fitted (Wahba) with the given intrinsics and every identified catalogue star is "
@@ -343,4 +350,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
                          "verdict": claim_verdict(study)}
     files["json"] = out / "star_calibration.json"
     files["json"].write_text(json.dumps(data, indent=1, default=float))
+    from rigsim.reporting import markdown_to_html
+
+    files["html"] = markdown_to_html(files["report"])
     return files
