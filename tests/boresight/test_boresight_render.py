@@ -6,7 +6,6 @@ render vs exact; measured <= 0.006 px (float32 geometry at F = 6 m ~0.005 px, Mo
 of 590k light paths ~0.002 px).
 """
 
-import warnings
 
 import numpy as np
 import pytest

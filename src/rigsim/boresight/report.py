@@ -29,7 +29,7 @@ def _plt():
     return plt
 
 
-def _sweep_figure(rows, xlabel, title, path, *, logx=False, xscale=1.0, relative=False):
+def _sweep_figure(rows, xlabel, title, path, *, logx=False, xscale=1.0, relative=False, note_loc="lower"):
     plt = _plt()
     ncol = 5 if relative else 4
     fig, axs = plt.subplots(1, ncol, figsize=(3.3 * ncol, 3.3))
@@ -46,17 +46,19 @@ def _sweep_figure(rows, xlabel, title, path, *, logx=False, xscale=1.0, relative
         ax.set_ylim(bottom=0)
     if relative:
         ax = axs[4]
-        for a, c in zip("xyz", ("#2ca02c", "#9467bd", "#8c564b")):
-            ax.plot(x, [r["relative_dvad"][a]["three_sigma"] for r in rows], "o-", color=c, label=f"about {a} (camera 1)")
+        for a, c, nm in zip("xyz", ("#2ca02c", "#9467bd", "#8c564b"),
+                            ("about x (roll)", "about y (pitch)", "about z (around the boresight)")):
+            ax.plot(x, [r["relative_dvad"][a]["three_sigma"] for r in rows], "o-", color=c, label=nm)
         ax.axhline(1.0, color="k", lw=0.8, ls=":")
         ax.text(x.max(), 1.02, "1″", ha="right", va="bottom", fontsize=8)
-        ax.set_title("angle between the cameras: 3σ [″]")
+        ax.set_title("relative angle, DVAD: 3σ [″]")
         ax.set_xlabel(xlabel)
         ax.set_ylim(bottom=0)
         ax.legend(fontsize=7, loc="upper left")
     axs[0].legend(fontsize=7, loc="upper left")
-    axs[2].text(0.97, 0.03, "DVAD separates Δf from β\n(Δf moves the off-axis spots in x)", transform=axs[2].transAxes,
-                ha="right", va="bottom", fontsize=7, color=C_DVAD)
+    y0 = 0.03 if note_loc == "lower" else 0.97
+    axs[2].text(0.97, y0, "DVAD separates Δf from β\n(Δf moves the off-axis spots in x)", transform=axs[2].transAxes,
+                ha="right", va="bottom" if note_loc == "lower" else "top", fontsize=7, color=C_DVAD)
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path)
@@ -242,10 +244,10 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
     _fig5(res, out / "fig5_monte_carlo.png")
     files["fig5"] = "fig5_monte_carlo.png"
     _sweep_figure(res["fig6"]["rows"], "focal length F [m]", "Fig 6: 3σ errors vs focal length (σ = "
-                  f"{res['sigma_px']} px)", out / "fig6_focal_length.png", xscale=1e-3)
+                  f"{res['sigma_px']} px)", out / "fig6_focal_length.png", xscale=1e-3, note_loc="upper")
     files["fig6"] = "fig6_focal_length.png"
     _sweep_figure(res["fig7"]["rows"], "detector spacing L [mm]", "Fig 7: 3σ errors vs detector spacing "
-                  f"(σ = {res['sigma_px']} px)", out / "fig7_spacing.png")
+                  f"(σ = {res['sigma_px']} px)", out / "fig7_spacing.png", note_loc="upper")
     files["fig7"] = "fig7_spacing.png"
     _fig8(res, out / "fig8_residual.png")
     files["fig8"] = "fig8_residual.png"
@@ -265,9 +267,12 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
              f"reference spots averaged over N = {res['state']['n_ref']} measurements.\n")
     L.append("## The paper's claims under this model\n")
     L.append("| claim | measured | verdict |\n|---|---|---|")
+    def cell(x):
+        return str(x).replace("|", "\\|")
+
     for c in res["claims"]:
         note = f" — {c['note']}" if c.get("note") else ""
-        L.append(f"| {c['claim']} | {c['measured']}{note} | **{c['verdict']}** |")
+        L.append(f"| {cell(c['claim'])} | {cell(c['measured'] + note)} | **{c['verdict']}** |")
     L.append("")
     f5 = res["fig5"]
     L.append(f"## Fig 5: {f5['runs']} Monte-Carlo runs at σ = {f5['sigma_px']} px\n")

@@ -52,7 +52,6 @@ def _err(msg):
 def cmd_run_boresight(args) -> int:
     import json
 
-    import numpy as np
     from tqdm import tqdm
 
     import rigsim
