@@ -438,9 +438,8 @@ def _autocollimator(scene: RigScene, rig: Rig, real: Realization, fi: int, pose_
         [det_c + 0.4 * RA[:, 0] - 0.01 * zA, det_c + 0.4 * RA[:, 1] - 0.01 * zA]),
         group="autocollimator", views=("detector",), color="#FFFFFF", line_width=2.0)
     ac = rig.autocollimator
-    scene.label(f"autocollimator f {ac.focal_length_mm:g} mm, \u00d8{ac.aperture_mm:g} mm "
-                f"({ac.distance_mm:g} mm from the face)", to_rot([0.0, -tube_r - 25.0, -0.5 * ac.focal_length_mm]),
-                views=("overview",), font_size=13)
+    scene.label(f"autocollimator\nf {ac.focal_length_mm:g} mm, \u00d8{ac.aperture_mm:g} mm, {ac.distance_mm:g} mm "
+                "from the face", to_rot([0.0, -tube_r - 30.0, opt.z_detector - 30.0]), views=("overview",), font_size=13)
     scene.label(f"detector {opt.width}\u00d7{opt.height} px ({2 * hw:.1f}\u00d7{2 * hh:.1f} mm)",
                 to_rot([-0.6 * hw, -hh - 0.3, opt.z_detector - 0.05]), views=("detector",), font_size=12)
     scene.label("optical axis", to_rot([-1.7, -0.45, opt.z_detector - 0.05]), views=("detector",), font_size=11, colour="#404040")

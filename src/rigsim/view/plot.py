@@ -84,6 +84,10 @@ def set_camera(pl, spec: ViewSpec, scene: RigScene | None = None) -> dict:
     if scene is not None and spec.name == scene.views[0].name:
         # fit the overview's bounding box as projected on the view plane
         pts = scene.points(spec.name)
+        anchors = [lab.point for lab in scene.labels if lab.shown_in(spec.name)]
+        if anchors:  # label anchors inside the frame too, with room above them for the text
+            a = np.asarray(anchors, float)
+            pts = np.vstack([pts, a, a + 0.04 * spec.extent_mm * up])
         pr = (pts - focus) @ np.column_stack([right, up])
         cmin, cmax = pr.min(0), pr.max(0)
         focus = focus + 0.5 * (cmin[0] + cmax[0]) * right + 0.5 * (cmin[1] + cmax[1]) * up
