@@ -265,6 +265,14 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
              f"L = Lc1 − Lc2 = {cam['L_mm']:g} mm, β (half the angle between OA0 and OB0) = {cam['beta_half_angle_deg']:.3f}°. "
              f"Monte-Carlo state: α = β = γ = {res['state']['arcsec']:g}″, Δf = {res['state']['df_um']:g} µm; "
              f"reference spots averaged over N = {res['state']['n_ref']} measurements.\n")
+    try:  # the rig in 3D (rigsim.view, off screen); the report goes on without it if OpenGL is unavailable
+        from rigsim.view import rig_picture
+
+        rig_picture(rig_path, out / "rig.png", size=(1400, 800))
+        files["rig"] = "rig.png"
+        L.append("![the two cameras, the prism and the laser loops (rigsim view)](rig.png)\n")
+    except Exception as e:
+        L.append(f"(rig picture unavailable: {type(e).__name__}: {e})\n")
     L.append("## The paper's claims under this model\n")
     L.append("| claim | measured | verdict |\n|---|---|---|")
     def cell(x):
@@ -365,4 +373,7 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
     if "orbit" in js:
         js["orbit"] = {k: v for k, v in js["orbit"].items() if not k.startswith("_")}
     (out / "boresight.json").write_text(json.dumps(js, indent=1, ensure_ascii=False, default=float), encoding="utf-8")
+    from rigsim.reporting import markdown_to_html
+
+    markdown_to_html(out / "report.md")
     return out / "report.md"
