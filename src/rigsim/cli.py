@@ -30,8 +30,7 @@ Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
 """
 
 
-class CliError(Exception):
-    pass
+from rigsim.errors import CliError  # noqa: E402  (shared with the procedure modules)
 
 
 def _fmt_row(cells, widths):
