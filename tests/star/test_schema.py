@@ -32,5 +32,5 @@ def test_errors_name_field_value_and_range(tmp_path):
     data["sensor"]["k1"], data["sensor"]["k2"] = -2.0, -20.0  # folds back at r_d ≈ 0.20 < corner 0.25
     with pytest.raises(RigError, match="folds back"):
         parse_star_rig(data)
-    with pytest.raises(RigError, match="no such star-sensor rig"):
+    with pytest.raises(RigError, match="no such rig file"):
         load_star_rig(tmp_path / "missing.toml")

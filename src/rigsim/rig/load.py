@@ -101,25 +101,27 @@ def _dotted(loc: tuple) -> str:
     return out or "(top level)"
 
 
-def _describe(err: dict) -> str:
+def describe_error(err: dict, model: type[BaseModel]) -> str:
+    """One pydantic validation error of ``model`` as one line: 'field `a.b` = value: message;
+    allowed: …' (or the unknown key with the keys allowed there). Shared by every rig family."""
     loc = tuple(err.get("loc", ()))
     field = _dotted(loc)
     etype = err.get("type", "")
     value = err.get("input")
     if etype == "extra_forbidden":
-        target = Rig
+        target = model
         if len(loc) > 1:
-            _, pinfo = _field_at(Rig, loc[:-1])
+            _, pinfo = _field_at(model, loc[:-1])
             target = _inner(pinfo.annotation, list) if pinfo is not None else None
             if isinstance(loc[-2], int) or target is None:
-                _, pinfo = _field_at(Rig, tuple(k for k in loc[:-1] if not isinstance(k, int)))
+                _, pinfo = _field_at(model, tuple(k for k in loc[:-1] if not isinstance(k, int)))
                 target = _inner(pinfo.annotation, list) if pinfo is not None else None
         keys = sorted(target.model_fields) if isinstance(target, type) and issubclass(target, BaseModel) else []
         allowed = f" (allowed keys here: {', '.join(keys)})" if keys else ""
         return f"unknown key `{field}`{allowed}"
     if etype == "missing":
         return f"field `{field}` is required but missing"
-    _, info = _field_at(Rig, loc)
+    _, info = _field_at(model, loc)
     allowed = _allowed(info)
     msg = err.get("msg", "invalid")
     if msg.startswith("Value error, "):
@@ -134,11 +136,20 @@ def _describe(err: dict) -> str:
     return f"field `{field}` = {shown}: {msg}{tail}"
 
 
-def parse_rig(data: dict, source: str | Path = "<dict>") -> Rig:
+def _describe(err: dict) -> str:
+    return describe_error(err, Rig)
+
+
+def parse_model(model: type[BaseModel], data: dict, source: str | Path = "<dict>"):
+    """Validate ``data`` as ``model``; every problem becomes one line of a :class:`RigError`."""
     try:
-        return Rig.model_validate(data)
+        return model.model_validate(data)
     except ValidationError as exc:
-        raise RigError(source, [_describe(e) for e in exc.errors()]) from None
+        raise RigError(source, [describe_error(e, model) for e in exc.errors()]) from None
+
+
+def parse_rig(data: dict, source: str | Path = "<dict>") -> Rig:
+    return parse_model(Rig, data, source)
 
 
 def resolve_rig_path(name_or_path: str | Path) -> Path:
@@ -155,7 +166,8 @@ def resolve_rig_path(name_or_path: str | Path) -> Path:
     raise RigError(name_or_path, [f"no such rig file; give a path or one of the default rigs: {known}"])
 
 
-def _read_toml(path: Path) -> dict:
+def read_rig_toml(path: Path) -> dict:
+    """The TOML table of a rig file; unreadable, non-UTF-8 or malformed files raise RigError."""
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -181,7 +193,7 @@ def load_any_rig(name_or_path: str | Path):
     import importlib
 
     path = resolve_rig_path(name_or_path)
-    data = _read_toml(path)
+    data = read_rig_toml(path)
     fam = RIG_FAMILIES.get(str(data.get("seed_document", "")))
     if fam is None:
         return parse_rig(data, path)
@@ -196,7 +208,7 @@ def load_any_rig(name_or_path: str | Path):
 def load_rig(name_or_path: str | Path) -> Rig:
     """A turntable/cube-mirror rig (seeds 000, 001). Other families: :func:`load_any_rig`."""
     path = resolve_rig_path(name_or_path)
-    data = _read_toml(path)
+    data = read_rig_toml(path)
     sd = str(data.get("seed_document", ""))
     if sd in RIG_FAMILIES:
         raise RigError(path, [f"seed_document = {sd!r}: this command needs a turntable/cube-mirror rig "

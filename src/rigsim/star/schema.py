@@ -13,15 +13,14 @@ normalised form. Attitudes are ``R_cam_from_icrs``.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown, brown_undistort, radial_r2_max
-from rigsim.rig.load import SCENES_DIR, RigError, _allowed, _dotted, _field_at, _inner
+from rigsim.rig.load import SCENES_DIR, RigError, parse_model, read_rig_toml
 
 __all__ = ["PSF", "StarSensor", "Sky", "Sequence", "Identification", "Calibration", "Study",
            "StarRig", "load_star_rig", "parse_star_rig", "DEFAULT_STAR_RIG"]
@@ -204,67 +203,18 @@ class StarRig(_Model):
 
 # ------------------------------------------------------------------------------ loading
 
-def _describe(err: dict) -> str:
-    """One pydantic error → 'field `a.b` = value: message; allowed: …' (as rigsim.rig.load)."""
-    loc = tuple(err.get("loc", ()))
-    field = _dotted(loc)
-    etype = err.get("type", "")
-    value = err.get("input")
-    if etype == "extra_forbidden":
-        target = StarRig
-        if len(loc) > 1:
-            _, pinfo = _field_at(StarRig, tuple(k for k in loc[:-1] if not isinstance(k, int)))
-            target = _inner(pinfo.annotation, list) if pinfo is not None else None
-        keys = sorted(target.model_fields) if isinstance(target, type) and issubclass(target, BaseModel) else []
-        allowed = f" (allowed keys here: {', '.join(keys)})" if keys else ""
-        return f"unknown key `{field}`{allowed}"
-    if etype == "missing":
-        return f"field `{field}` is required but missing"
-    _, info = _field_at(StarRig, loc)
-    allowed = _allowed(info)
-    msg = err.get("msg", "invalid")
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
-    if isinstance(value, dict):
-        where = f"table `[{field}]`" if loc else "the rig"
-        return f"in {where}: {msg}"
-    shown = repr(value)
-    if len(shown) > 80:
-        shown = shown[:77] + "..."
-    tail = f"; {allowed}" if allowed and allowed.split(": ", 1)[-1] not in msg else ""
-    return f"field `{field}` = {shown}: {msg}{tail}"
-
-
 def parse_star_rig(data: dict, source: str | Path = "<dict>") -> StarRig:
-    try:
-        return StarRig.model_validate(data)
-    except ValidationError as exc:
-        raise RigError(source, [_describe(e) for e in exc.errors()]) from None
+    return parse_model(StarRig, data, source)
 
 
 def resolve_star_rig_path(name_or_path: str | Path) -> Path:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" and p.exists():
-        return p
-    cand = SCENES_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
-    if cand.exists():
-        return cand
-    if p.exists():
-        return p
-    raise RigError(name_or_path, [f"no such star-sensor rig file; give a path or the default rig name "
-                                  f"'{DEFAULT_STAR_RIG}'"])
+    """A path, or the stem of a file in scenes/ (default ``star_sensor``)."""
+    from rigsim.rig.load import resolve_rig_path
+
+    return resolve_rig_path(name_or_path)
 
 
 def load_star_rig(name_or_path: str | Path = DEFAULT_STAR_RIG) -> StarRig:
     path = resolve_star_rig_path(name_or_path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise RigError(path, [f"cannot read file: {exc.strerror}"]) from None
-    try:
-        data = tomllib.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError as exc:
-        raise RigError(path, [f"not UTF-8 text (byte {exc.start})"]) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise RigError(path, [f"TOML syntax error: {exc}"]) from None
+    data = read_rig_toml(path)
     return parse_star_rig(data, path)
