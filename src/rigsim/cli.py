@@ -87,6 +87,20 @@ def _progress(total, desc, enabled=True):
     return tqdm(total=total, desc=desc, unit="campaign", disable=None if enabled else True, file=sys.stderr, dynamic_ncols=True)
 
 
+def _print_truth_vs_recovered(res, labels) -> None:
+    """The three recovered rotations of a cube-mirror campaign against the truth (arcsec)."""
+    from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
+
+    rows = []
+    for label, (est, tru) in zip(labels, ((res.R_sun_from_rot_est, res.R_sun_from_rot_true),
+                                          (res.R_cube_from_rot_est, res.R_cube_from_rot_true),
+                                          (res.R_cube_from_sun_est, res.R_cube_from_sun_true))):
+        e = small_angle_error(est, tru) * ARCSEC_PER_RAD
+        rows.append([label, *(f"{x:+.3f}" for x in e), f"{np.linalg.norm(e):.3f}"])
+    print("\nTruth vs recovered (small-angle error of the recovered rotation, about the target frame's axes, arcsec):")
+    print(_table(["rotation", "x″", "y″", "z″", "|δ|″"], rows))
+
+
 def cmd_run_cube_mirror(args) -> int:
     if args.trials is None:
         args.trials = 300 if args.analytic else 200
@@ -101,7 +115,6 @@ def _run_cube_mirror_rendered(args) -> int:
 
     from tqdm import tqdm
 
-    from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
     from rigsim.procedures import cube_mirror as cm
     from rigsim.procedures import rendered_campaign as rc
     from rigsim.procedures.report import write_report
@@ -156,16 +169,7 @@ def _run_cube_mirror_rendered(args) -> int:
           f"({'Table 1 form: θ in degrees, hole/spot offset in aiming-camera px' if camp.null_unit == 'px' else 'readings in arcsec'}):")
     print(table1_text(camp.searches))
 
-    def row(label, est, tru):
-        e = small_angle_error(est, tru) * ARCSEC_PER_RAD
-        return [label, *(f"{x:+.3f}" for x in e), f"{np.linalg.norm(e):.3f}"]
-
-    print("\nTruth vs recovered (small-angle error of the recovered rotation, about the target frame's axes, arcsec):")
-    print(_table(["rotation", "x″", "y″", "z″", "|δ|″"], [
-        row("R(sun←rot)  sweep fit", res.R_sun_from_rot_est, res.R_sun_from_rot_true),
-        row("R(cube←rot) search + TRIAD", res.R_cube_from_rot_est, res.R_cube_from_rot_true),
-        row("R(cube←sun) composed", res.R_cube_from_sun_est, res.R_cube_from_sun_true),
-    ]))
+    _print_truth_vs_recovered(res, ("R(sun←rot)  sweep fit", "R(cube←rot) search + TRIAD", "R(cube←sun) composed"))
     budget = None
     if not args.no_budget:
         mn = camp.measured_noise
@@ -204,7 +208,6 @@ def _run_cube_mirror_rendered(args) -> int:
 
 
 def _run_cube_mirror_analytic(args) -> int:
-    from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
     from rigsim.procedures import cube_mirror as cm
     from rigsim.rig import load_rig
 
@@ -235,16 +238,7 @@ def _run_cube_mirror_analytic(args) -> int:
     poses = ", ".join(f"θ{2 * i + 1}={p['X']:.4f}° θ{2 * i + 2}={p['Y']:.4f}°" for i, p in enumerate(res.null_poses_deg))
     print(f"\nSteps 2-3/C  nulls on faces {rig.procedure.faces[0]} and {rig.procedure.faces[1]} (readings): {poses}")
 
-    def row(label, est, tru):
-        e = small_angle_error(est, tru) * ARCSEC_PER_RAD
-        return [label, *(f"{x:+.3f}" for x in e), f"{np.linalg.norm(e):.3f}"]
-
-    print("\nTruth vs recovered (small-angle error of the recovered rotation, about the target frame's axes, arcsec):")
-    print(_table(["rotation", "x″", "y″", "z″", "|δ|″"], [
-        row("R(sun←rot)  step 1/B", res.R_sun_from_rot_est, res.R_sun_from_rot_true),
-        row("R(cube←rot) TRIAD", res.R_cube_from_rot_est, res.R_cube_from_rot_true),
-        row("R(cube←sun) composed", res.R_cube_from_sun_est, res.R_cube_from_sun_true),
-    ]))
+    _print_truth_vs_recovered(res, ("R(sun←rot)  step 1/B", "R(cube←rot) TRIAD", "R(cube←sun) composed"))
     np.set_printoptions(precision=7, suppress=True)
     print(f"\nrecovered R(cube←sun):\n{res.R_cube_from_sun_est}")
 

@@ -89,22 +89,28 @@ def noise_from_rig(rig: Rig) -> Noise:
     return Noise(enc, null, rig.sun_sensor.centroid_sigma_px)
 
 
+def perpendicularity_perturbed(turntable: TurntableModel, angles_rad) -> TurntableModel:
+    """``turntable`` with each inner axis turned by ``angles_rad[k]`` towards its parent, about
+    their common normal (k = 0: the second axis against the first, …): non-perpendicularity."""
+    axes = list(turntable.axes)
+    new = [axes[0]]
+    for (parent, ax), e in zip(zip(axes[:-1], axes[1:]), angles_rad):
+        w = np.cross(ax.direction, parent.direction)
+        w /= np.linalg.norm(w)
+        new.append(AxisKinematics(ax.label, Rotation.from_rotvec(float(e) * w).as_matrix() @ ax.direction))
+    return TurntableModel(new)
+
+
 def draw_realization(rig: Rig, rng: np.random.Generator, sources: set[str]) -> Realization:
     """A random rig instance: errors drawn from the rig's 1σ specifications.
 
     ``sources`` ⊂ {"perpendicularity", "mounting", "plane_mirror"}; others stay ideal.
     """
     base = realization_from_rig(rig, ideal=True)
-    axes = list(base.turntable.axes)
     if "perpendicularity" in sources and rig.turntable.perpendicularity_sigma_arcsec > 0:
         s = rig.turntable.perpendicularity_sigma_arcsec * RAD_PER_ARCSEC
-        new = [axes[0]]
-        for parent, ax in zip(axes[:-1], axes[1:]):
-            w = np.cross(ax.direction, parent.direction)
-            w /= np.linalg.norm(w)
-            d = Rotation.from_rotvec(rng.normal(0.0, s) * w).as_matrix() @ ax.direction
-            new.append(AxisKinematics(ax.label, d))
-        base.turntable = TurntableModel(new)
+        base.turntable = perpendicularity_perturbed(
+            base.turntable, [rng.normal(0.0, s) for _ in range(len(base.turntable.axes) - 1)])
     if "mounting" in sources and rig.procedure.method == "diaphragm":
         s = rig.aiming_camera.mounting_sigma_arcsec * RAD_PER_ARCSEC
         base.null_bias_rad = [rng.normal(0.0, s, 2), rng.normal(0.0, s, 2)]

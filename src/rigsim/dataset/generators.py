@@ -138,20 +138,12 @@ class SunSensorGenerator:
 
     # -- rendering (worker side) ---------------------------------------------------------------
     def _real(self, draws: dict):
-        from scipy.spatial.transform import Rotation
-
         from rigsim.frames import RAD_PER_ARCSEC
-        from rigsim.rig.turntable import AxisKinematics, TurntableModel
-        from rigsim.truth import realization_from_rig
+        from rigsim.truth import perpendicularity_perturbed, realization_from_rig
 
         real = realization_from_rig(self.rig, ideal=True)
-        axes = list(real.turntable.axes)
-        new = [axes[0]]
-        for (parent, ax), e in zip(zip(axes[:-1], axes[1:]), draws["perpendicularity_arcsec"]):
-            w = np.cross(ax.direction, parent.direction)
-            w /= np.linalg.norm(w)
-            new.append(AxisKinematics(ax.label, Rotation.from_rotvec(e * RAD_PER_ARCSEC * w).as_matrix() @ ax.direction))
-        real.turntable = TurntableModel(new)
+        real.turntable = perpendicularity_perturbed(
+            real.turntable, [e * RAD_PER_ARCSEC for e in draws["perpendicularity_arcsec"]])
         return real
 
     def render(self, index: int, params: dict):

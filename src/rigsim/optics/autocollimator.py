@@ -775,6 +775,20 @@ class AutocollimatorLayout:
                 "plane_mirror_centre_mount_mm": self.plane_mirror_centre_mount_mm.tolist()}
 
 
+def a_frame_basis(axis_rot) -> np.ndarray:
+    """R_rot_from_A of an autocollimator whose axis (unit, from the mirror towards the instrument)
+    is ``axis_rot``: z_A = −axis, x_A = X′ made perpendicular to it (Y′ if the axis is near X′),
+    y_A = z_A × x_A."""
+    d = np.asarray(axis_rot, float)
+    z = -d / np.linalg.norm(d)
+    x0 = np.array([1.0, 0.0, 0.0])
+    if abs(x0 @ z) > 0.9:
+        x0 = np.array([0.0, 1.0, 0.0])
+    x = x0 - (x0 @ z) * z
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def reference_pose_rad(rig: Rig, real: Realization) -> dict:
     """The true turntable pose at which every axis *reads* zero (step A's pose)."""
     return {a.label: -real.encoder_bias_rad.get(a.label, 0.0) for a in rig.turntable.axes}
@@ -814,6 +828,7 @@ def autocollimator_layout(rig: Rig, real: Realization, target: str = "face", fac
     if target not in ("face", "plane_mirror"):
         raise ValueError(f"target = {target!r}: must be 'face' or 'plane_mirror'")
     d = reference_axis_rot(rig, real) if axis_rot is None else np.asarray(axis_rot, float)
+    R = a_frame_basis(d)  # from the axis as given: a_frame_basis normalises it once, as below
     d = d / np.linalg.norm(d)
     pm_c = np.asarray(plane_mirror_centre_mount_mm, float)
     if target == "face":
@@ -835,14 +850,6 @@ def autocollimator_layout(rig: Rig, real: Realization, target: str = "face", fac
         if reference_pose is None:
             reference_pose = reference_pose_rad(rig, real)
         anchor = _plane_mirror_centre_rot(real, reference_pose, pm_c)
-    z_A = -d
-    x0 = np.array([1.0, 0.0, 0.0])
-    if abs(x0 @ z_A) > 0.9:
-        x0 = np.array([0.0, 1.0, 0.0])
-    x_A = x0 - (x0 @ z_A) * z_A
-    x_A /= np.linalg.norm(x_A)
-    y_A = np.cross(z_A, x_A)
-    R = np.column_stack([x_A, y_A, z_A])
     origin = anchor + d * (rig.autocollimator.distance_mm + objective_vertex_z_mm)
     return AutocollimatorLayout(target, face, d, R, origin, anchor, dict(reference_pose), pm_c)
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.imaging import Background, Flag, centroid_tcom, detect, estimate_background, extract_rois
+from rigsim.optics.autocollimator import a_frame_basis  # noqa: F401  (re-exported)
 from rigsim.procedures.search import SearchError, SearchResult, encoder_reading_to_true, null_search
 from rigsim.rig.schema import Rig
 from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
@@ -80,22 +81,6 @@ THRESHOLD_SIGMA = 3.0
 
 
 # ------------------------------------------------------------------------------ geometry
-def a_frame_basis(axis_rot) -> np.ndarray:
-    """R_rot_from_A of an autocollimator whose axis (unit, from the mirror towards the
-    instrument) is ``axis_rot``: z_A = −axis, x_A = X′ made perpendicular to it (Y′ if the
-    axis is near X′), y_A = z_A × x_A — as :func:`rigsim.optics.autocollimator.autocollimator_layout`
-    builds it (tested equal)."""
-    d = np.asarray(axis_rot, float)
-    d = d / np.linalg.norm(d)
-    z = -d
-    x0 = np.array([1.0, 0.0, 0.0])
-    if abs(x0 @ z) > 0.9:
-        x0 = np.array([0.0, 1.0, 0.0])
-    x = x0 - (x0 @ z) * z
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
-
-
 def exact_reading_rad(R_rot_from_A: np.ndarray, normal_rot) -> np.ndarray:
     """The instrument's ideal reading of a mirror with outward normal ``normal_rot``:
     (θx, θy) = (atan2(n_x, −n_z), atan2(n_y, −n_z)) with n in the A frame
@@ -425,8 +410,6 @@ class FaceReadingMeasurer:
             self.optics = optics or _optics(rig)
             layout = autocollimator_layout(rig, real, "face", face, axis_rot=self.axis_rot,
                                            objective_vertex_z_mm=self.optics.objective.z_vertex)
-            if not np.allclose(layout.R_rot_from_A, self.R_rot_from_A, atol=1e-15, rtol=0):
-                raise RuntimeError("a_frame_basis and autocollimator_layout disagree")  # tested: cannot happen
             self.renderer = AutocollimatorRenderer(rig, real, "face", face, spp=DEFAULT_SPP if spp is None else int(spp),
                                                    optics=self.optics, layout=layout, mesh_dir=mesh_dir)
             self.build_seconds = time.perf_counter() - t0

@@ -138,9 +138,11 @@ class OffsetMeasurer:
             from rigsim.render.scenes.diaphragm import diaphragm_geometry
 
             self._geom = diaphragm_geometry(self.rig, self.real, self.face_index)
+        from rigsim.render.scenes.aiming import divergence_radius_mm
+
         g = self._geom
-        R = g.hole_radius_mm + 2.0 * self.rig.diaphragm_screen.distance_to_cube_mm * math.tan(
-            0.5 * math.radians(self.rig.sun_simulator.collimation_full_angle_arcmin / 60.0))
+        R = g.hole_radius_mm + divergence_radius_mm(
+            self.rig, math.radians(self.rig.sun_simulator.collimation_full_angle_arcmin / 60.0))
         c = np.asarray(offset_px, float) * self.rig.aiming_camera.object_pixel_mm
         pts = c + R * np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
         return bool(np.all(g.camera.on_detector(g.screen_to_uv(pts))))

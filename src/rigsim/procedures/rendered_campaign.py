@@ -81,6 +81,23 @@ def _encoder_errors(rig: Rig, noise: Noise, rng: np.random.Generator) -> dict[st
             for a in rig.turntable.axes if a.label in ("X", "Y")}
 
 
+def compose(rig: Rig, real: Realization, order: str, cal, R_sun_est: np.ndarray, null_readings: list[dict]) -> CampaignResult:
+    """Steps 4–5 / C3, D: TRIAD on the recorded null readings, R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ,
+    and the truth beside each estimate."""
+    R_cr, _, _ = cube_from_rot_triad(null_readings, rig.procedure.faces, order, NOMINAL_D)
+    return CampaignResult(rig.name, order, cal, [{k: math.degrees(v) for k, v in p.items()} for p in null_readings],
+                          R_sun_est, real.R_sun_from_mount, R_cr, real.R_cube_from_mount, R_cr @ R_sun_est.T,
+                          real.R_cube_from_sun)
+
+
+def _null_noise(resid: list, unit: str) -> dict:
+    """rms of (measured − exact) null measurements, overall and per axis."""
+    r = np.array(resid)
+    return {"null_measurement_rms": float(np.sqrt(np.mean(r**2))),
+            "null_measurement_rms_xy": np.sqrt(np.mean(r**2, axis=0)).tolist(),
+            "null_measurement_unit": unit, "null_measurement_n": int(len(r))}
+
+
 def expected_frames(rig: Rig) -> int:
     """Frames the progress bar counts: the sweep poses plus a typical null search."""
     k = int(round(rig.procedure.sweep_range_deg / rig.procedure.sweep_step_deg))
@@ -154,11 +171,7 @@ def run_rendered_campaign(rig: Rig, real: Realization, *, seed: int = 0, axis_or
                     resid.append(m + meas.bias_px - ex)
                     pb.update(1)
                 times["aiming-camera repeatability frames"] = time.perf_counter() - t0
-        r = np.array(resid)
-        measured["null_measurement_rms"] = float(np.sqrt(np.mean(r**2)))
-        measured["null_measurement_rms_xy"] = np.sqrt(np.mean(r**2, axis=0)).tolist()
-        measured["null_measurement_unit"] = "px"
-        measured["null_measurement_n"] = int(len(r))
+        measured.update(_null_noise(resid, "px"))
     else:
         from rigsim.procedures.autocollimation import (
             FaceReadingMeasurer,
@@ -193,11 +206,7 @@ def run_rendered_campaign(rig: Rig, real: Realization, *, seed: int = 0, axis_or
                     resid.append(np.asarray(m) - np.asarray(ex))
                     pb.update(1)
                 times["autocollimator repeatability frames"] = time.perf_counter() - t0
-        r = np.array(resid)
-        measured["null_measurement_rms"] = float(np.sqrt(np.mean(r**2)))
-        measured["null_measurement_rms_xy"] = np.sqrt(np.mean(r**2, axis=0)).tolist()
-        measured["null_measurement_unit"] = "arcsec"
-        measured["null_measurement_n"] = int(len(r))
+        measured.update(_null_noise(resid, "arcsec"))
     for s in searches:
         if not s.converged:
             raise SearchError(f"face {s.face}: the null search did not converge ({s.message})")
@@ -205,12 +214,8 @@ def run_rendered_campaign(rig: Rig, real: Realization, *, seed: int = 0, axis_or
     # ---- step 4 / C3, D: TRIAD and composition
     t0 = time.perf_counter()
     readings = [s.final_reading_rad for s in searches]
-    R_cr, _, _ = cube_from_rot_triad(readings, rig.procedure.faces, order, NOMINAL_D)
-    R_cs = R_cr @ cal.R_sun_from_rot.T
+    result = compose(rig, real, order, cal, cal.R_sun_from_rot, readings)
     times["TRIAD + compose"] = time.perf_counter() - t0
-    result = CampaignResult(rig.name, order, cal, [{k: math.degrees(v) for k, v in p.items()} for p in readings],
-                            cal.R_sun_from_rot, real.R_sun_from_mount, R_cr, real.R_cube_from_mount, R_cs,
-                            real.R_cube_from_sun)
     return RenderedCampaign(rig.name, rig.procedure.method, int(seed), sweep, cal, searches, step_a, result, times,
                             measured)
 
@@ -273,10 +278,7 @@ def surrogate_campaign(rig: Rig, real: Realization, noise: Noise, rng: np.random
             if not res.converged:
                 raise SearchError(f"face {res.face}: surrogate search did not converge ({res.message})")
             null_readings.append(res.final_reading_rad)
-    R_cr, _, _ = cube_from_rot_triad(null_readings, rig.procedure.faces, order, NOMINAL_D)
-    R_cs = R_cr @ R_sun_est.T
-    return CampaignResult(rig.name, order, cal, [{k: math.degrees(v) for k, v in p.items()} for p in null_readings],
-                          R_sun_est, real.R_sun_from_mount, R_cr, real.R_cube_from_mount, R_cs, real.R_cube_from_sun)
+    return compose(rig, real, order, cal, R_sun_est, null_readings)
 
 
 @dataclass

@@ -81,8 +81,6 @@ class ConcentricityRenderer:
                  divergence_full_angle_arcmin: float | None = None, grid_mm: float = 0.01,
                  spot_photons_per_px: float | None = None, hole_glow_ratio: float = 1.0,
                  deterministic: bool = True, detector=None):
-        import cv2  # noqa: F401
-
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         arcmin = rig.sun_simulator.collimation_full_angle_arcmin if divergence_full_angle_arcmin is None \
