@@ -65,3 +65,10 @@ def test_committed_reports_render_in_chromium(report):
     ok, n = _images_ok(dom)
     assert n >= 3 and ok == n, (ok, n)
     assert "<table>" in dom
+
+
+def test_every_procedure_has_a_committed_html_report():
+    """The browser test above is parametrised over renders/*/report.html: make sure it has them all."""
+    for d in ("cube_mirror_sun-sensor-2axis-diaphragm", "cube_mirror_sun-sensor-3axis-autocollimator", "boresight",
+              "star_calibration"):
+        assert (ROOT / "renders" / d / "report.html").is_file(), d
