@@ -30,7 +30,7 @@ Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
 """
 
 
-from rigsim.errors import CliError  # noqa: E402  (shared with the procedure modules)
+from rigsim.errors import CliError, RigsimError  # noqa: E402
 
 
 def _fmt_row(cells, widths):
@@ -477,11 +477,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rigsim.rig.load import RigError
-    from rigsim.dataset.store import DatasetError
-    from rigsim.procedures.search import SearchError
-    from rigsim.rig.turntable import GeometryError
-
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -489,7 +484,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (RigError, CliError, GeometryError, SearchError, DatasetError) as exc:
+    except RigsimError as exc:
         print(f"rigsim: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,9 +1,62 @@
-"""Errors the ``rigsim`` command reports as one line (``rigsim: error: ...``, exit 2).
+"""Every user-facing error and warning of rigsim, in one hierarchy.
 
-Defined here, not in rigsim.cli, so that ``python -m rigsim.cli`` (where cli is ``__main__``) and
-the procedure modules that raise it share one class.
+``rigsim`` prints any :class:`RigsimError` as one line (``rigsim: error: ...``) and exits 2. The
+message names the file or option, the field, the value and the allowed range. Library callers
+catch :class:`RigsimError` (or the specific class); the classes that describe bad input also
+derive from ``ValueError`` so that generic ``except ValueError`` code keeps working.
 """
 
+from __future__ import annotations
 
-class CliError(Exception):
+__all__ = ["RigsimError", "CliError", "RigError", "GeometryError", "SearchError", "DatasetError", "ViewError",
+           "ExportError", "GeometryWarning", "SaturationWarning"]
+
+
+class RigsimError(Exception):
+    """Base of every error the ``rigsim`` command reports as one line (exit 2)."""
+
+
+class CliError(RigsimError, ValueError):
     """Bad command-line input: the message names the option, the value and the allowed range."""
+
+
+class RigError(RigsimError, ValueError):
+    """A rig file is unreadable or invalid. ``str(err)`` is the user-facing message."""
+
+    def __init__(self, path, problems: list[str]):
+        self.path = str(path)
+        self.problems = list(problems)
+        head = f"{self.path}: invalid rig file"
+        if len(self.problems) == 1:
+            msg = f"{head}: {self.problems[0]}"
+        else:
+            msg = head + f" ({len(self.problems)} problems):\n" + "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(msg)
+
+
+class GeometryError(RigsimError, ValueError):
+    """A geometry that cannot work (no turntable pose brings a face normal onto the beam, …)."""
+
+
+class SearchError(RigsimError, RuntimeError):
+    """A null search cannot proceed (no measurable spot, or it does not converge)."""
+
+
+class DatasetError(RigsimError):
+    """A dataset folder, its manifest or a prediction file is unusable."""
+
+
+class ViewError(RigsimError, ValueError):
+    """A 3D view cannot be built or written (bad pose, face, size or output path)."""
+
+
+class ExportError(RigsimError, ValueError):
+    """A scene cannot be exported as plain Mitsuba XML."""
+
+
+class GeometryWarning(UserWarning):
+    """Geometry that cannot give a valid measurement (spot off the detector, cut, too big, …)."""
+
+
+class SaturationWarning(UserWarning):
+    """A frame has saturated pixels (full well or ADC top code)."""

@@ -24,12 +24,9 @@ import os
 from pathlib import Path
 
 import numpy as np
+from rigsim.errors import DatasetError
 
 FORMAT = "rigsim.dataset/1"
-
-
-class DatasetError(Exception):
-    """A dataset directory or a predictions file is missing, corrupt or inconsistent."""
 
 
 def sha256_bytes(b: bytes) -> str:

@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+from rigsim.errors import CliError
+
 __all__ = ["add_cli", "cmd_run_boresight"]
 
 
@@ -37,18 +39,6 @@ def add_cli(run_subparsers, top=None):
     return p
 
 
-def _err(msg):
-    """rigsim.cli's CliError — the class of the module actually running: under ``python -m rigsim.cli``
-    that is ``__main__``, whose CliError is a different class from ``rigsim.cli.CliError``."""
-    main = sys.modules.get("__main__")
-    spec = getattr(main, "__spec__", None)
-    if spec is not None and spec.name == "rigsim.cli" and hasattr(main, "CliError"):
-        return main.CliError(msg)
-    from rigsim.cli import CliError
-
-    return CliError(msg)
-
-
 def cmd_run_boresight(args) -> int:
     import json
 
@@ -62,17 +52,17 @@ def cmd_run_boresight(args) -> int:
 
     rig = load_boresight_rig(args.rig)
     if args.runs is not None and not 10 <= args.runs <= 1_000_000:
-        raise _err(f"--runs = {args.runs}: allowed range is 10 to 1000000")
+        raise CliError(f"--runs = {args.runs}: allowed range is 10 to 1000000")
     if args.measurements is not None and not 3 <= args.measurements <= 1000:
-        raise _err(f"--measurements = {args.measurements}: allowed range is 3 to 1000")
+        raise CliError(f"--measurements = {args.measurements}: allowed range is 3 to 1000")
     if args.spp is not None and not 16 <= args.spp <= 65536:
-        raise _err(f"--spp = {args.spp}: allowed range is 16 to 65536")
+        raise CliError(f"--spp = {args.spp}: allowed range is 16 to 65536")
     if not 0.0 <= args.jitter_px <= 5.0:
-        raise _err(f"--jitter-px = {args.jitter_px}: allowed range is 0 to 5 px")
+        raise CliError(f"--jitter-px = {args.jitter_px}: allowed range is 0 to 5 px")
     if args.seed is not None and args.seed < 0:
-        raise _err(f"--seed = {args.seed}: must be >= 0")
+        raise CliError(f"--seed = {args.seed}: must be >= 0")
     if not args.no_orbit and len(rig.cameras) < 2:
-        raise _err(f"the orbit scenario needs two cameras; {args.rig} has {len(rig.cameras)} (use --no-orbit)")
+        raise CliError(f"the orbit scenario needs two cameras; {args.rig} has {len(rig.cameras)} (use --no-orbit)")
     rig_path = resolve_rig_path(args.rig)
     n_meas = args.measurements or rig.orbit.measurements
     total = 5 + (0 if args.no_orbit else 4 * (rig.orbit.reference_frames + n_meas))

@@ -26,10 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-
-
-class SearchError(RuntimeError):
-    """The null search cannot proceed (no measurable spot, or it does not converge)."""
+from rigsim.errors import SearchError
 
 
 @dataclass

@@ -7,13 +7,11 @@ import sys
 import time
 from pathlib import Path
 
+from rigsim.errors import CliError
+
 __all__ = ["add_cli", "cmd_run_star_calibration"]
 
 RENDERERS = ("analytic", "mitsuba")
-
-
-class StarCliError(ValueError):
-    """Bad command-line input (message names the option, the value and the allowed range)."""
 
 
 def add_cli(run_subparsers, top=None) -> None:
@@ -36,14 +34,14 @@ def add_cli(run_subparsers, top=None) -> None:
 
 def _check(args) -> None:
     if args.renderer not in RENDERERS:
-        raise StarCliError(f"--renderer = {args.renderer!r}: allowed one of {', '.join(RENDERERS)}")
+        raise CliError(f"--renderer = {args.renderer!r}: allowed one of {', '.join(RENDERERS)}")
     if args.trials is not None and not 2 <= args.trials <= 100000:
-        raise StarCliError(f"--trials = {args.trials}: allowed range is 2 to 100000")
+        raise CliError(f"--trials = {args.trials}: allowed range is 2 to 100000")
     if args.seed < 0:
-        raise StarCliError(f"--seed = {args.seed}: allowed range is ≥ 0")
+        raise CliError(f"--seed = {args.seed}: allowed range is ≥ 0")
     spp = args.mitsuba_spp
     if spp < 1 or spp > 65536 or (spp & (spp - 1)) or (spp.bit_length() - 1) % 2:
-        raise StarCliError(f"--mitsuba-spp = {spp}: must be a power of 4 between 1 and 65536 (e.g. 64, 256, 1024)")
+        raise CliError(f"--mitsuba-spp = {spp}: must be a power of 4 between 1 and 65536 (e.g. 64, 256, 1024)")
 
 
 def cmd_run_star_calibration(args) -> int:
@@ -52,22 +50,13 @@ def cmd_run_star_calibration(args) -> int:
     from tqdm import tqdm
 
     import rigsim
-    from rigsim.rig.load import RigError
     from rigsim.star.pipeline import run_pipeline
     from rigsim.star.report import summary_lines, write_report
     from rigsim.star.schema import load_star_rig, resolve_star_rig_path
     from rigsim.star.study import CentroidNoise, run_study
 
-    try:
-        _check(args)
-    except StarCliError as exc:
-        print(f"rigsim: error: {exc}", file=sys.stderr)
-        return 2
-    try:
-        rig = load_star_rig(args.rig)
-    except RigError as exc:
-        print(f"rigsim: error: {exc}", file=sys.stderr)
-        return 2
+    _check(args)
+    rig = load_star_rig(args.rig)
     out = Path(args.out) if args.out else Path("renders") / "star_calibration"
     trials = rig.study.trials if args.trials is None else args.trials
     print(f"rigsim {rigsim.__version__} — seed 004 star-sensor calibration, rig '{rig.name}', seed {args.seed}, "

@@ -33,6 +33,7 @@ import numpy as np
 from rigsim.render.backend import ensure_variant
 from rigsim.render.camera import PinholeCamera
 from rigsim.render.sensors import PINHOLE_PLUGIN, register_sensors
+from rigsim.errors import GeometryWarning
 
 __all__ = [
     "SUN_FULL_ANGLE_RAD",
@@ -59,10 +60,6 @@ def _check_spp(spp, sampler: str) -> None:
     if sampler == "ldsampler" and (spp & (spp - 1) or (spp.bit_length() - 1) % 2):
         raise ValueError(f"spp = {spp!r}: the ldsampler needs a power of 4 (e.g. 256, 1024, "
                          "4096); Mitsuba would silently round it")
-
-
-class GeometryWarning(UserWarning):
-    """Geometry that cannot give a valid measurement (spot off the detector, cut, too big...)."""
 
 
 def _unit(v) -> np.ndarray:

@@ -14,22 +14,9 @@ import annotated_types as at
 from pydantic import BaseModel, ValidationError
 
 from rigsim.rig.schema import Rig
+from rigsim.errors import RigError  # noqa: F401  (re-exported)
 
 SCENES_DIR = Path(__file__).resolve().parents[3] / "scenes"
-
-
-class RigError(ValueError):
-    """A rig file is unreadable or invalid. ``str(err)`` is the user-facing message."""
-
-    def __init__(self, path, problems: list[str]):
-        self.path = str(path)
-        self.problems = problems
-        head = f"{self.path}: invalid rig file"
-        if len(problems) == 1:
-            msg = f"{head}: {problems[0]}"
-        else:
-            msg = head + f" ({len(problems)} problems):\n" + "\n".join(f"  - {p}" for p in problems)
-        super().__init__(msg)
 
 
 def _field_at(model: type[BaseModel], loc: tuple) -> tuple[type[BaseModel] | None, object | None]:

@@ -23,12 +23,9 @@ from scipy.spatial.transform import Rotation
 
 from rigsim.frames import RAD_PER_ARCSEC, rot_axis
 from rigsim.rig.schema import Turntable
+from rigsim.errors import GeometryError  # noqa: F401  (re-exported)
 
 _E = {"X": np.array([1.0, 0.0, 0.0]), "Y": np.array([0.0, 1.0, 0.0]), "Z": np.array([0.0, 0.0, 1.0])}
-
-
-class GeometryError(ValueError):
-    """A geometry that cannot work (no turntable pose brings a face normal onto the beam, …)."""
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+from rigsim.errors import CliError, ViewError
+
 __all__ = ["add_cli", "cmd_view", "parse_pose_arg"]
 
 EPILOG = """\
@@ -22,10 +24,6 @@ the face's search_start_deg), null (the face's exact null), nominal (nominal_pos
 """
 
 
-class _CliViewError(ValueError):
-    pass
-
-
 def parse_pose_arg(text: str | None):
     """'X=10,Y=-5' → {'X': '10', 'Y': '-5'} (values checked by the builder); keywords pass through."""
     if text is None:
@@ -36,11 +34,11 @@ def parse_pose_arg(text: str | None):
     pose = {}
     for part in t.split(","):
         if "=" not in part:
-            raise _CliViewError(f"--pose = {text!r}: expected LABEL=DEGREES[,LABEL=DEGREES] (e.g. X=181.4,Y=0.55) "
+            raise CliError(f"--pose = {text!r}: expected LABEL=DEGREES[,LABEL=DEGREES] (e.g. X=181.4,Y=0.55) "
                                 "or one of start, null, nominal")
         k, v = (x.strip() for x in part.split("=", 1))
         if k in pose:
-            raise _CliViewError(f"--pose = {text!r}: axis {k!r} given twice")
+            raise CliError(f"--pose = {text!r}: axis {k!r} given twice")
         pose[k] = v
     return pose
 
@@ -92,45 +90,38 @@ def _check_outputs(args) -> None:
 
 
 def cmd_view(args) -> int:
-    from rigsim.rig.load import RigError
-    from rigsim.rig.turntable import GeometryError
     from rigsim.view.api import build_scene, parse_size
-    from rigsim.view.scene import ViewError
 
-    try:
-        size = parse_size(args.size)
-        pose = parse_pose_arg(args.pose)
-        _check_outputs(args)
-        t0 = time.perf_counter()
-        scene = build_scene(args.rig, pose=pose, face=args.face)
-        print(scene.title)
-        for line in scene.notes:
-            print(f"  {line}")
-        for w in scene.warnings:
-            print(f"  WARNING: {w}")
-        if args.screenshot:
-            from rigsim.view.display import render_window_class
-            from rigsim.view.plot import make_plotter
+    size = parse_size(args.size)
+    pose = parse_pose_arg(args.pose)
+    _check_outputs(args)
+    t0 = time.perf_counter()
+    scene = build_scene(args.rig, pose=pose, face=args.face)
+    print(scene.title)
+    for line in scene.notes:
+        print(f"  {line}")
+    for w in scene.warnings:
+        print(f"  WARNING: {w}")
+    if args.screenshot:
+        from rigsim.view.display import render_window_class
+        from rigsim.view.plot import make_plotter
 
-            out = Path(args.screenshot)
-            out.parent.mkdir(parents=True, exist_ok=True)
-            pl = make_plotter(scene, off_screen=True, size=size)
-            try:
-                pl.screenshot(str(out), return_img=False)
-                rw = render_window_class(pl)
-            finally:
-                pl.close()
-            print(f"wrote {out} ({size[0]}x{size[1]}, off screen via {rw}, {time.perf_counter() - t0:.1f} s)")
-        for path in (args.export, args.html):
-            if path:
-                from rigsim.view.plot import export_scene
+        out = Path(args.screenshot)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        pl = make_plotter(scene, off_screen=True, size=size)
+        try:
+            pl.screenshot(str(out), return_img=False)
+            rw = render_window_class(pl)
+        finally:
+            pl.close()
+        print(f"wrote {out} ({size[0]}x{size[1]}, off screen via {rw}, {time.perf_counter() - t0:.1f} s)")
+    for path in (args.export, args.html):
+        if path:
+            from rigsim.view.plot import export_scene
 
-                print(f"wrote {export_scene(scene, path)}")
-        if args._wants_window:
-            from rigsim.view.plot import show
+            print(f"wrote {export_scene(scene, path)}")
+    if args._wants_window:
+        from rigsim.view.plot import show
 
-            show(scene, size=size)
-    except (ViewError, _CliViewError, RigError, GeometryError) as exc:
-        print(f"rigsim: error: {exc}", file=sys.stderr)
-        return 2
+        show(scene, size=size)
     return 0

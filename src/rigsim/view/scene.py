@@ -16,15 +16,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from rigsim.errors import ViewError
 
 __all__ = ["Item", "Label", "Beam", "ViewSpec", "RigScene", "ALL_VIEWS", "COLOURS", "ViewError"]
 
 ALL_VIEWS = ("*",)
 """``Item.views`` value: shown in every viewport."""
-
-
-class ViewError(ValueError):
-    """Bad input to a rig view (the message names the option, the value and what is allowed)."""
 
 
 def _pose_text(pose) -> str:

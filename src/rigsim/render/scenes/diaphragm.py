@@ -74,6 +74,7 @@ from rigsim.render.sunspot import GeometryWarning, disk_directions
 from rigsim.rig.schema import Rig
 from rigsim.rig.turntable import GeometryError
 from rigsim.truth import Realization, realization_from_rig
+from rigsim.errors import SaturationWarning
 
 __all__ = [
     "GeometryWarning",
@@ -768,10 +769,6 @@ _WARN_FLAGS = {
     "beam_source_in_view": ("the 'diffuse'-mode beam disk is in the aiming camera's view and hides "
                             "part of the screen (increase beam_standoff_mm or view_angle_deg)"),
 }
-
-
-class SaturationWarning(UserWarning):
-    """A frame has saturated pixels (full well or ADC top code)."""
 
 
 def _derived_seed(seed: int, stream: int) -> int:

@@ -12,10 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-
-class ExportError(ValueError):
-    pass
-
+from rigsim.errors import ExportError
 
 def _check_builtin(d, where="scene"):
     for k, v in d.items():
