@@ -35,8 +35,10 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="fewer repetitions, no rendering")
     args = ap.parse_args()
 
-    from rigsim.boresight import CameraGeometry, dvad, load_boresight_rig, rotation_xyz, simplified, spots_uv
-    from rigsim.boresight.pipeline import CameraProcessor
+    from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
+    from rigsim.estimation.dvad import dvad, simplified
+    from rigsim.rig.load import load_boresight_rig
+    from rigsim.procedures.boresight.pipeline import CameraProcessor
     from rigsim.frames import ARCSEC_PER_RAD as AS
     from rigsim.imaging import NoiseModel
 
@@ -59,7 +61,7 @@ def main() -> int:
             origins.append(o)
         render_note = "synthetic disk ROIs"
     else:
-        from rigsim.boresight.render import LoopRenderer
+        from rigsim.render.boresight import LoopRenderer
 
         rends = [LoopRenderer(rig, 0, j) for j in (0, 1)]
         for r in rends:
@@ -83,7 +85,7 @@ def main() -> int:
     proc.process(rois[0], rois[1], origins[0], origins[1])   # warm caches
     reps = 300 if args.quick else 2000
     t = _timeit(lambda: proc.process(rois[0], rois[1], origins[0], origins[1]), reps)
-    from rigsim.boresight.pipeline import tcom_fast
+    from rigsim.procedures.boresight.pipeline import tcom_fast
 
     stack = np.stack(rois)
     t_cen = _timeit(lambda: tcom_fast(stack, origins, noise=proc.noise), reps)

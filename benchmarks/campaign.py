@@ -26,8 +26,8 @@ def main() -> None:
     a = ap.parse_args()
 
     t_import = time.perf_counter()
-    from rigsim.procedures import cube_mirror as cm
-    from rigsim.procedures import rendered_campaign as rc
+    from rigsim.procedures.cube_mirror import campaign as cm
+    from rigsim.procedures.cube_mirror import rendered_campaign as rc
     from rigsim.render.backend import ensure_variant
     from rigsim.rig import load_rig
 

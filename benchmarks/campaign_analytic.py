@@ -10,9 +10,10 @@ import numpy as np
 from rigsim.estimation.cube_attitude import cube_from_rot_triad
 from rigsim.frames import ARCSEC_PER_RAD, random_rotations, rotation_angle
 from rigsim.optics.cube import FACE_NORMALS
-from rigsim.procedures import cube_mirror as cm
+from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
-from rigsim.rig.turntable import GeometryError, TurntableModel
+from rigsim.errors import GeometryError
+from rigsim.rig.turntable import TurntableModel
 
 
 def timeit(fn, n):

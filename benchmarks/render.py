@@ -17,9 +17,9 @@ import numpy as np
 
 
 def sun_sensor_rig(spp: int, n: int):
-    from rigsim.render.scenes.sun_sensor import SunSensorScene
+    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
     from rigsim.rig import load_rig
-    from rigsim.truth import realization_from_rig
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
 
     rig = load_rig("sun_sensor_2axis_diaphragm")
     sc = SunSensorScene(rig, realization_from_rig(rig), spp=spp)

@@ -35,9 +35,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from rigsim.render import backend  # noqa: E402
-from rigsim.render.scenes.autocollimator import AutocollimatorRenderer, GeometryWarning  # noqa: E402
+from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
+from rigsim.errors import GeometryWarning  # noqa: E402
 from rigsim.rig import load_rig  # noqa: E402
-from rigsim.truth import realization_from_rig  # noqa: E402
+from rigsim.truth.cube_mirror.realization import realization_from_rig  # noqa: E402
 
 ARCMIN = math.radians(1 / 60)
 # (outer Y', middle X') offsets in arcmin from the face's null: the spot moves along u, v.

@@ -34,8 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from rigsim.detector import DetectorConfig, apply_detector  # noqa: E402
 from rigsim.render import backend  # noqa: E402
 from rigsim.render.camera import PinholeCamera  # noqa: E402
-from rigsim.render.sunspot import (SUN_FULL_ANGLE_RAD, SunSpotRenderer,  # noqa: E402
-                                   spot_truth, window_centroid)
+from rigsim.render.cube_mirror.sun_sensor import SUN_FULL_ANGLE_RAD, SunSpotRenderer, spot_truth, window_centroid
 
 CAM = PinholeCamera(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
                     k1=-0.15, k2=0.012, k3=-0.0003, p1=3e-4, p2=-2e-4)

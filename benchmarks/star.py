@@ -10,13 +10,13 @@ import time
 import numpy as np
 
 from rigsim.detector import apply_detector
-from rigsim.star import attitude as att
-from rigsim.star.analytic import render_stars
-from rigsim.star.calib import run_ekf
-from rigsim.star.extract import extract_stars
-from rigsim.star.field import StarSky
-from rigsim.star.schema import load_star_rig
-from rigsim.star.study import CentroidNoise, case_setup, simulate_frames
+from rigsim.truth import star as att
+from rigsim.render.star import render_stars
+from rigsim.estimation.star_calibration import run_ekf
+from rigsim.imaging.stars import extract_stars
+from rigsim.truth.star import StarSky
+from rigsim.rig.load import load_star_rig
+from rigsim.procedures.star.study import CentroidNoise, case_setup, simulate_frames
 
 
 def best(fn, n=10):

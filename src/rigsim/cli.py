@@ -13,7 +13,7 @@ import rigsim
 
 DEFAULT_RIG = "sun_sensor_2axis_diaphragm"
 # modules with an ``add_cli(run_subparsers, top=top_level_subparsers)`` function (optional)
-PLUGIN_MODULES = ("rigsim.procedures.boresight_cli", "rigsim.procedures.star_calibration_cli",
+PLUGIN_MODULES = ("rigsim.procedures.boresight.cli", "rigsim.procedures.star.cli",
                   "rigsim.dataset.cli", "rigsim.view.cli")
 
 EPILOG = """\
@@ -115,9 +115,9 @@ def _run_cube_mirror_rendered(args) -> int:
 
     from tqdm import tqdm
 
-    from rigsim.procedures import cube_mirror as cm
-    from rigsim.procedures import rendered_campaign as rc
-    from rigsim.procedures.report import write_report
+    from rigsim.procedures.cube_mirror import campaign as cm
+    from rigsim.procedures.cube_mirror import rendered_campaign as rc
+    from rigsim.procedures.cube_mirror.report import write_report
     from rigsim.rig import load_rig
     from rigsim.rig.load import resolve_rig_path
 
@@ -159,7 +159,7 @@ def _run_cube_mirror_rendered(args) -> int:
     print(f"\nStep 1/B  sun-sensor sweep ±{rig.procedure.sweep_range_deg:g}° every "
           f"{args.sweep_step or rig.procedure.sweep_step_deg:g}°: {camp.sweep.n_rendered} frames rendered, "
           f"{cal.n_points} used, fit RMS {cal.rms_px:.4f} px; centroid − exact {camp.measured_noise['sun_centroid_rms_px']:.4f} px rms")
-    from rigsim.procedures.concentricity import table1_text
+    from rigsim.procedures.cube_mirror.concentricity import table1_text
 
     if camp.step_a is not None:
         sa = camp.step_a
@@ -208,7 +208,7 @@ def _run_cube_mirror_rendered(args) -> int:
 
 
 def _run_cube_mirror_analytic(args) -> int:
-    from rigsim.procedures import cube_mirror as cm
+    from rigsim.procedures.cube_mirror import campaign as cm
     from rigsim.rig import load_rig
 
     rig = load_rig(args.rig)
@@ -336,7 +336,7 @@ def _parse_pose(text: str | None, rig) -> dict[str, float]:
 
 
 def cmd_scene_export(args) -> int:
-    from rigsim.render.scenes.export import export_rig
+    from rigsim.render.export import export_rig
     from rigsim.rig import load_rig
 
     rig = load_rig(args.rig)
@@ -350,9 +350,9 @@ def cmd_scene_export(args) -> int:
 def cmd_render_sun_sensor(args) -> int:
     import cv2
 
-    from rigsim.render.scenes.sun_sensor import SunSensorScene
+    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
     from rigsim.rig import load_rig
-    from rigsim.truth import realization_from_rig
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
 
     rig = load_rig(args.rig)
     pose = _parse_pose(args.pose, rig)

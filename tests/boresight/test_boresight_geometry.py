@@ -11,8 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from rigsim.boresight import CameraGeometry, load_boresight_rig, loop_trace, rotation_xyz, spots_uv
-from rigsim.boresight.geometry import facet_normals_ota
+from rigsim.optics.line_camera import CameraGeometry, loop_trace, rotation_xyz, spots_uv
+from rigsim.rig.load import load_boresight_rig
+from rigsim.optics.line_camera import facet_normals_ota
 
 RIG = load_boresight_rig()
 G = CameraGeometry.from_rig(RIG.cameras[0])

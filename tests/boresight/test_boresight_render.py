@@ -10,7 +10,8 @@ of 590k light paths ~0.002 px).
 import numpy as np
 import pytest
 
-from rigsim.boresight import CameraGeometry, load_boresight_rig, rotation_xyz
+from rigsim.optics.line_camera import CameraGeometry, rotation_xyz
+from rigsim.rig.load import load_boresight_rig
 from rigsim.frames import ARCSEC_PER_RAD as AS
 
 pytestmark = pytest.mark.render
@@ -20,7 +21,7 @@ RIG = load_boresight_rig()
 
 @pytest.fixture(scope="module")
 def renderers():
-    from rigsim.boresight.render import LoopRenderer
+    from rigsim.render.boresight import LoopRenderer
 
     return {j: LoopRenderer(RIG, 0, j, follow=True, window_px=24, spp=1024) for j in (0, 1)}
 
@@ -65,7 +66,8 @@ def test_photometry_reproducibility_and_noise(renderers):
 
 
 def test_fixed_roi_flags_a_spot_that_leaves_it():
-    from rigsim.boresight.render import GeometryWarning, LoopRenderer
+    from rigsim.errors import GeometryWarning
+    from rigsim.render.boresight import LoopRenderer
 
     r = LoopRenderer(RIG, 1, 1, window_px=16, spp=64)      # fixed ROI centred on the reference spot
     E = rotation_xyz(0.0, 4.0 / AS, 0.0)                   # 4" moves the spot ~23 px: out of the ROI
@@ -84,7 +86,7 @@ def test_pipeline_recovers_the_state_from_rendered_rois(renderers):
     Expected error: centroid noise ~0.005 px (shot noise of 4e5 photons on a 2.5-px disk) plus
     the thresholded CoM's disk bias (<= 0.02 px) -> alpha, beta ~0.002", gamma ~0.03" (eq 22 at
     0.02 px: 0.03" for 1 sigma); the bound below is 3x that."""
-    from rigsim.boresight.pipeline import CameraProcessor
+    from rigsim.procedures.boresight.pipeline import CameraProcessor
     from rigsim.imaging import NoiseModel
 
     g = CameraGeometry.from_rig(RIG.cameras[0])

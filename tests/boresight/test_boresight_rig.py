@@ -5,8 +5,10 @@ import tomllib
 
 import pytest
 
-from rigsim.boresight import CameraGeometry, load_boresight_rig, parse_boresight_rig
-from rigsim.rig.load import SCENES_DIR, RigError
+from rigsim.optics.line_camera import CameraGeometry
+from rigsim.rig.load import load_boresight_rig, parse_boresight_rig
+from rigsim.rig.load import SCENES_DIR
+from rigsim.errors import RigError
 
 BASE = tomllib.loads((SCENES_DIR / "dual_line_array_prism.toml").read_text())
 

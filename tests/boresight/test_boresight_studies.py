@@ -7,9 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from rigsim.boresight import CameraGeometry, estimate, load_boresight_rig, rotation_xyz, spots_uv
-from rigsim.boresight.studies import (PARAMS, fig8_residual, mc_errors, orbit_truth, predicted_3sigma,
-                                      rotation_order)
+from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
+from rigsim.estimation.dvad import estimate
+from rigsim.rig.load import load_boresight_rig
+from rigsim.procedures.boresight.studies import (
+    PARAMS, fig8_residual, mc_errors, orbit_truth, predicted_3sigma, rotation_order,
+)
 from rigsim.frames import ARCSEC_PER_RAD as AS
 
 RIG = load_boresight_rig()

@@ -18,11 +18,12 @@ import numpy as np
 import pytest
 
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
-from rigsim.optics.autocollimator import (AutocollimatorOptics, PlanoConvexObjective, _refract,
-                                          autocollimator_layout, flat_mirror, mirror_target, n_bk7,
-                                          retilt)
+from rigsim.optics.autocollimator import (
+    AutocollimatorOptics, PlanoConvexObjective, _refract, autocollimator_layout, flat_mirror, mirror_target, n_bk7,
+    retilt,
+)
 from rigsim.rig import load_rig
-from rigsim.truth import realization_from_rig
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 RIG = load_rig("sun_sensor_3axis_autocollimator")
 AC = RIG.autocollimator
@@ -164,7 +165,7 @@ def test_layout_nulls_and_signs(optics):
             assert abs(tl[1 - k]) < 0.01 * d
     # the step-A axis is the campaign's noise-free reference direction (plane-mirror normal at the
     # pose where every axis reads zero: 4″/−6″ tilt, encoder biases and axis misalignments)
-    from rigsim.procedures.cube_mirror import Noise, reference_direction
+    from rigsim.procedures.cube_mirror.campaign import Noise, reference_direction
     lay = autocollimator_layout(RIG, REAL, "plane_mirror")
     d_ref = reference_direction(RIG, REAL, Noise(), np.random.default_rng(0))
     np.testing.assert_allclose(lay.axis_rot, d_ref, atol=1e-15)

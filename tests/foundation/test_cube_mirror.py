@@ -8,9 +8,10 @@ from rigsim.estimation.cube_attitude import cube_from_rot_triad, normal_in_mount
 from rigsim.estimation.triad import triad
 from rigsim.frames import ARCSEC_PER_RAD, Rot_X, Rot_Y, angle_between, random_rotations, rotation_angle
 from rigsim.optics.cube import FACE_NORMALS, reflect
-from rigsim.procedures import cube_mirror as cm
+from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
-from rigsim.rig.turntable import GeometryError, TurntableModel
+from rigsim.errors import GeometryError
+from rigsim.rig.turntable import TurntableModel
 
 D = np.array([0.0, 0.0, 1.0])
 TABLE1 = [{"X": np.radians(181.398), "Y": np.radians(0.528)}, {"X": np.radians(91.386), "Y": np.radians(-0.048)}]

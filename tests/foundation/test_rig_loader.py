@@ -6,7 +6,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rigsim.rig import Rig, RigError, default_rigs, load_rig, parse_rig
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.errors import RigError
+from rigsim.rig import default_rigs, load_rig, parse_rig
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 BASE = tomllib.loads((SCENES / "sun_sensor_2axis_diaphragm.toml").read_text())
@@ -130,13 +132,13 @@ def test_fuzz_loader_only_ever_returns_a_rig_or_a_rig_error(mutations):
         assert msg.startswith("fuzz.toml: invalid rig file") and len(exc.problems) >= 1
         assert all(("`" in p) or p.startswith("in the rig: ") for p in exc.problems), msg
     else:
-        assert isinstance(rig, Rig)
+        assert isinstance(rig, CubeMirrorRig)
 
 
 def test_rig_families_dispatch_and_refuse_clearly():
     from rigsim.rig.load import load_any_rig
 
     assert load_any_rig("star_sensor").seed_document == "004"
-    assert isinstance(load_any_rig("sun_sensor_2axis_diaphragm"), Rig)
-    with pytest.raises(RigError, match="seed_document = '004': this command needs a turntable/cube-mirror rig"):
+    assert isinstance(load_any_rig("sun_sensor_2axis_diaphragm"), CubeMirrorRig)
+    with pytest.raises(RigError, match="seed_document` = '004': this command needs a turntable/cube-mirror rig"):
         load_rig("star_sensor")

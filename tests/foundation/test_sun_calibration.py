@@ -5,7 +5,7 @@ import pytest
 
 from rigsim.estimation.sun_calibration import calibrate_sun_sensor
 from rigsim.frames import small_angle_error
-from rigsim.procedures import cube_mirror as cm
+from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
 from rigsim.rig.turntable import TurntableModel
 

@@ -1,4 +1,4 @@
-"""Seed 001 steps A and C (rigsim.procedures.autocollimation) against truth.
+"""Seed 001 steps A and C (rigsim.procedures.cube_mirror.autocollimation) against truth.
 
 Surrogate (numpy, fast) and rendered (Mitsuba + detector + centroid on the DN frame).
 
@@ -21,12 +21,13 @@ import pytest
 
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC, angle_between
 from rigsim.optics.autocollimator import autocollimator_layout, mirror_target, reference_axis_rot, reference_pose_rad
-from rigsim.procedures import autocollimation as ac
-from rigsim.procedures import cube_mirror as cm
-from rigsim.procedures.search import SearchError, numerical_jacobian
+from rigsim.procedures.cube_mirror import autocollimation as ac
+from rigsim.procedures.cube_mirror import campaign as cm
+from rigsim.errors import SearchError
+from rigsim.estimation.null_search import numerical_jacobian
 from rigsim.rig import load_rig
 from rigsim.rig.turntable import pose_deg_to_rad
-from rigsim.truth import Noise, realization_from_rig, tilt
+from rigsim.truth.cube_mirror.realization import Noise, realization_from_rig, tilt
 
 RIG = load_rig("sun_sensor_3axis_autocollimator")
 REAL = realization_from_rig(RIG)
@@ -311,7 +312,7 @@ def test_rendered_reading_error_statistics(optics):
     of null, default rig, noise-free and noisy detector; face +Z (12 frames each) and the plane
     mirror (6 each, a fresh renderer per instrument pointing as in step A). About 90 s; run with
     ``-s`` to see the table."""
-    from rigsim.render.scenes.autocollimator import AutocollimatorRenderer
+    from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
 
     d = reference_axis_rot(RIG, REAL)
     rng = np.random.default_rng(7)

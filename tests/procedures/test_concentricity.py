@@ -6,17 +6,14 @@ import warnings
 import numpy as np
 import pytest
 
-from rigsim.procedures.concentricity import (
-    OffsetMeasurer,
-    concentricity_search,
-    hole_spot_offset,
-    null_bias_offset_px,
-    offset_model,
+from rigsim.procedures.cube_mirror.concentricity import (
+    OffsetMeasurer, concentricity_search, hole_spot_offset, null_bias_offset_px, offset_model,
 )
-from rigsim.procedures.search import SearchError, numerical_jacobian
+from rigsim.errors import SearchError
+from rigsim.estimation.null_search import numerical_jacobian
 from rigsim.rig import load_rig
 from rigsim.rig.turntable import pose_deg_to_rad
-from rigsim.truth import realization_from_rig
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 RIG = load_rig("sun_sensor_2axis_diaphragm")
 REAL = realization_from_rig(RIG)
@@ -86,7 +83,7 @@ def test_unreachable_start_is_reported_not_guessed():
 
 def _analytic_frames(renderer, offset_mm):
     """Exact images (no Mitsuba): the divergent spot = disk ⊛ divergence − hole, plus the glow."""
-    from rigsim.render.scenes.diaphragm import rasterise_screen_disk
+    from rigsim.render.cube_mirror.diaphragm import rasterise_screen_disk
 
     g = renderer.geometry
     pencil = rasterise_screen_disk(g, offset_mm, g.hole_radius_mm, value=1.0)
@@ -97,7 +94,7 @@ def _analytic_frames(renderer, offset_mm):
 
 @pytest.fixture(scope="module")
 def conc_renderer():
-    from rigsim.render.scenes.aiming import ConcentricityRenderer
+    from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
 
     return ConcentricityRenderer(RIG, REAL, 0)
 
@@ -118,7 +115,7 @@ def test_offset_estimator_is_unbiased_at_the_null_and_scaled_off_it(conc_rendere
 def test_rendered_divergent_spot_matches_the_exact_image(conc_renderer):
     """Mitsuba pencil + convolution vs the exact pencil through the same convolution: the spot
     centre agrees to ≤ 0.02 px (0.3 µm on the screen) at the null and 40″ off it."""
-    from rigsim.procedures.concentricity import _masked_screen_centroid
+    from rigsim.procedures.cube_mirror.concentricity import _masked_screen_centroid
 
     null = conc_renderer.geometry.layout.null_pose_rad
     for dx, dy, seed in ((0.0, 0.0, 1), (40.0, -25.0, 2)):

@@ -7,9 +7,9 @@ import warnings
 import numpy as np
 import pytest
 
-from rigsim.procedures.rendered_campaign import rendered_error_budget, run_rendered_campaign
+from rigsim.procedures.cube_mirror.rendered_campaign import rendered_error_budget, run_rendered_campaign
 from rigsim.rig import load_rig
-from rigsim.truth import Noise, realization_from_rig
+from rigsim.truth.cube_mirror.realization import Noise, realization_from_rig
 
 RIG0 = load_rig("sun_sensor_2axis_diaphragm")
 
@@ -54,7 +54,7 @@ def test_noise_free_sweep_error_matches_its_own_uncertainty(coarse_ideal_000):
 
 @pytest.mark.render
 def test_report_has_the_table_and_the_plots(coarse_ideal_000, tmp_path):
-    from rigsim.procedures.report import write_report
+    from rigsim.procedures.cube_mirror.report import write_report
 
     rig, c = coarse_ideal_000
     files = write_report(tmp_path, c, rig, budget=None, wall_times=c.times)

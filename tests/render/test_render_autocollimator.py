@@ -18,11 +18,11 @@ import pytest
 
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.render.backend import ensure_variant
-from rigsim.render.frameio import read_frame
-from rigsim.render.scenes.autocollimator import (AutocollimatorRenderer, GeometryWarning,
-                                                 build_autocollimator_scene_dict)
+from rigsim.render.frame import read_frame
+from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer, build_autocollimator_scene_dict
+from rigsim.errors import GeometryWarning
 from rigsim.rig import load_rig
-from rigsim.truth import realization_from_rig
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 ensure_variant()
 import drjit as dr  # noqa: E402

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rigsim.render.scenes.export import ExportError, perspective_from_intrinsics, scene_dict_to_xml
+from rigsim.errors import ExportError
+from rigsim.render.export import perspective_from_intrinsics, scene_dict_to_xml
 
 MITSUBA = Path(sys.executable).with_name("mitsuba")
 
@@ -67,7 +68,7 @@ def test_nested_objects_with_equal_keys_export_and_load_back():
 def test_every_default_rig_exports_scenes_that_load(tmp_path):
     import mitsuba as mi
 
-    from rigsim.render.scenes.export import export_rig
+    from rigsim.render.export import export_rig
     from rigsim.rig import load_rig
 
     names = {}

@@ -10,7 +10,7 @@ import pytest
 
 from rigsim.detector import DetectorConfig, apply_detector
 from rigsim.render.camera import PinholeCamera
-from rigsim.render.frameio import FLAG_KEYS, build_sidecar, read_frame, write_frame
+from rigsim.render.frame import FLAG_KEYS, build_sidecar, read_frame, write_frame
 
 
 def test_round_trip_is_lossless(tmp_path):
@@ -63,7 +63,7 @@ def test_bad_inputs_rejected(tmp_path):
 def test_sun_sensor_frame_end_to_end(tmp_path):
     """Render -> detector -> PNG -> read -> centroid: the truth in the sidecar is what the frame
     shows, to within the photon noise predicted for this spot."""
-    from rigsim.render.sunspot import SUN_FULL_ANGLE_RAD, SunSpotRenderer
+    from rigsim.render.cube_mirror.sun_sensor import SUN_FULL_ANGLE_RAD, SunSpotRenderer
 
     cam = PinholeCamera(fx=700.0, fy=700.0, cx=255.5, cy=255.5, width=512, height=512, k1=-0.08,
                         k2=0.01)

@@ -19,7 +19,7 @@ import pytest
 
 from rigsim.render.backend import ensure_variant
 from rigsim.render.camera import PinholeCamera
-from rigsim.render.sensors import PINHOLE_PLUGIN, TELECENTRIC_PLUGIN, register_sensors
+from rigsim.render.plugins import PINHOLE_PLUGIN, TELECENTRIC_PLUGIN, register_sensors
 
 ensure_variant()
 register_sensors()

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import centroid_tcom
-from rigsim.procedures import cube_mirror as cm
-from rigsim.render.frameio import read_frame
-from rigsim.render.scenes.sun_sensor import SunSensorScene
+from rigsim.procedures.cube_mirror import campaign as cm
+from rigsim.render.frame import read_frame
+from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 from rigsim.rig import load_rig
-from rigsim.truth import realization_from_rig
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 RIG = load_rig("sun_sensor_2axis_diaphragm")
 

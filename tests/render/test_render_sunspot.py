@@ -19,8 +19,10 @@ import numpy as np
 import pytest
 
 from rigsim.render.camera import PinholeCamera
-from rigsim.render.sunspot import (SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, GeometryWarning,
-                                   SunSpotRenderer, spot_truth)
+from rigsim.render.cube_mirror.sun_sensor import (
+    SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, SunSpotRenderer, spot_truth,
+)
+from rigsim.errors import GeometryWarning
 
 WIDE = PinholeCamera(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
                      k1=-0.15, k2=0.012, k3=-0.0003, p1=3e-4, p2=-2e-4)

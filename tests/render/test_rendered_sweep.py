@@ -3,9 +3,9 @@
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
-from rigsim.procedures.rendered_sweep import calibrate_from_sweep, render_sweep
+from rigsim.procedures.cube_mirror.sweep import calibrate_from_sweep, render_sweep
 from rigsim.rig import load_rig
-from rigsim.truth import Noise, realization_from_rig
+from rigsim.truth.cube_mirror.realization import Noise, realization_from_rig
 
 
 def test_coarse_rendered_sweep_recovers_the_sensor():

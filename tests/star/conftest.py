@@ -1,7 +1,7 @@
 import pytest
 
-from rigsim.star.field import StarSky
-from rigsim.star.schema import load_star_rig
+from rigsim.truth.star import StarSky
+from rigsim.rig.load import load_star_rig
 
 
 @pytest.fixture(scope="session")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rigsim.star.analytic import render_stars
+from rigsim.render.star import render_stars
 
 
 def test_flux_and_first_moment_exact():

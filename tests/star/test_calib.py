@@ -3,10 +3,12 @@
 import numpy as np
 import pytest
 
-from rigsim.star import attitude as att
-from rigsim.star.calib import MODELS, THETA_NAMES, FrameObs, batch_lsq, frame_system, pair_sets, run_ekf
-from rigsim.star.observability import observability
-from rigsim.star.study import CentroidNoise, random_slew, simulate_frames
+from rigsim.truth import star as att
+from rigsim.estimation.star_calibration import (
+    FrameObs, MODELS, THETA_NAMES, batch_lsq, frame_system, pair_sets, run_ekf,
+)
+from rigsim.estimation.observability import observability
+from rigsim.procedures.star.study import CentroidNoise, random_slew, simulate_frames
 
 
 def _truth(rig):

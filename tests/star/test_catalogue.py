@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rigsim.star.catalogue import load_hipparcos, photon_rate, propagate, radec_to_unit
+from rigsim.optics.sky import load_hipparcos, photon_rate, propagate, radec_to_unit
 
 
 def test_parse_counts_and_first_record():

@@ -3,10 +3,10 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rigsim.star import attitude as att
-from rigsim.star.extract import extract_stars
-from rigsim.star.identify import identify
-from rigsim.star.render import render_frame
+from rigsim.truth import star as att
+from rigsim.imaging.stars import extract_stars
+from rigsim.estimation.star_id import identify
+from rigsim.render.star import render_frame
 
 
 def test_identification_limits(rig, sky):

@@ -3,7 +3,7 @@
 import numpy as np
 
 from rigsim.cli import main
-from rigsim.star.pipeline import run_pipeline
+from rigsim.procedures.star.pipeline import run_pipeline
 
 
 def test_pipeline_end_to_end(rig):

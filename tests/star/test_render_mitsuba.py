@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import centroid_gauss, extract_rois
-from rigsim.star import attitude as att
-from rigsim.star.analytic import render_stars
+from rigsim.truth import star as att
+from rigsim.render.star import render_stars
 
 
 def _centroids(img, uv, bg, sigma):
@@ -21,7 +21,7 @@ def _centroids(img, uv, bg, sigma):
 
 
 def test_mitsuba_and_analytic_centroids_agree(rig, sky):
-    from rigsim.star.render_mitsuba import MitsubaStarRenderer
+    from rigsim.render.star import MitsubaStarRenderer
 
     seq = att.from_rig(rig.sequence)
     truth = sky.field(seq.R_cam_from_icrs[3], omega_cam_rad_s=seq.omega_cam_rad_s[3], substeps=8, margin_px=-4)

@@ -4,8 +4,9 @@ import tomllib
 
 import pytest
 
-from rigsim.rig.load import SCENES_DIR, RigError
-from rigsim.star.schema import load_star_rig, parse_star_rig
+from rigsim.rig.load import SCENES_DIR
+from rigsim.errors import RigError
+from rigsim.rig.load import load_star_rig, parse_star_rig
 
 
 def test_default_rig(rig):

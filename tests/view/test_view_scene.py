@@ -12,11 +12,11 @@ pytest.importorskip("pyvista")
 
 from rigsim.optics.autocollimator import AutocollimatorOptics, autocollimator_layout, mirror_target
 from rigsim.optics.cube import reflect
-from rigsim.optics.placement import diaphragm_layout, face_in_rot, trace_return_spot
+from rigsim.truth.cube_mirror.placement import diaphragm_layout, face_in_rot, trace_return_spot
 from rigsim.rig import load_rig
-from rigsim.truth import realization_from_rig
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 from rigsim.view import ViewError, build_scene
-from rigsim.view.cube_rigs import resolve_pose_deg
+from rigsim.view.cube_mirror import resolve_pose_deg
 
 RIG000 = "sun_sensor_2axis_diaphragm"
 RIG001 = "sun_sensor_3axis_autocollimator"
@@ -67,7 +67,7 @@ def test_seed000_scene_has_every_part(scene000):
     cube = scene000.item("cube").mesh
     pose = _rad(scene000.pose_deg)
     real = realization_from_rig(load_rig(RIG000))
-    from rigsim.optics.placement import cube_pose
+    from rigsim.truth.cube_mirror.placement import cube_pose
 
     assert np.allclose(np.asarray(cube.points).mean(0), cube_pose(load_rig(RIG000), real, pose).t, atol=0.05)
 
@@ -146,8 +146,8 @@ def test_seed001_beams_equal_the_autocollimator_trace(rig001, scene001):
 
 
 def test_star_beams_equal_the_field_truth():
-    from rigsim.star.field import StarSky
-    from rigsim.star.schema import load_star_rig
+    from rigsim.truth.star import StarSky
+    from rigsim.rig.load import load_star_rig
     from rigsim.view.star import RAY_LENGTH_MM, first_attitude, image_point_mm
 
     rig = load_star_rig("star_sensor")
@@ -162,7 +162,7 @@ def test_star_beams_equal_the_field_truth():
 
 
 def test_boresight_loops_land_where_loop_trace_says():
-    from rigsim.boresight.geometry import CameraGeometry, loop_trace
+    from rigsim.optics.line_camera import CameraGeometry, loop_trace
     from rigsim.view.api import load_view_rig
     from rigsim.view.boresight import camera_placement, laser_loops
 
@@ -177,7 +177,7 @@ def test_boresight_loops_land_where_loop_trace_says():
             local = (pts - O) @ R
             np.testing.assert_allclose(local[-1, :2], land[j], atol=TOL_MM)
         # a perturbed camera: the returned beam lands where loop_trace says
-        from rigsim.boresight.geometry import rotation_xyz
+        from rigsim.optics.line_camera import rotation_xyz
 
         E = rotation_xyz(*np.radians(np.array([10.0, -20.0, 30.0]) / 3600.0))
         go, back = laser_loops(g, E, 0.01)[0]

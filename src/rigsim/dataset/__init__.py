@@ -2,6 +2,6 @@
 resume after a kill, read back, and score an external pipeline against the truth (docs/datasets.md)."""
 
 from rigsim.dataset.reader import Dataset, open_dataset
-from rigsim.dataset.store import DatasetError
+from rigsim.errors import DatasetError
 
 __all__ = ["Dataset", "DatasetError", "open_dataset"]

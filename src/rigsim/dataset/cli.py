@@ -36,7 +36,7 @@ def _score(args) -> int:
     from rigsim.dataset.score import score
 
     if not (0 < args.match_radius <= 50):
-        from rigsim.dataset.store import DatasetError
+        from rigsim.errors import DatasetError
 
         raise DatasetError(f"--match-radius = {args.match_radius}: allowed range is (0, 50] px")
     s = score(args.dataset, args.predictions, mode=args.mode, truth_ref=args.truth_ref, outlier=args.outlier,

@@ -24,7 +24,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rigsim.dataset.store import DatasetError
+from rigsim.errors import DatasetError
 
 GENERATORS: dict[str, type] = {}
 
@@ -85,7 +85,7 @@ class SunSensorGenerator:
 
     def _on_detector(self, pose_deg: dict) -> bool:
         from rigsim.optics.camera import PinholeBrown
-        from rigsim.truth import realization_from_rig
+        from rigsim.truth.cube_mirror.realization import realization_from_rig
 
         if not hasattr(self, "_plan_real"):
             self._plan_real = realization_from_rig(self.rig, ideal=True)
@@ -139,7 +139,7 @@ class SunSensorGenerator:
     # -- rendering (worker side) ---------------------------------------------------------------
     def _real(self, draws: dict):
         from rigsim.frames import RAD_PER_ARCSEC
-        from rigsim.truth import perpendicularity_perturbed, realization_from_rig
+        from rigsim.truth.cube_mirror.realization import perpendicularity_perturbed, realization_from_rig
 
         real = realization_from_rig(self.rig, ideal=True)
         real.turntable = perpendicularity_perturbed(
@@ -154,7 +154,7 @@ class SunSensorGenerator:
                 import drjit as dr
 
                 dr.set_thread_count(int(self.threads))
-            from rigsim.render.scenes.sun_sensor import SunSensorScene
+            from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 
             self._scene = SunSensorScene(self.rig, spp=self.spp)
         real = self._real(params["draws"])
@@ -212,7 +212,7 @@ class StarFieldGenerator:
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 1024, threads: int | None = None):
         import tomllib
 
-        from rigsim.star.schema import parse_star_rig
+        from rigsim.rig.load import parse_star_rig
 
         self.rig = parse_star_rig(tomllib.loads(rig_text), rig_source)
         self.spp = int(spp)  # the analytic renderer has no samples; kept for a uniform interface
@@ -252,18 +252,18 @@ class StarFieldGenerator:
 
         if "quat_cam_from_icrs_xyzw" in att:
             return Rotation.from_quat(att["quat_cam_from_icrs_xyzw"]).as_matrix()
-        from rigsim.star.attitude import pointing
+        from rigsim.truth.star import pointing
 
         return pointing(att["ra_deg"], att["dec_deg"], att["roll_deg"])
 
     def render(self, index: int, params: dict):
         from scipy.spatial.transform import Rotation
 
-        from rigsim.star.attitude import boresight_radec
-        from rigsim.star.render import render_frame
+        from rigsim.truth.star import boresight_radec
+        from rigsim.render.star import render_frame
 
         if self._sky is None:
-            from rigsim.star.field import StarSky
+            from rigsim.truth.star import StarSky
 
             self._sky = StarSky(self.rig)
         R = self.attitude_matrix(params["attitude"])
@@ -319,7 +319,7 @@ class BoresightRoiGenerator:
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 1024, threads: int | None = None):
         import tomllib
 
-        from rigsim.boresight.load import parse_boresight_rig
+        from rigsim.rig.load import parse_boresight_rig
 
         self.rig = parse_boresight_rig(tomllib.loads(rig_text), rig_source)
         self.spp = int(spp)
@@ -360,8 +360,8 @@ class BoresightRoiGenerator:
     def render(self, index: int, params: dict):
         import warnings
 
-        from rigsim.boresight.geometry import rotation_xyz
-        from rigsim.boresight.render import LoopRenderer
+        from rigsim.optics.line_camera import rotation_xyz
+        from rigsim.render.boresight import LoopRenderer
 
         key = (params["camera"], params["detector"])
         if key not in self._renderers:

@@ -25,15 +25,9 @@ from pathlib import Path
 
 from rigsim.dataset.generators import GENERATORS, make_generator, worker_generator
 from rigsim.dataset.store import (
-    FORMAT,
-    DatasetError,
-    atomic_write_json,
-    frame_complete,
-    frame_files,
-    read_json,
-    sha256_file,
-    write_frame_atomic,
+    FORMAT, atomic_write_json, frame_complete, frame_files, read_json, sha256_file, write_frame_atomic,
 )
+from rigsim.errors import DatasetError
 
 PLAN_KEYS = ("generator", "rig_sha256", "seed", "frames", "sweep", "options")
 FAIL_ENV = "RIGSIM_DATASET_INJECT_FAULT"  # tests: "crash:INDEX" or "raise:INDEX" (once per dataset)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.dataset.reader import open_dataset
-from rigsim.dataset.store import DatasetError
+from rigsim.errors import DatasetError
 
 MODES = {"centroid": ("frame", "u", "v"), "direction": ("frame", "x", "y", "z")}
 TRUTH_REFS = {"centre": ("spot_u", "spot_v"), "pixel-centroid": ("spot_centroid_u", "spot_centroid_v")}

@@ -52,7 +52,7 @@ def atomic_write_bytes(path, data: bytes) -> None:
 
 
 def atomic_write_json(path, obj) -> None:
-    from rigsim.render.frameio import _jsonable
+    from rigsim.render.frame import _jsonable
 
     atomic_write_bytes(path, (json.dumps(_jsonable(obj), indent=1) + "\n").encode())
 

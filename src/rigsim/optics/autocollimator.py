@@ -1,7 +1,7 @@
 """Photoelectric autocollimator: exact numpy model (the truth for rendered frames).
 
 Pure numpy, float64, no Mitsuba: this module is the *independent* computation that the
-Mitsuba scene (:mod:`rigsim.render.scenes.autocollimator`) is tested against.
+Mitsuba scene (:mod:`rigsim.render.cube_mirror.autocollimator`) is tested against.
 
 Instrument (docs/render_autocollimator.md)
 ------------------------------------------
@@ -54,10 +54,11 @@ import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.cube import FACE_NORMALS
-from rigsim.optics.placement import cube_pose
-from rigsim.rig.schema import Autocollimator, Rig
-from rigsim.rig.turntable import GeometryError, pose_deg_to_rad
-from rigsim.truth import Realization
+from rigsim.truth.cube_mirror.placement import cube_pose
+from rigsim.rig.cube_mirror import Autocollimator, CubeMirrorRig
+from rigsim.errors import GeometryError
+from rigsim.rig.turntable import pose_deg_to_rad
+from rigsim.truth.cube_mirror.realization import Realization
 
 __all__ = [
     "SCHOTT_N_BK7",
@@ -308,7 +309,7 @@ class SpotTruth:
 class AutocollimatorOptics:
     """Exact model of one autocollimator (numpy, float64). See the module docstring.
 
-    Parameters: the rig's :class:`~rigsim.rig.schema.Autocollimator`; ``wavelength_nm`` of the
+    Parameters: the rig's :class:`~rigsim.rig.cube_mirror.Autocollimator`; ``wavelength_nm`` of the
     (monochromatic) reticle light; ``center_thickness_mm`` of the singlet; ``focus``:
     ``"collimated"`` (reticle at the best-collimation position, default) or ``"paraxial"``
     (paraxial focal point); ``source_offset_mm``: the detector plane lies this far behind the
@@ -789,15 +790,15 @@ def a_frame_basis(axis_rot) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def reference_pose_rad(rig: Rig, real: Realization) -> dict:
+def reference_pose_rad(rig: CubeMirrorRig, real: Realization) -> dict:
     """The true turntable pose at which every axis *reads* zero (step A's pose)."""
     return {a.label: -real.encoder_bias_rad.get(a.label, 0.0) for a in rig.turntable.axes}
 
 
-def reference_axis_rot(rig: Rig, real: Realization) -> np.ndarray:
+def reference_axis_rot(rig: CubeMirrorRig, real: Realization) -> np.ndarray:
     """Step A: the autocollimator adjusted to read zero on the inner-frame plane mirror, all axes
     reading zero — its axis is the plane mirror's normal in rot (noise-free; same formula as
-    :func:`rigsim.procedures.cube_mirror.reference_direction`)."""
+    :func:`rigsim.procedures.cube_mirror.campaign.reference_direction`)."""
     if real.plane_mirror_normal_mount is None:
         raise GeometryError("this rig has no plane mirror; pass axis_rot explicitly")
     m = real.turntable.R_rot_from_mount(reference_pose_rad(rig, real)) @ real.plane_mirror_normal_mount
@@ -808,7 +809,7 @@ def _plane_mirror_centre_rot(real: Realization, pose_rad: dict, centre_mount) ->
     return real.turntable.R_rot_from_mount(pose_rad) @ np.asarray(centre_mount, float)
 
 
-def autocollimator_layout(rig: Rig, real: Realization, target: str = "face", face: str | None = None, *,
+def autocollimator_layout(rig: CubeMirrorRig, real: Realization, target: str = "face", face: str | None = None, *,
                           axis_rot=None, reference_pose=None, objective_vertex_z_mm: float = 2.5,
                           plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0)) -> AutocollimatorLayout:
     """Place the autocollimator for ``target`` = ``"face"`` (cube face ``face``, default the
@@ -854,7 +855,7 @@ def autocollimator_layout(rig: Rig, real: Realization, target: str = "face", fac
     return AutocollimatorLayout(target, face, d, R, origin, anchor, dict(reference_pose), pm_c)
 
 
-def mirror_target(rig: Rig, real: Realization, layout: AutocollimatorLayout, pose_rad: dict,
+def mirror_target(rig: CubeMirrorRig, real: Realization, layout: AutocollimatorLayout, pose_rad: dict,
                   reflectance: float = 1.0) -> MirrorTarget:
     """The target mirror at turntable pose ``pose_rad`` (true kinematics), in the A frame."""
     if layout.target == "face":

@@ -1,4 +1,4 @@
-"""Numpy camera models that mirror the Mitsuba sensors in :mod:`rigsim.render.sensors`.
+"""Numpy camera models that mirror the Mitsuba sensors in :mod:`rigsim.render.plugins`.
 
 Pure numpy (no mitsuba): used to place crop windows, to compute the truth written into frame
 sidecars, and by tests. Conventions, fixed project-wide and identical to OpenCV:

@@ -1,4 +1,4 @@
-"""Load and validate rig files (TOML) into :class:`~rigsim.rig.schema.Rig`.
+"""Load and validate rig files (TOML) into :class:`~rigsim.rig.cube_mirror.CubeMirrorRig`.
 
 Every problem becomes one :class:`RigError` whose message names the file, the field, the
 value and the allowed range — never a traceback from inside pydantic or tomllib.
@@ -13,7 +13,9 @@ from pathlib import Path
 import annotated_types as at
 from pydantic import BaseModel, ValidationError
 
-from rigsim.rig.schema import Rig
+from rigsim.rig.boresight import BoresightRig
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.star import StarRig
 from rigsim.errors import RigError  # noqa: F401  (re-exported)
 
 SCENES_DIR = Path(__file__).resolve().parents[3] / "scenes"
@@ -123,10 +125,6 @@ def describe_error(err: dict, model: type[BaseModel]) -> str:
     return f"field `{field}` = {shown}: {msg}{tail}"
 
 
-def _describe(err: dict) -> str:
-    return describe_error(err, Rig)
-
-
 def parse_model(model: type[BaseModel], data: dict, source: str | Path = "<dict>"):
     """Validate ``data`` as ``model``; every problem becomes one line of a :class:`RigError`."""
     try:
@@ -135,8 +133,8 @@ def parse_model(model: type[BaseModel], data: dict, source: str | Path = "<dict>
         raise RigError(source, [describe_error(e, model) for e in exc.errors()]) from None
 
 
-def parse_rig(data: dict, source: str | Path = "<dict>") -> Rig:
-    return parse_model(Rig, data, source)
+def parse_rig(data: dict, source: str | Path = "<dict>") -> CubeMirrorRig:
+    return parse_model(CubeMirrorRig, data, source)
 
 
 def resolve_rig_path(name_or_path: str | Path) -> Path:
@@ -167,40 +165,55 @@ def read_rig_toml(path: Path) -> dict:
         raise RigError(path, [f"TOML syntax error: {exc}"]) from None
 
 
-# Rig families with their own schema, by ``seed_document`` → "module:parser(data, source)".
-# Seeds 000/001 (turntable + cube mirror) use :class:`Rig`.
-RIG_FAMILIES = {
-    "003": "rigsim.boresight.load:parse_boresight_rig",
-    "004": "rigsim.star.schema:parse_star_rig",
-}
+# The schema of each rig family, and the seed documents it describes (plain imports: the rig layer
+# knows every family's schema; families.py ties each family to its procedures, views and generators).
+RIG_MODELS: dict[str, type[BaseModel]] = {"000": CubeMirrorRig, "001": CubeMirrorRig, "003": BoresightRig, "004": StarRig}
+
+DEFAULT_RIG = "sun_sensor_2axis_diaphragm"
+DEFAULT_BORESIGHT_RIG = "dual_line_array_prism"
+DEFAULT_STAR_RIG = "star_sensor"
 
 
 def load_any_rig(name_or_path: str | Path):
-    """Load a rig file of any family (dispatch on its ``seed_document``)."""
-    import importlib
-
+    """Load a rig file of any family (its ``seed_document`` picks the schema; none: seeds 000/001)."""
     path = resolve_rig_path(name_or_path)
     data = read_rig_toml(path)
-    fam = RIG_FAMILIES.get(str(data.get("seed_document", "")))
-    if fam is None:
-        return parse_rig(data, path)
-    mod, fn = fam.split(":")
-    try:
-        parser = getattr(importlib.import_module(mod), fn)
-    except (ImportError, AttributeError):
-        raise RigError(path, [f"seed_document = {data.get('seed_document')!r}: this rigsim has no loader for it ({fam})"]) from None
-    return parser(data, path)
+    model = RIG_MODELS.get(str(data.get("seed_document", "")), CubeMirrorRig)
+    return parse_model(model, data, path)
 
 
-def load_rig(name_or_path: str | Path) -> Rig:
+def _load(name_or_path, model: type[BaseModel], wrong_family: str):
+    path = resolve_rig_path(name_or_path)
+    data = read_rig_toml(path)
+    sd = data.get("seed_document")
+    if sd is not None and RIG_MODELS.get(str(sd), CubeMirrorRig) is not model:
+        raise RigError(path, [f"field `seed_document` = {sd!r}: {wrong_family}"])
+    return parse_model(model, data, path)
+
+
+def load_rig(name_or_path: str | Path = DEFAULT_RIG) -> CubeMirrorRig:
     """A turntable/cube-mirror rig (seeds 000, 001). Other families: :func:`load_any_rig`."""
-    path = resolve_rig_path(name_or_path)
-    data = read_rig_toml(path)
-    sd = str(data.get("seed_document", ""))
-    if sd in RIG_FAMILIES:
-        raise RigError(path, [f"seed_document = {sd!r}: this command needs a turntable/cube-mirror rig "
-                              "(seed_document '000' or '001')"])
-    return parse_rig(data, path)
+    return _load(name_or_path, CubeMirrorRig,
+                 "this command needs a turntable/cube-mirror rig (seed_document '000' or '001')")
+
+
+def load_boresight_rig(name_or_path: str | Path = DEFAULT_BORESIGHT_RIG) -> BoresightRig:
+    """A dual line-array camera rig (seed 003)."""
+    return _load(name_or_path, BoresightRig, "this is not a seed-003 rig (`rigsim run cube-mirror` takes seeds "
+                                             "000/001, `rigsim run star-calibration` seed 004)")
+
+
+def load_star_rig(name_or_path: str | Path = DEFAULT_STAR_RIG) -> StarRig:
+    """A star-sensor rig (seed 004)."""
+    return _load(name_or_path, StarRig, "this is not a seed-004 star-sensor rig")
+
+
+def parse_boresight_rig(data: dict, source: str | Path = "<dict>") -> BoresightRig:
+    return parse_model(BoresightRig, data, source)
+
+
+def parse_star_rig(data: dict, source: str | Path = "<dict>") -> StarRig:
+    return parse_model(StarRig, data, source)
 
 
 def default_rigs() -> list[Path]:

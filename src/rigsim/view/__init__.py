@@ -6,7 +6,8 @@ is the command (docs/view.md).
 """
 
 from rigsim.view.api import build_scene, export_scene, load_view_rig, rig_picture, show_scene
-from rigsim.view.scene import Beam, Item, Label, RigScene, ViewError, ViewSpec
+from rigsim.view.scene import Beam, Item, Label, RigScene, ViewSpec
+from rigsim.errors import ViewError
 
 __all__ = ["build_scene", "rig_picture", "export_scene", "show_scene", "load_view_rig", "RigScene", "Item", "Label",
            "Beam", "ViewSpec", "ViewError"]

@@ -11,7 +11,8 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from rigsim.view.scene import RigScene, ViewError
+from rigsim.view.scene import RigScene
+from rigsim.errors import ViewError
 
 __all__ = ["register_view_builder", "builder_for", "load_view_rig", "build_scene", "rig_picture", "export_scene",
            "show_scene", "VIEW_BUILDERS", "parse_size"]
@@ -21,16 +22,16 @@ VIEW_BUILDERS: dict[str, str] = {}
 
 # Fallback loaders, by seed_document, for when rigsim.rig.load.load_any_rig cannot load a family
 # that has a view builder (e.g. its RIG_FAMILIES entry points at a parser that moved).
-FALLBACK_LOADERS: dict[str, str] = {"003": "rigsim.boresight.load:load_boresight_rig"}
+FALLBACK_LOADERS: dict[str, str] = {"003": "rigsim.rig.load:load_boresight_rig"}
 
 
 def register_view_builder(rig_class: str, builder: str) -> None:
     VIEW_BUILDERS[rig_class] = builder
 
 
-register_view_builder("rigsim.rig.schema:Rig", "rigsim.view.cube_rigs:build_cube_rig_scene")
-register_view_builder("rigsim.star.schema:StarRig", "rigsim.view.star:build_star_scene")
-register_view_builder("rigsim.boresight.schema:BoresightRig", "rigsim.view.boresight:build_boresight_scene")
+register_view_builder("rigsim.rig.cube_mirror:CubeMirrorRig", "rigsim.view.cube_mirror:build_cube_rig_scene")
+register_view_builder("rigsim.rig.star:StarRig", "rigsim.view.star:build_star_scene")
+register_view_builder("rigsim.rig.boresight:BoresightRig", "rigsim.view.boresight:build_boresight_scene")
 
 
 def _resolve(path: str):
@@ -56,7 +57,8 @@ def load_view_rig(rig_or_path):
         return rig_or_path
     import tomllib
 
-    from rigsim.rig.load import RigError, load_any_rig, resolve_rig_path
+    from rigsim.errors import RigError
+    from rigsim.rig.load import load_any_rig, resolve_rig_path
 
     try:
         return load_any_rig(rig_or_path)

@@ -1,6 +1,6 @@
 """3D scene of the boresight rig (seed 003): two line-array cameras, the shared prism, laser loops.
 
-Geometry from :mod:`rigsim.boresight.geometry` (the exact in-focus loop model that is the truth
+Geometry from :mod:`rigsim.optics.line_camera` (the exact in-focus loop model that is the truth
 of seed 003): each camera is its ideal thin lens at the OTA origin with the focal plane at
 z = −F, the CMOS detectors M1/M2 at the ends of the CCD line, and for each detector a laser
 loop: emitter (at the reference point A1/B1) → parallel to the axis to the lens plane → towards
@@ -23,7 +23,8 @@ import math
 import numpy as np
 
 from rigsim.view import primitives as P
-from rigsim.view.scene import COLOURS, Beam, RigScene, ViewError, ViewSpec, _pose_text
+from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec, _pose_text
+from rigsim.errors import ViewError
 
 __all__ = ["build_boresight_scene", "PAIR_OFFSET_MM", "camera_placement", "laser_loops"]
 
@@ -42,7 +43,7 @@ def camera_placement(geom, index: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _facet_points(geom) -> tuple[np.ndarray, np.ndarray]:
-    from rigsim.boresight.geometry import facet_normals_ota
+    from rigsim.optics.line_camera import facet_normals_ota
 
     e = geom.emitter_mm
     f0 = facet_normals_ota(geom)
@@ -55,8 +56,8 @@ def laser_loops(geom, E_hrc=None, delta_f_mm: float = 0.0) -> list[tuple[np.ndar
     """Per detector (M1, M2): (outgoing points, returning points) in the OTA frame, mm.
 
     Outgoing: emitter → lens plane → facet. Returning: facet → lens plane → landing point, the
-    landing point from :func:`rigsim.boresight.geometry.loop_trace` (the exact model)."""
-    from rigsim.boresight.geometry import loop_trace
+    landing point from :func:`rigsim.optics.line_camera.loop_trace` (the exact model)."""
+    from rigsim.optics.line_camera import loop_trace
 
     facets, f0 = _facet_points(geom)
     e = geom.emitter_mm
@@ -83,7 +84,7 @@ def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
                         "reference state (no camera rotation, no focal change)")
     if face is not None:
         raise ViewError(f"--face = {face!r}: the boresight rig (seed 003) has no mirror cube")
-    from rigsim.boresight.geometry import CameraGeometry
+    from rigsim.optics.line_camera import CameraGeometry
 
     scene = RigScene(rig.name, "003", f"{rig.name} (seed 003): {len(rig.cameras)} line-array cameras, shared prism, "
                                       "laser loops at the reference", "prism frame, mm (schematic placement of "
@@ -157,10 +158,10 @@ def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
                                                         rig.laser.core_radius_um * 1e-3),
                       group="beam", views=("detector",), color=COLOURS["reflected"], lighting=False)
             scene.add_beam(Beam(f"{cam.name}_M{j + 1}_out", to_p(go), "incident", 0.0,
-                                "rigsim.boresight.geometry (facet_normals_ota)", "emitter -> lens -> facet"),
+                                "rigsim.optics.line_camera (facet_normals_ota)", "emitter -> lens -> facet"),
                            line_width=4.0, legend="laser, outgoing" if (i == 0 and j == 0) else None)
             scene.add_beam(Beam(f"{cam.name}_M{j + 1}_back", to_p(back), "reflected", 0.0,
-                                "rigsim.boresight.geometry.loop_trace", "facet -> lens -> landing point"),
+                                "rigsim.optics.line_camera.loop_trace", "facet -> lens -> landing point"),
                            line_width=4.0, legend="laser, returned by its facet" if (i == 0 and j == 0) else None)
     fa = np.array(facet_all)
     lo, hi = fa.min(0) - 60.0, fa.max(0) + 60.0

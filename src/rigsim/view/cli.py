@@ -65,7 +65,7 @@ def add_cli(run_subparsers, top=None) -> None:
 
 def _check_outputs(args) -> None:
     from rigsim.view.plot import html_available
-    from rigsim.view.scene import ViewError
+    from rigsim.errors import ViewError
 
     if args.screenshot is not None and Path(args.screenshot).suffix.lower() != ".png":
         raise ViewError(f"--screenshot = {args.screenshot!r}: must end in .png")

@@ -3,8 +3,8 @@
 Frame: the sensor's camera frame at the first attitude of the rig's sequence (rigsim's camera
 convention: x = +u, y = +v, z = boresight), millimetres, the pinhole at the origin. The
 attitude is the one ``rigsim run star-calibration --seed 0`` renders first
-(:func:`rigsim.star.attitude.from_rig` with the pipeline's seed), the stars are
-:meth:`rigsim.star.field.StarSky.field` of it: catalogue directions at the observation epoch and
+(:func:`rigsim.truth.star.from_rig` with the pipeline's seed), the stars are
+:meth:`rigsim.truth.star.StarSky.field` of it: catalogue directions at the observation epoch and
 their true image positions (distortion included).
 
 Drawn: the detector where it physically sits (z = −f, the image inverted through the pinhole),
@@ -21,7 +21,8 @@ import math
 import numpy as np
 
 from rigsim.view import primitives as P
-from rigsim.view.scene import COLOURS, Beam, RigScene, ViewError, ViewSpec, _pose_text
+from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec, _pose_text
+from rigsim.errors import ViewError
 
 __all__ = ["build_star_scene", "RAY_LENGTH_MM", "first_attitude"]
 
@@ -30,7 +31,7 @@ RAY_LENGTH_MM = 400.0
 
 def first_attitude(rig, seed: int = 0) -> np.ndarray:
     """R_cam_from_icrs of the first frame ``rigsim run star-calibration --seed SEED`` renders."""
-    from rigsim.star import attitude as att
+    from rigsim.truth import star as att
 
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 4004]))
     return att.from_rig(rig.sequence, rng).R_cam_from_icrs[0]
@@ -57,8 +58,8 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
         raise ViewError(f"--face = {face!r}: the star-sensor rig (seed 004) has no mirror cube")
     if not 0 <= int(n_bright) <= 50:
         raise ViewError(f"n_bright = {n_bright}: allowed range is 0 to 50")
-    from rigsim.star.attitude import boresight_radec
-    from rigsim.star.field import StarSky
+    from rigsim.truth.star import boresight_radec
+    from rigsim.truth.star import StarSky
 
     s = rig.sensor
     sky = sky if sky is not None else StarSky(rig)
@@ -131,7 +132,7 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
               color="#FFD24D", point_size=5.0, render_points_as_spheres=True)
     for rank, i in enumerate(order):
         pts = np.vstack([L * d[i], np.zeros(3), img[i]])
-        scene.add_beam(Beam(f"star_HIP{int(field.hip[i])}", pts, "incident", 0.0, "rigsim.star.field.StarSky.field",
+        scene.add_beam(Beam(f"star_HIP{int(field.hip[i])}", pts, "incident", 0.0, "rigsim.truth.star.StarSky.field",
                             "catalogue direction -> pinhole -> true image point"), line_width=2.5,
                        line_views=("overview",),
                        legend="brightest stars: direction -> pinhole -> image" if rank == 0 else None)

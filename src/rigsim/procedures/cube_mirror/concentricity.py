@@ -1,0 +1,222 @@
+"""Seed 000 steps 2–3 on rendered frames: the hole/spot concentricity search (Table 1).
+
+* :func:`hole_spot_offset` — the image side: fit the hole centre on the hole frame (spot blocked),
+  then the spot centre on the spot frame minus the hole frame, both on the screen plane through
+  the aiming camera's nominal homography; their difference in screen pixels (mm / object pixel),
+  x = lab X′, y = lab Y′, as Table 1 prints it. No truth is used.
+* :func:`offset_model` — the operator's nominal prediction of the offset vs the turntable reading
+  (ideal turntable, nominal beam, face normal estimated from the start pose): its Jacobian drives
+  the feedback rule of :func:`rigsim.estimation.null_search.null_search`.
+* :class:`OffsetMeasurer` — measure(true pose) on rendered frames, or the Monte-Carlo surrogate
+  (exact offset + measured noise) used by the error budget.
+* :func:`concentricity_search` — one face, start to null.
+
+The aiming camera's mounting error (paper's σ3) enters as the equivalent null bias of the
+analytic model (``Realization.null_bias_rad``): the operator's "concentric" is off by the offset
+that bias produces, so the measured offset is reduced by it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from rigsim.errors import SearchError
+from rigsim.estimation.null_search import SearchResult, encoder_reading_to_true, null_search
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
+from rigsim.truth.cube_mirror.realization import NOMINAL_D, Realization, tilt
+
+FREE_AXES = ("X", "Y")
+
+
+# ------------------------------------------------------------------ image side
+
+def _masked_screen_centroid(img: np.ndarray, geom, level: float) -> tuple[np.ndarray, int]:
+    """Centroid on the screen plane (mm) of the pixels whose smoothed value exceeds ``level``
+    times the smoothed image's robust peak; weights = value × screen area of the pixel."""
+    import cv2
+
+    from rigsim.render.cube_mirror.diaphragm import _pixel_area_mm2
+
+    a = np.asarray(img, np.float64)
+    sm = cv2.GaussianBlur(a.astype(np.float32), (0, 0), 2.0)
+    peak = float(np.percentile(sm, 99.95))
+    if not (peak > 0):
+        return np.array([np.nan, np.nan]), 0
+    vv, uu = np.nonzero(sm > level * peak)
+    if len(uu) < 10:
+        return np.array([np.nan, np.nan]), len(uu)
+    uv = np.stack([uu, vv], axis=1).astype(float)
+    w = np.clip(a[vv, uu], 0.0, None) * _pixel_area_mm2(geom, uv)
+    st = geom.uv_to_screen(uv)
+    return (w[:, None] * st).sum(axis=0) / w.sum(), len(uu)
+
+
+def hole_spot_offset(hole_dn: np.ndarray, spot_dn: np.ndarray, geom, *, offset_dn: float,
+                     hole_level: float = 0.5, spot_level: float = 0.1) -> dict:
+    """Centres of the hole and of the returned spot on the screen (mm) and their offset in
+    aiming-camera pixels (spot − hole, x = X′, y = Y′; 1 px = the camera's object pixel).
+
+    The hole is fitted on the hole frame (the paper: spot blocked); the spot on spot − hole frame
+    (the glow, in both frames, cancels). ``geom`` supplies the nominal screen → image homography."""
+    hole = np.asarray(hole_dn, float) - offset_dn
+    spot = np.asarray(spot_dn, float) - np.asarray(hole_dn, float)
+    hc, nh = _masked_screen_centroid(hole, geom, hole_level)
+    sc, ns = _masked_screen_centroid(spot, geom, spot_level)
+    px = geom.rig.aiming_camera.object_pixel_mm
+    return {"hole_mm": hc, "spot_mm": sc, "offset_mm": sc - hc, "offset_px": (sc - hc) / px,
+            "hole_pixels": nh, "spot_pixels": ns}
+
+
+# ------------------------------------------------------------------ operator's model
+
+def reflected_offset_mm(n_rot: np.ndarray, d_rot: np.ndarray, lever_mm: float) -> np.ndarray:
+    """Where the beam (−d) reflected by a face of normal n lands on a screen ⟂ d at ``lever_mm``
+    from the face, relative to the hole (screen axes X′, Y′), for a lab frame with d ≈ +Z′."""
+    n = n_rot / np.linalg.norm(n_rot)
+    r = 2.0 * float(d_rot @ n) * n - d_rot
+    return lever_mm * r[:2] / r[2]
+
+
+def offset_model(rig: CubeMirrorRig, start_reading_rad: dict, axis_order: str | None = None) -> Callable[[dict], np.ndarray]:
+    """The operator's nominal prediction of the offset (px) vs turntable reading (rad)."""
+    nom = TurntableModel.nominal_for(rig.turntable, axis_order)
+    n_mount = nom.R_rot_from_mount(start_reading_rad).T @ NOMINAL_D
+    L = rig.diaphragm_screen.distance_to_cube_mm
+    px = rig.aiming_camera.object_pixel_mm
+
+    def model(reading_rad: dict) -> np.ndarray:
+        return reflected_offset_mm(nom.R_rot_from_mount(reading_rad) @ n_mount, NOMINAL_D, L) / px
+
+    return model
+
+
+def null_bias_offset_px(rig: CubeMirrorRig, real: Realization, face_index: int) -> np.ndarray:
+    """The offset (px) at which the biased operator sees concentricity: the face normal tilted from
+    the beam by the equivalent null bias."""
+    d = real.d_sun_rot
+    n = tilt(d, real.null_bias_rad[face_index])
+    return reflected_offset_mm(n, d, rig.diaphragm_screen.distance_to_cube_mm) / rig.aiming_camera.object_pixel_mm
+
+
+# ------------------------------------------------------------------ measurer
+
+class OffsetMeasurer:
+    """``measure(true_pose_rad) -> (measured px (2,), exact px (2,), flags)`` for one face.
+
+    ``renderer`` (a :class:`~rigsim.render.cube_mirror.aiming.ConcentricityRenderer`): rendered frames,
+    fitted by :func:`hole_spot_offset`. ``renderer=None``: the surrogate — the exact trace plus
+    N(0, ``sigma_px``) per axis — for Monte-Carlo budgets whose noise was measured on renders.
+    Raises :class:`SearchError` when the spot cannot be measured (off the detector, cut by its
+    edge, beam off the face, saturated).
+    """
+
+    def __init__(self, rig: CubeMirrorRig, real: Realization, face_index: int, *, renderer=None, seed: int = 0,
+                 sigma_px: float = 0.0, rng: np.random.Generator | None = None, noiseless: bool = False,
+                 keep_frames: bool = False):
+        from rigsim.truth.cube_mirror.placement import diaphragm_layout
+
+        self.rig, self.real, self.face_index = rig, real, int(face_index)
+        self.face = rig.procedure.faces[face_index]
+        self.renderer = renderer
+        self.seed = int(seed)
+        self.sigma_px = float(sigma_px)
+        self.rng = rng if rng is not None else np.random.default_rng(seed)
+        self.noiseless = noiseless
+        self.bias_px = null_bias_offset_px(rig, real, face_index)
+        self.layout = diaphragm_layout(rig, real, face_index)
+        self.calls = 0
+        self._geom = None
+        self.keep_frames = keep_frames
+        self.frames: list = []
+
+    def _in_view(self, offset_px: np.ndarray) -> bool:
+        """Does the divergent spot (radius hole + path·tan(α/2)) lie inside the camera's field?"""
+        if self._geom is None:
+            from rigsim.render.cube_mirror.diaphragm import diaphragm_geometry
+
+            self._geom = diaphragm_geometry(self.rig, self.real, self.face_index)
+        from rigsim.render.cube_mirror.aiming import divergence_radius_mm
+
+        g = self._geom
+        R = g.hole_radius_mm + divergence_radius_mm(
+            self.rig, math.radians(self.rig.sun_simulator.collimation_full_angle_arcmin / 60.0))
+        c = np.asarray(offset_px, float) * self.rig.aiming_camera.object_pixel_mm
+        pts = c + R * np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+        return bool(np.all(g.camera.on_detector(g.screen_to_uv(pts))))
+
+    def exact_px(self, true_pose_rad: dict) -> np.ndarray:
+        from rigsim.truth.cube_mirror.placement import trace_return_spot
+
+        sp = trace_return_spot(self.rig, self.real, self.layout, true_pose_rad)
+        return np.asarray(sp.offset_mm, float) / self.rig.aiming_camera.object_pixel_mm
+
+    def __call__(self, true_pose_rad: dict):
+        k = self.calls
+        self.calls += 1
+        pose_txt = ", ".join(f"{a}={math.degrees(v):.4f}°" for a, v in true_pose_rad.items())
+        if self.renderer is None:
+            try:
+                exact = self.exact_px(true_pose_rad)
+            except Exception as e:  # GeometryError from the trace
+                raise SearchError(f"face {self.face}: no return spot at true pose {pose_txt}: {e}") from e
+            if not self._in_view(exact):
+                raise SearchError(
+                    f"face {self.face}: the returned spot ({exact[0]:.0f}, {exact[1]:.0f}) px from the hole is not wholly "
+                    f"in the aiming camera's view at true pose {pose_txt}. Start the search closer to the null "
+                    "(procedure.search_start_deg) or widen the aiming camera's field.")
+            return exact + self.rng.normal(0.0, self.sigma_px, 2) - self.bias_px, exact, {}
+        fr = self.renderer.render(true_pose_rad, seed=int(np.random.SeedSequence([self.seed, k]).generate_state(1)[0]),
+                                  hole_seed=self.seed, noiseless=self.noiseless, warn=False)
+        bad = [f for f in ("beam_misses_face", "beam_clipped_by_face", "spot_not_returned", "spot_off_detector",
+                           "spot_cut_by_edge", "hole_off_detector", "hole_cut_by_edge", "saturated") if fr.flags.get(f)]
+        if bad:
+            raise SearchError(
+                f"face {self.face}: cannot measure the hole/spot offset at true pose {pose_txt}: {', '.join(bad)}. "
+                "Start the search closer to the null (procedure.search_start_deg) or widen the aiming camera's field.")
+        m = hole_spot_offset(fr.hole.dn, fr.spot.dn, self.renderer.geometry, offset_dn=self.renderer.detector.offset_dn)
+        if not np.all(np.isfinite(m["offset_px"])):
+            raise SearchError(f"face {self.face}: no spot found in the aiming-camera frame at true pose {pose_txt}")
+        exact = np.asarray(fr.truth.offset_mm, float) / self.rig.aiming_camera.object_pixel_mm
+        if self.keep_frames:
+            self.frames.append(fr)
+        flags = {"render_seconds": fr.seconds.get("total", 0.0), "spot_overlaps_hole": fr.flags.get("spot_overlaps_hole")}
+        return m["offset_px"] - self.bias_px, exact, flags
+
+
+def concentricity_search(rig: CubeMirrorRig, real: Realization, face_index: int, measure: OffsetMeasurer,
+                         encoder_error_rad: dict[str, float], *, axis_order: str | None = None,
+                         threshold_px: float | None = None, start_offset_rad: dict | None = None,
+                         progress=None) -> SearchResult:
+    """Null one face (Table 1): start at ``procedure.search_start[face_index]`` (plus
+    ``start_offset_rad``, the Monte-Carlo's scatter of the coarse alignment) and move X′, Y′."""
+    proc = rig.procedure
+    start = pose_deg_to_rad(proc.search_start[face_index])
+    for k, v in (start_offset_rad or {}).items():
+        start[k] = start.get(k, 0.0) + float(v)
+    for a in rig.turntable.axes:
+        start.setdefault(a.label, 0.0)
+    free = [a for a in FREE_AXES if a in start]
+    thr = rig.aiming_camera.concentric_threshold_px if threshold_px is None else float(threshold_px)
+    return null_search(measure, offset_model(rig, start, axis_order), start, free,
+                       encoder_reading_to_true(real.encoder_bias_rad, encoder_error_rad, free),
+                       face=proc.faces[face_index], unit="px", threshold=thr,
+                       command_resolution_rad=math.radians(proc.command_resolution_deg),
+                       max_iterations=proc.max_search_iterations, progress=progress)
+
+
+def table1_text(results: list[SearchResult]) -> str:
+    """The iteration log in the form of the paper's Table 1 (θ in degrees, offsets in px), with
+    the exact offsets (truth) beside the measured ones."""
+    lines = []
+    for res in results:
+        a, b = res.free_axes
+        lines.append(f"face {res.face} ({'converged' if res.converged else 'NOT converged: ' + res.message})")
+        u = "″" if res.unit == "arcsec" else " px"
+        lines.append(f"  {'#':>2} {a + ' (°)':>11} {b + ' (°)':>10} {'x' + u:>8} {'y' + u:>8}   {'exact x':>8} {'exact y':>8}")
+        for row in res.table_rows():
+            lines.append(f"  {row[0]:>2} {row[1]:>11.4f} {row[2]:>10.4f} {row[3]:>8.3f} {row[4]:>8.3f}   {row[5]:>8.3f} {row[6]:>8.3f}")
+    return "\n".join(lines)

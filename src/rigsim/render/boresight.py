@@ -1,0 +1,487 @@
+"""Seed 003: Mitsuba scene of one camera's laser loop and the CMOS ROI frames it produces.
+
+One scene per (camera, detector) path, light-traced (``ptracer``: emitter → lens → facet → lens →
+detector is a caustic path, which ``path`` cannot render):
+
+* ``laser``    — a ``directionalarea`` disk (the transceiver's emitting core, radius
+  ``laser.core_radius_um``) 5 mm in front of the focal plane at the reference point, emitting along
+  the optical axis (telecentric). Its BSDF is ``null``: the returning light passes through it (in
+  the real transceiver a beam splitter separates them). The spot on the CMOS is the core's image.
+* ``lens``     — the camera, an *ideal thin lens* (Python BSDF ``rigsim_ideal_lens``: a ray crossing
+  the lens plane at r from the centre C changes its transverse slope by −r/f; exact, in-focus
+  imaging of directions onto the focal plane). The camera's real three-mirror optics is replaced by
+  this ideal model on purpose: the paper's equations assume a distortion-free camera, and an ideal
+  lens makes the rendered truth exact (docs/boresight.md, "Rendering").
+* ``facet``    — the prism facet: Python BSDF ``rigsim_normal_mirror`` (a perfect mirror about a
+  given normal) on a small carrier rectangle perpendicular to the world z axis.
+* ``detector`` — a Lambertian rectangle covering the CMOS in the focal plane.
+* ``sensor``   — rigsim's telecentric sensor 2 mm in front of the detector, looking at it, whose
+  film is the ROI (``window_px``²) of the CMOS; its v axis is mirrored (the sensor looks at the
+  detector's face), which the renderer undoes.
+
+Float32 (docs/boresight.md, "Rendering precision"): 0.02 px at F = 6 m is 3e-8 rad, at the
+resolution of float32. So the world frame has the OTA axes (every carrier rectangle is world-
+aligned: Mitsuba's local frames are then exact); its origin is the pencil's crossing of the lens
+plane, chosen so that the lens centre C is exactly representable; the lens carrier is a small patch
+there (hit points precise to 1e-6 mm); the facet normal is passed as a vector, and the truth uses
+the float32 values of every rendered parameter. Per frame only the facet normal, the lens (Δf) and
+the seed change, through ``mi.traverse`` (no recompilation).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rigsim.detector import DetectorFrame, apply_detector
+from rigsim.render.backend import ensure_variant
+from rigsim.render.frame import build_sidecar, write_frame
+from rigsim.errors import GeometryWarning
+
+from rigsim.optics.line_camera import CameraGeometry, facet_normals_ota, loop_trace
+from rigsim.rig.boresight import BoresightRig
+
+__all__ = ["LoopRenderer", "RoiFrame", "register_plugins", "trace_scene_rays", "GeometryWarning",
+           "LENS_PLUGIN", "MIRROR_PLUGIN"]
+
+LENS_PLUGIN = "rigsim_ideal_lens"
+MIRROR_PLUGIN = "rigsim_normal_mirror"
+LASER_STANDOFF_MM = 5.0     # emitter disk in front of the focal plane (telecentric rays: no effect)
+SENSOR_STANDOFF_MM = 2.0    # > Mitsuba's ray offset at 6 m (0.54 mm), < LASER_STANDOFF_MM
+LENS_PATCH_HALF_MM = 20.0
+FACET_HALF_MM = 25.0
+MAX_DEPTH = 6               # emitter, lens, facet, lens, (laser disk, null), detector
+
+_registered: set = set()
+
+
+def register_plugins() -> None:
+    """Register the ideal-lens and normal-mirror BSDFs (and rigsim's sensors) for the variant."""
+    variant = ensure_variant()
+    from rigsim.render.plugins import register_sensors
+
+    register_sensors()
+    if variant in _registered:
+        return
+    import drjit as dr
+    import mitsuba as mi
+
+    def _vec(props, name, default):
+        v = props[name] if name in props else default
+        return mi.Vector3f(*[float(x) for x in v])
+
+    def _delta_sample(si, d_world, kind, active):
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = si.to_local(d_world)
+        bs.pdf = mi.Float(1.0)
+        bs.eta = mi.Float(1.0)
+        bs.sampled_type = mi.UInt32(+kind)
+        bs.sampled_component = mi.UInt32(0)
+        return bs, dr.select(active, mi.Spectrum(1.0), mi.Spectrum(0.0))
+
+    class IdealLens(mi.BSDF):
+        """Thin ideal lens: focal_length (mm), centre (world), axis e3, in-plane axes e1, e2."""
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.f = mi.Float(float(props["focal_length"]))
+            self.C = _vec(props, "centre", (0.0, 0.0, 0.0))
+            self.e1 = _vec(props, "e1", (1.0, 0.0, 0.0))
+            self.e2 = _vec(props, "e2", (0.0, 1.0, 0.0))
+            self.e3 = _vec(props, "e3", (0.0, 0.0, 1.0))
+            fl = mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+            self.m_components = [fl]
+            self.m_flags = fl
+            dr.make_opaque(self.f, self.C, self.e1, self.e2, self.e3)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            p = -si.to_world(si.wi)                      # propagation direction (world)
+            px, py, pz = dr.dot(p, self.e1), dr.dot(p, self.e2), dr.dot(p, self.e3)
+            r = si.p - self.C
+            x, y = dr.dot(r, self.e1), dr.dot(r, self.e2)
+            az = dr.abs(pz)
+            qx = px / az - x / self.f                    # transverse slope per unit travel, minus r/f
+            qy = py / az - y / self.f
+            sz = dr.select(pz >= 0, 1.0, -1.0)
+            d = dr.normalize(qx * self.e1 + qy * self.e2 + sz * self.e3)
+            return _delta_sample(si, d, mi.BSDFFlags.DeltaTransmission, active)
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+
+        def traverse(self, cb):
+            cb.put("focal_length", self.f, mi.ParamFlags.NonDifferentiable)
+            cb.put("centre", self.C, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys=None):
+            dr.make_opaque(self.f, self.C)
+
+        def to_string(self):
+            return f"IdealLens[f={self.f}, centre={self.C}]"
+
+    class NormalMirror(mi.BSDF):
+        """Perfect mirror about the given world-space unit normal (independent of the carrier)."""
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.N = _vec(props, "normal", (0.0, 0.0, 1.0))
+            fl = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+            self.m_components = [fl]
+            self.m_flags = fl
+            dr.make_opaque(self.N)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            d = -si.to_world(si.wi)
+            wo = d - 2.0 * dr.dot(d, self.N) * self.N
+            return _delta_sample(si, wo, mi.BSDFFlags.DeltaReflection, active)
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+
+        def traverse(self, cb):
+            cb.put("normal", self.N, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys=None):
+            dr.make_opaque(self.N)
+
+        def to_string(self):
+            return f"NormalMirror[normal={self.N}]"
+
+    mi.register_bsdf(LENS_PLUGIN, lambda props: IdealLens(props))
+    mi.register_bsdf(MIRROR_PLUGIN, lambda props: NormalMirror(props))
+    _registered.add(variant)
+
+
+def _f32(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float32).astype(np.float64)
+
+
+def trace_scene_rays(src_xy: np.ndarray, src_z: float, C: np.ndarray, f_lens: float, N: np.ndarray,
+                     facet_point: np.ndarray, z_det: float) -> np.ndarray:
+    """Exact float64 trace of telecentric rays (+z) from source points (n, 2) at height ``src_z``
+    through an ideal thin lens in the plane z = C_z (centre C, focal ``f_lens``), a plane mirror
+    (normal N through ``facet_point``) and back through the lens to the plane z = ``z_det``.
+    Returns landing points (n, 2). World frame of the scene (OTA axes)."""
+    x = np.asarray(src_xy, float)
+    n = len(x)
+    # source -> lens plane (telecentric: straight up)
+    h = x.copy()
+    d = np.column_stack([-(h - C[:2]) / f_lens, np.ones(n)])          # slope form (qx, qy, 1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.column_stack([h, np.full(n, C[2])])
+    t = ((facet_point - o) @ N) / (d @ N)
+    hit = o + t[:, None] * d
+    r = d - 2.0 * (d @ N)[:, None] * N
+    t2 = (C[2] - hit[:, 2]) / r[:, 2]
+    h2 = hit[:, :2] + t2[:, None] * r[:, :2]
+    q = r[:, :2] / np.abs(r[:, 2:3]) - (h2 - C[:2]) / f_lens             # slope per unit |z| after the lens
+    return h2 + (C[2] - z_det) * q
+
+
+@dataclass
+class RoiFrame:
+    """One CMOS ROI: ``dn[j, i]`` is detector pixel (origin_uv[0] + i, origin_uv[1] + j)."""
+
+    dn: np.ndarray
+    origin_uv: tuple[int, int]
+    photons: np.ndarray
+    detector: DetectorFrame | None
+    truth: dict
+    flags: dict
+    sidecar: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def photon_centroid(self) -> np.ndarray:
+        """First moment of the expected-photon image (rigsim pixels)."""
+        s = self.photons.sum()
+        if not s > 0:
+            return np.array([np.nan, np.nan])
+        v, u = np.indices(self.photons.shape)
+        return np.array([(self.photons * u).sum() / s + self.origin_uv[0],
+                         (self.photons * v).sum() / s + self.origin_uv[1]])
+
+
+class LoopRenderer:
+    """Renders the ROI of one CMOS (``detector`` 0 = M1, 1 = M2) of one camera.
+
+    ``window_px``: ROI size; ``roi_origin``: fixed ROI (default: centred on the reference spot;
+    pass ``follow=True`` to centre the ROI on the exact spot of every frame instead).
+    """
+
+    def __init__(self, rig: BoresightRig, camera: int | str = 0, detector: int = 0, *, window_px: int | None = None,
+                 spp: int | None = None, roi_origin=None, follow: bool = False, sampler: str = "independent",
+                 truth_rays: int = 400_000):
+        register_plugins()
+        import mitsuba as mi
+
+        cams = rig.cameras
+        self.cam_index = camera if isinstance(camera, int) else [c.name for c in cams].index(camera)
+        if not 0 <= self.cam_index < len(cams):
+            raise ValueError(f"camera = {camera!r}: this rig has {len(cams)} cameras")
+        if detector not in (0, 1):
+            raise ValueError(f"detector = {detector!r}: 0 (M1) or 1 (M2)")
+        self.rig = rig
+        self.j = detector
+        self.geom = CameraGeometry.from_rig(cams[self.cam_index])
+        self.window_px = int(window_px or rig.orbit.window_px)
+        self.spp = int(spp or rig.orbit.spp)
+        if not 8 <= self.window_px <= 512:
+            raise ValueError(f"window_px = {self.window_px}: allowed 8..512")
+        if self.spp < 1:
+            raise ValueError(f"spp = {self.spp}: must be >= 1")
+        self.follow = bool(follow)
+        self.sampler = sampler
+        self.truth_rays = int(truth_rays)
+        self.variant = ensure_variant()
+        g, j = self.geom, self.j
+        self.core_radius_mm = rig.laser.core_radius_um * 1e-3
+        e = g.emitter_mm[j]
+        # world = OTA + C_W, with the lens centre C_W exactly representable in float32
+        self.C_W = _f32([-e[0], -e[1], 0.0])
+        c, s = math.cos(g.tilt_rad[j]), math.sin(g.tilt_rad[j])
+        self.u_axis = np.array([c, s, 0.0])
+        self.v_axis = np.array([-s, c, 0.0])
+        self.laser_W = _f32(np.array([e[0], e[1], -g.F + LASER_STANDOFF_MM]) + self.C_W)
+        self.det_centre_W = np.array([g.centers_mm[j, 0], g.centers_mm[j, 1], -g.F]) + self.C_W
+        self.f0 = facet_normals_ota(g)[j]
+        D = g.facet_distance_mm
+        u_out = -self.f0
+        self.facet_point_W = _f32(np.array([e[0], e[1], 0.0]) + D / u_out[2] * u_out + self.C_W)
+        # sensor: origin near the detector centre, axes (u, -v, -z): looks at the detector's face
+        self.T_s = _f32(self.det_centre_W + SENSOR_STANDOFF_MM * np.array([0, 0, 1.0]))
+        Q = self.T_s - SENSOR_STANDOFF_MM * np.array([0, 0, 1.0])
+        self.u_T, self.v_T = self._uv_of_world(Q)
+        self.ref_uv = g.reference_uv[j]
+        if roi_origin is None:
+            roi_origin = (int(round(self.ref_uv[0])) - self.window_px // 2, int(round(self.ref_uv[1])) - self.window_px // 2)
+        self.roi_origin = (int(roi_origin[0]), int(roi_origin[1]))
+        scene = self._scene_dict()
+        self._scene = mi.load_dict(scene)
+        self._params = mi.traverse(self._scene)
+        M = np.eye(4)
+        M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = self.u_axis, -self.v_axis, [0, 0, -1.0], self.T_s
+        self._params["sensor.to_world"] = mi.Transform4f(M.astype(np.float32))
+        self._params.update()
+        self._state = None
+        self.photons_per_unit = None
+        self.det_cfg = rig.detector.model_copy(update={"sensor_seed": rig.detector.sensor_seed + 97 * self.cam_index + 13 * j})
+
+    # -- geometry ------------------------------------------------------------------------------
+    def _uv_of_world(self, pW) -> tuple[float, float]:
+        g, j = self.geom, self.j
+        dpos = np.asarray(pW, float) - self.det_centre_W
+        return (float(dpos @ self.u_axis / g.pitch_mm + g.cx), float(dpos @ self.v_axis / g.pitch_mm + g.cy))
+
+    def _scene_dict(self) -> dict:
+        import mitsuba as mi
+
+        g = self.geom
+        T = mi.ScalarTransform4f
+
+        def M(R, t):
+            A = np.eye(4)
+            A[:3, :3] = R
+            A[:3, 3] = t
+            return T(A.tolist())
+
+        W = self.window_px
+        rb = self.core_radius_mm
+        Rdet = np.column_stack([self.u_axis * 0.5 * g.width_px * g.pitch_mm,
+                                self.v_axis * 0.5 * g.height_px * g.pitch_mm, [0, 0, 1.0]])
+        return {
+            "type": "scene",
+            "integrator": {"type": "ptracer", "max_depth": MAX_DEPTH, "rr_depth": 100, "hide_emitters": True},
+            "sensor": {"type": "rigsim_telecentric", "pixel_size_mm": g.pitch_mm,
+                       "cx": self.u_T, "cy": (g.height_px - 1) - self.v_T,
+                       "detector_width": g.width_px, "detector_height": g.height_px,
+                       "window_u0": 0, "window_v0": 0,
+                       "film": {"type": "hdrfilm", "width": W, "height": W, "rfilter": {"type": "box"},
+                                "pixel_format": "luminance", "component_format": "float32"},
+                       "sampler": {"type": self.sampler, "sample_count": self.spp}},
+            "laser": {"type": "disk", "to_world": M(np.diag([rb, rb, 1.0]), self.laser_W), "bsdf": {"type": "null"},
+                      "emitter": {"type": "directionalarea", "radiance": 1.0}},
+            "lens": {"type": "rectangle", "to_world": M(np.diag([LENS_PATCH_HALF_MM] * 2 + [1.0]), np.zeros(3)),
+                     "bsdf": {"type": LENS_PLUGIN, "focal_length": g.F, "centre": self.C_W.tolist()}},
+            "facet": {"type": "rectangle", "to_world": M(np.diag([FACET_HALF_MM, -FACET_HALF_MM, -1.0]), self.facet_point_W),
+                      "bsdf": {"type": MIRROR_PLUGIN, "normal": self.f0.tolist()}},
+            "detector": {"type": "rectangle", "to_world": M(Rdet, self.det_centre_W),
+                         "bsdf": {"type": "diffuse", "reflectance": 1.0}},
+        }
+
+    def _rendered_params(self, E_hrc, delta_f_mm) -> dict:
+        """Float32 values of everything the scene gets for this state (the truth uses these)."""
+        g = self.geom
+        C = g.R_ota_from_hrc
+        E = np.eye(3) if E_hrc is None else np.asarray(E_hrc, float)
+        N = _f32((C @ E @ C.T).T @ self.f0)
+        dF = float(delta_f_mm) / g.telecentric_factor
+        dz = float(_f32(dF))
+        f_lens = float(_f32(g.F + dF))
+        return {"N": N, "lens_z": dz, "f_lens": f_lens, "C": self.C_W + np.array([0.0, 0.0, dz])}
+
+    def _set(self, E_hrc, delta_f_mm, window_origin) -> dict:
+        import mitsuba as mi
+
+        p = self._rendered_params(E_hrc, delta_f_mm)
+        self._params["facet.bsdf.normal"] = mi.Vector3f(*[float(x) for x in p["N"]])
+        self._params["lens.bsdf.focal_length"] = mi.Float(p["f_lens"])
+        self._params["lens.bsdf.centre"] = mi.Vector3f(*[float(x) for x in p["C"]])
+        A = np.diag([LENS_PATCH_HALF_MM, LENS_PATCH_HALF_MM, 1.0, 1.0])
+        A[2, 3] = p["lens_z"]
+        self._params["lens.to_world"] = mi.Transform4f(A.astype(np.float32))
+        u0, v0 = window_origin
+        self._params["sensor.window_origin"] = mi.Point2f(float(u0), float(self.geom.height_px - self.window_px - v0))
+        self._params.update()
+        return p
+
+    # -- truth ---------------------------------------------------------------------------------
+    def exact_uv(self, E_hrc=None, delta_f_mm=0.0) -> np.ndarray:
+        """Spot centre (image of the core's centre) from the exact forward model, rigsim px."""
+        g = self.geom
+        P = loop_trace(g, E_hrc, delta_f_mm)[self.j]
+        return g.xy_to_uv(g.focal_to_xy(np.stack([P, P]))[self.j])
+
+    def truth(self, E_hrc=None, delta_f_mm=0.0, window_origin=None, rng_seed: int = 0) -> dict:
+        """Exact truth of the rendered scene (float64 trace of its float32 parameters): the spot
+        centre, the mean of the core's image and the first moment of its pixel-binned image in the
+        ROI (what a perfect renderer gives), plus geometry flags."""
+        g = self.geom
+        p = self._rendered_params(E_hrc, delta_f_mm)
+        rng = np.random.default_rng(rng_seed)
+        n = self.truth_rays
+        r = self.core_radius_mm * np.sqrt(rng.random(n))
+        t = 2 * np.pi * rng.random(n)
+        src = self.laser_W[:2] + np.column_stack([r * np.cos(t), r * np.sin(t)])
+        land = trace_scene_rays(src, self.laser_W[2], p["C"], p["f_lens"], p["N"], self.facet_point_W,
+                                self.det_centre_W[2])
+        lw = np.column_stack([land, np.full(n, self.det_centre_W[2])])
+        du = (lw - self.det_centre_W) @ self.u_axis / g.pitch_mm + g.cx
+        dv = (lw - self.det_centre_W) @ self.v_axis / g.pitch_mm + g.cy
+        centre = self.exact_uv(E_hrc, delta_f_mm)
+        if window_origin is None:
+            window_origin = self._window_for(centre)
+        u0, v0 = window_origin
+        W = self.window_px
+        iu, iv = np.floor(du + 0.5), np.floor(dv + 0.5)
+        inside = (iu >= u0) & (iu < u0 + W) & (iv >= v0) & (iv < v0 + W) & (iu >= 0) & (iv >= 0) \
+            & (iu < g.width_px) & (iv < g.height_px)
+        binned = np.array([iu[inside].mean(), iv[inside].mean()]) if inside.any() else np.array([np.nan, np.nan])
+        rad_px = self.core_radius_mm / g.pitch_mm
+        flags = {
+            "spot_outside_model": False,
+            "spot_off_detector": bool(not (-0.5 <= centre[0] <= g.width_px - 0.5 and -0.5 <= centre[1] <= g.height_px - 0.5)),
+            "spot_cut_by_edge": bool(centre[0] - rad_px < 0.5 or centre[1] - rad_px < 0.5
+                                     or centre[0] + rad_px > g.width_px - 1.5 or centre[1] + rad_px > g.height_px - 1.5),
+            "spot_exceeds_window": bool(inside.mean() < 1.0),
+        }
+        return {"spot_uv": centre.tolist(), "mean_uv": [float(du.mean()), float(dv.mean())],
+                "pixel_centroid_uv": binned.tolist(), "window_origin_uv": [int(u0), int(v0)],
+                "fraction_in_window": float(inside.mean()), "flags": flags,
+                "facet_normal_ota_f32": p["N"].tolist(), "lens_focal_length_mm_f32": p["f_lens"]}
+
+    def _window_for(self, uv) -> tuple[int, int]:
+        if not self.follow:
+            return self.roi_origin
+        return (int(round(uv[0])) - self.window_px // 2, int(round(uv[1])) - self.window_px // 2)
+
+    # -- rendering -----------------------------------------------------------------------------
+    def render_photons(self, E_hrc=None, delta_f_mm=0.0, seed: int = 0, spp: int | None = None,
+                       window_origin=None) -> tuple[np.ndarray, tuple[int, int]]:
+        """Expected photons per ROI pixel (h, w) and the ROI origin (u0, v0)."""
+        import mitsuba as mi
+
+        if window_origin is None:
+            window_origin = self._window_for(self.exact_uv(E_hrc, delta_f_mm))
+        self._set(E_hrc, delta_f_mm, window_origin)
+        img = np.array(mi.render(self._scene, seed=int(seed), spp=int(spp or self.spp)), dtype=np.float64)
+        img = img[..., 0] if img.ndim == 3 else img
+        img = np.ascontiguousarray(img[::-1, :])
+        if self.photons_per_unit is None:
+            self.photons_per_unit = self._calibrate()
+        return img * self.photons_per_unit, tuple(int(x) for x in window_origin)
+
+    def _calibrate(self) -> float:
+        """Film units → photons: the whole core lands in the ROI at the reference (checked)."""
+        import mitsuba as mi
+
+        origin = self._window_for(self.ref_uv)
+        tr = self.truth(None, 0.0, origin)
+        if tr["fraction_in_window"] < 1.0:
+            raise ValueError("the reference spot does not fit in the ROI: enlarge window_px")
+        self._set(None, 0.0, origin)
+        img = np.array(mi.render(self._scene, seed=12345, spp=max(self.spp, 256)), dtype=np.float64)
+        total = float(img.sum())
+        if not total > 0:
+            raise RuntimeError("the laser loop renders nothing at the reference: scene geometry is broken")
+        return self.rig.laser.photons_per_frame / total
+
+    def warm_up(self) -> float:
+        t0 = time.perf_counter()
+        self.render_photons(None, 0.0, seed=0)
+        return time.perf_counter() - t0
+
+    def render(self, E_hrc=None, delta_f_mm=0.0, seed: int = 0, *, noiseless: bool = False,
+               spp: int | None = None, with_truth: bool = True) -> RoiFrame:
+        """A CMOS ROI frame (uint16 DN, detector model applied) for the camera state (E, Δf)."""
+        t0 = time.perf_counter()
+        centre = self.exact_uv(E_hrc, delta_f_mm)
+        origin = self._window_for(centre)
+        tr = self.truth(E_hrc, delta_f_mm, origin) if with_truth else {"spot_uv": centre.tolist(), "flags": {}}
+        flags = dict(tr.get("flags", {}))
+        if flags.get("spot_off_detector"):
+            warnings.warn(f"camera {self.geom.name} M{self.j + 1}: the laser spot is off the CMOS (out of the "
+                          "measuring range); nothing rendered", GeometryWarning, stacklevel=2)
+        elif flags.get("spot_exceeds_window"):
+            warnings.warn(f"camera {self.geom.name} M{self.j + 1}: the laser spot leaves the ROI at {origin} "
+                          "(its centroid is biased)", GeometryWarning, stacklevel=2)
+        W = self.window_px
+        if flags.get("spot_off_detector"):
+            photons = np.zeros((W, W))
+        else:
+            photons, origin = self.render_photons(E_hrc, delta_f_mm, seed, spp, origin)
+        det = apply_detector(photons, self._roi_cfg(origin), seed=int(seed), noiseless=noiseless)
+        flags["saturated"] = bool(det.saturated_pixels > 0)
+        if det.saturated_pixels:
+            warnings.warn(f"{det.saturated_pixels} saturated pixels in the ROI: lower laser.photons_per_frame",
+                          GeometryWarning, stacklevel=2)
+        sidecar = build_sidecar(truth=tr, render=self.settings(spp), detector_frame=det, geometry_flags=flags,
+                                seed=int(seed), extra={"roi_origin_uv": list(origin), "camera": self.geom.name,
+                                                       "detector": f"M{self.j + 1}",
+                                                       "state": {"delta_f_mm": float(delta_f_mm),
+                                                                 "E_hrc": (np.eye(3) if E_hrc is None else np.asarray(E_hrc)).tolist()}})
+        return RoiFrame(det.dn, origin, photons, det, tr, flags, sidecar, time.perf_counter() - t0)
+
+    def _roi_cfg(self, origin):
+        """The detector instance of this ROI: the fixed patterns are drawn for the ROI (keyed by
+        its position), which is right for fixed ROIs (docs/boresight.md)."""
+        key = (self.det_cfg.sensor_seed * 1_000_003 + 7919 * int(origin[0]) + int(origin[1])) % (2**63)
+        return self.det_cfg.model_copy(update={"sensor_seed": int(key)})
+
+    def write(self, path, frame: RoiFrame):
+        return write_frame(path, frame.dn, frame.sidecar)
+
+    def settings(self, spp=None) -> dict:
+        g = self.geom
+        return {"primitive": "boresight_laser_loop", "variant": self.variant, "camera": g.name,
+                "detector": f"M{self.j + 1}", "integrator": f"ptracer(max_depth={MAX_DEPTH}, hide_emitters)",
+                "sampler": self.sampler, "spp": int(spp or self.spp), "window_px": self.window_px,
+                "lens": "ideal thin lens (rigsim_ideal_lens), in focus", "facet": "rigsim_normal_mirror",
+                "core_radius_um": self.core_radius_mm * 1e3, "photons_per_frame": self.rig.laser.photons_per_frame,
+                "world_frame": "OTA axes, origin at the pencil's lens crossing (lens centre float32-exact)",
+                "units": "mm"}

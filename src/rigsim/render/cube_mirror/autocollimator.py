@@ -1,0 +1,719 @@
+"""Seed 001: the photoelectric autocollimator, rendered with Mitsuba (light tracing).
+
+Scene (millimetres, world frame = the autocollimator frame A of
+:mod:`rigsim.optics.autocollimator`: origin at the objective's centre, +z towards the mirror):
+
+* ``reticle``    -- a ``spot`` emitter (a point: a pinhole reticle) at the best-collimation
+  point of the objective, uniform over a cone that slightly overfills the stop;
+* ``objective``  -- a plano-convex N-BK7 singlet, a PLY mesh with analytic vertex normals,
+  ``dielectric`` BSDF. Fresnel *reflections* are discarded (``specular_reflectance = 0``; no
+  ghosts, as with AR coatings and baffles), Fresnel *transmission* is kept;
+* ``stop``       -- a black annulus in front of the convex vertex (the clear aperture);
+* ``mirror``     -- the cube (all six faces ``conductor``, ``face_normals``) or the plane mirror
+  (a 512-gon), in a ``shapegroup`` placed by an ``instance`` whose transform is a pure
+  translation to the target's centre at the reference pose. The mesh's own vertices are given
+  relative to that point (small numbers), so float32 keeps the face normal to ~1e-10 rad; the
+  turntable pose changes the vertices through ``mi.traverse`` (no rebuild, no recompile);
+* ``detector``   -- a Lambertian (reflectance 1) rectangle covering exactly the detector area,
+  in the detector plane; what lands on it is the image;
+* ``sensor``     -- a built-in ``perspective`` camera ``CAMERA_STANDOFF_MM`` in front of the
+  detector plane, looking at it square-on, whose field is exactly ``window_px`` detector pixels.
+  The render window is moved by moving this camera (``sensor.to_world``), never the film crop.
+  The camera sees the detector from the lens side, so the film is mirrored in u: window pixel
+  (i, j) is ``film[j, window_px - 1 - i]``;
+* ``integrator`` -- ``ptracer`` (the beam → mirror → lens → detector path is a caustic),
+  ``hide_emitters``, ``max_depth`` = the length of the main path (so light scattered back off the
+  detector is not re-imaged).
+
+Why the objective sits at the origin (and not the mirror): Mitsuba offsets every new ray by
+``(1 + max|p|)·8.9e-5`` scene units along the surface normal. At a refracting surface 500 mm
+from the origin that is 0.045 mm: it acts like moving the lens and changing its radii, a
+~1.6e-4 scale error of the spot offset (0.1 px at the edge of the range). At the origin it is
+2e-3 mm at the rim. The mirror only needs an exact normal (offsets along it only shift the
+collimated return beam sideways), which the instance translation gives.
+
+Every plugin is built in: ``mi.xml.dict_to_xml`` exports a scene dict that the plain
+``mitsuba`` command renders (meshes are PLY files under ``mesh_dir``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from rigsim.detector import DetectorFrame, apply_detector
+from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.optics.autocollimator import (
+    AutocollimatorLayout, AutocollimatorOptics, MirrorTarget, PlanoConvexObjective, SpotTruth, autocollimator_layout,
+    mirror_target,
+)
+from rigsim.optics.cube import FACE_NORMALS, face_normal_cube
+from rigsim.truth.cube_mirror.placement import cube_pose
+from rigsim.render.backend import ensure_variant
+from rigsim.render.frame import build_sidecar, write_frame
+from rigsim.render.meshes import mesh_ply
+from rigsim.errors import GeometryWarning
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
+
+__all__ = [
+    "CAMERA_STANDOFF_MM",
+    "DEFAULT_WINDOW_PX",
+    "DEFAULT_SOURCE_PHOTONS",
+    "AutocollimatorScene",
+    "AutocollimatorWindow",
+    "AutocollimatorFrame",
+    "AutocollimatorRenderer",
+    "build_autocollimator_scene_dict",
+    "autocollimator_scene",
+    "lens_mesh",
+    "stop_mesh",
+    "mirror_mesh_A",
+    "GeometryWarning",
+]
+
+CAMERA_STANDOFF_MM = 50.0
+DEFAULT_WINDOW_PX = 32
+DEFAULT_SOURCE_PHOTONS = 1.8e6
+"""Photons the reticle emits per exposure (scene dicts). With the seed-001 rig (50 mm beam on a
+25 mm cube face, the rig's default detector) the brightest pixel of the nulled *geometric* spot
+gets about half the full well (the diffraction blur lowers the peak ~2.5×); the renderer sets its
+own from ``peak_fraction`` (diffraction included) unless told."""
+
+MAIN_PATH_DEPTH = 7  # Mitsuba counts the emitter vertex: reticle, flat, convex, mirror, convex, flat, detector
+
+
+# ------------------------------------------------------------------------------ meshes
+def lens_mesh(obj: PlanoConvexObjective, n_rings: int = 64, n_seg: int = 256) -> trimesh.Trimesh:
+    """Closed plano-convex lens in the A frame, outward analytic vertex normals (sphere: from
+    the centre of curvature; rim: radial; flat face: −z). Split vertices along the edges."""
+    R, rl = obj.radius_mm, obj.lens_radius_mm
+    C = np.array([0.0, 0.0, obj.z_centre])
+    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
+    cph, sph = np.cos(ph), np.sin(ph)
+    V, N, F = [], [], []
+
+    def add(v, n):
+        V.append(np.asarray(v, float))
+        N.append(np.asarray(n, float))
+        return sum(len(x) for x in V[:-1])
+
+    def rings(z_of_r, n_of_p, facing_up: bool, n_rings: int):
+        r = rl * np.arange(1, n_rings + 1) / n_rings
+        pts = [np.array([[0.0, 0.0, z_of_r(0.0)]])]
+        for rk in r:
+            pts.append(np.column_stack([rk * cph, rk * sph, np.full(n_seg, z_of_r(rk))]))
+        P = np.vstack(pts)
+        base = add(P, n_of_p(P))
+        tri = []
+        for j in range(n_seg):  # centre fan
+            a, b = 1 + j, 1 + (j + 1) % n_seg
+            tri.append((0, a, b))
+        for k in range(n_rings - 1):
+            o0, o1 = 1 + k * n_seg, 1 + (k + 1) * n_seg
+            for j in range(n_seg):
+                j1 = (j + 1) % n_seg
+                tri.append((o0 + j, o1 + j, o1 + j1))
+                tri.append((o0 + j, o1 + j1, o0 + j1))
+        tri = np.array(tri)
+        if not facing_up:
+            tri = tri[:, ::-1]
+        F.append(tri + base)
+        return P
+
+    def cap_z(r):
+        return obj.z_centre + math.sqrt(R * R - r * r)
+
+    rings(cap_z, lambda P: (P - C) / R, True, n_rings)
+    # the flat face needs no tessellation (one fan of n_seg triangles)
+    rings(lambda r: obj.z_flat, lambda P: np.tile([0.0, 0.0, -1.0], (len(P), 1)), False, 1)
+    # rim wall from the flat face (z_flat) up to the cap's edge
+    z_top = cap_z(rl)
+    bot = np.column_stack([rl * cph, rl * sph, np.full(n_seg, obj.z_flat)])
+    top = np.column_stack([rl * cph, rl * sph, np.full(n_seg, z_top)])
+    radial = np.column_stack([cph, sph, np.zeros(n_seg)])
+    base = add(np.vstack([bot, top]), np.vstack([radial, radial]))
+    tri = []
+    for j in range(n_seg):
+        j1 = (j + 1) % n_seg
+        tri.append((j, j1, n_seg + j1))
+        tri.append((j, n_seg + j1, n_seg + j))
+    F.append(np.array(tri) + base)
+    V, N, F = np.vstack(V), np.vstack(N), np.vstack(F)
+    m = trimesh.Trimesh(V, F, vertex_normals=N, process=False)
+    return m
+
+
+def stop_mesh(obj: PlanoConvexObjective, outer_radius_mm: float | None = None, n_seg: int = 512) -> trimesh.Trimesh:
+    """Flat annulus (the clear-aperture stop) at ``obj.z_stop``, facing +z."""
+    r0 = obj.stop_radius_mm
+    r1 = outer_radius_mm or max(2.5 * r0, r0 + 20.0)
+    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
+    inner = np.column_stack([r0 * np.cos(ph), r0 * np.sin(ph), np.full(n_seg, obj.z_stop)])
+    outer = np.column_stack([r1 * np.cos(ph), r1 * np.sin(ph), np.full(n_seg, obj.z_stop)])
+    tri = []
+    for j in range(n_seg):
+        j1 = (j + 1) % n_seg
+        tri.append((j, n_seg + j, n_seg + j1))
+        tri.append((j, n_seg + j1, j1))
+    return trimesh.Trimesh(np.vstack([inner, outer]), np.array(tri), process=False)
+
+
+def _quad(centre, e1, e2, n, h):
+    V = np.array([centre - h * e1 - h * e2, centre + h * e1 - h * e2, centre + h * e1 + h * e2,
+                  centre - h * e1 + h * e2])
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    if np.cross(V[1] - V[0], V[2] - V[0]) @ n < 0:
+        F = F[:, ::-1]
+    return V, F
+
+
+def mirror_mesh_A(rig: CubeMirrorRig, real: Realization, layout: AutocollimatorLayout, pose_rad: dict,
+                  n_seg: int = 512) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (A frame, float64) and faces of the target at ``pose_rad``.
+
+    Cube: six square faces (split vertices), each with its true normal (the measured faces from
+    the realisation, the others ideal), so the mesh's face normals are the truth's. Plane
+    mirror: a 512-gon fan in the mirror plane (its outline is within 5e-4 mm of the disk).
+    """
+    if layout.target == "face":
+        cp = cube_pose(rig, real, pose_rad)
+        R_rm = real.turntable.R_rot_from_mount(pose_rad)
+        h = 0.5 * rig.cube.edge_mm
+        Vs, Fs = [], []
+        for f, nom in FACE_NORMALS.items():
+            n_mount = real.face_normals_mount.get(f)
+            if n_mount is None:
+                n_mount = real.R_cube_from_mount.T @ face_normal_cube(f, None)
+            n = layout.dir_to_A(R_rm @ n_mount)
+            n /= np.linalg.norm(n)
+            centre = layout.to_A(cp.apply(h * nom))
+            k = int(np.argmax(np.abs(nom)))
+            e1 = layout.dir_to_A(cp.R[:, (k + 1) % 3])
+            e1 = e1 - (e1 @ n) * n
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(n, e1)
+            V, F = _quad(centre, e1, e2, n, h)
+            Fs.append(F + 4 * len(Vs))
+            Vs.append(V)
+        return np.vstack(Vs), np.vstack(Fs)
+    m = mirror_target(rig, real, layout, pose_rad)
+    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
+    rim = m.centre + m.half_size_mm * (np.cos(ph)[:, None] * m.e1 + np.sin(ph)[:, None] * m.e2)
+    V = np.vstack([m.centre[None, :], rim])
+    F = np.array([(0, 1 + j, 1 + (j + 1) % n_seg) for j in range(n_seg)])
+    if np.cross(V[F[0, 1]] - V[0], V[F[0, 2]] - V[0]) @ m.normal < 0:
+        F = F[:, ::-1]
+    return V, F
+
+
+# ------------------------------------------------------------------------------ scene
+@dataclass
+class AutocollimatorScene:
+    """A scene dict plus everything needed to interpret what it renders."""
+
+    scene_dict: dict
+    optics: AutocollimatorOptics
+    layout: AutocollimatorLayout
+    mirror: MirrorTarget
+    window: tuple[int, int, int, int]
+    photons_per_unit: float  # film value (radiance) → photons per detector pixel
+    source_photons: float  # reticle photons per exposure the scene's intensity stands for
+    anchor_A: np.ndarray
+    mesh_files: dict = field(default_factory=dict)
+    world_shift_A: np.ndarray = field(default_factory=lambda: np.zeros(3))  # world = A − shift
+
+
+def _camera_matrix(optics: AutocollimatorOptics, window_origin, window_px: int) -> np.ndarray:
+    """Camera → world (A frame): at the window centre, CAMERA_STANDOFF_MM in front of the
+    detector, looking −z; local x = +x_A, local y = −y_A (right-handed)."""
+    u0, v0 = window_origin
+    xc = (u0 + (window_px - 1) / 2.0 - optics.cx) * optics.pitch_mm
+    yc = (v0 + (window_px - 1) / 2.0 - optics.cy) * optics.pitch_mm
+    M = np.eye(4)
+    M[:3, 0] = [1.0, 0.0, 0.0]
+    M[:3, 1] = [0.0, -1.0, 0.0]
+    M[:3, 2] = [0.0, 0.0, -1.0]
+    M[:3, 3] = [xc, yc, optics.z_detector + CAMERA_STANDOFF_MM]
+    return M
+
+
+def _fov_deg(optics: AutocollimatorOptics, window_px: int) -> float:
+    return math.degrees(2.0 * math.atan(0.5 * window_px * optics.pitch_mm / CAMERA_STANDOFF_MM))
+
+
+def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad: dict, target: str = "face",
+                         face: str | None = None, *, spp: int, mesh_dir=None,
+                         window_px: int = DEFAULT_WINDOW_PX, window_origin=None,
+                         optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
+                         source_photons: float = DEFAULT_SOURCE_PHOTONS, sampler: str = "stratified",
+                         lens_ghosts: bool = False, max_depth: int | None = None,
+                         mirror_reflectance: float = 1.0,
+                         plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
+                         world_origin: str = "objective") -> AutocollimatorScene:
+    """Build the scene (see the module docstring) and return it with its interpretation.
+
+    ``world_origin="mirror"`` shifts the whole scene so that the target's centre is the world
+    origin (the objective then sits ~500 mm away). It exists to measure why the default is the
+    objective (docs/render_autocollimator.md); do not use it for production frames."""
+    ensure_variant()
+    import mitsuba as mi
+
+    if rig.autocollimator is None:
+        raise ValueError("this rig has no autocollimator")
+    _check_sampler(spp, sampler)
+    if int(window_px) != window_px or not (8 <= window_px <= 4096):
+        raise ValueError(f"window_px = {window_px!r}: must be an integer in [8, 4096]")
+    if not (source_photons > 0 and math.isfinite(source_photons)):
+        raise ValueError(f"source_photons = {source_photons!r}: must be a finite number > 0")
+    if not (0.0 < mirror_reflectance <= 1.0):
+        raise ValueError(f"mirror_reflectance = {mirror_reflectance!r}: must be in (0, 1]")
+    real = real if real is not None else realization_from_rig(rig)
+    optics = optics or AutocollimatorOptics(rig.autocollimator)
+    layout = layout or autocollimator_layout(rig, real, target, face, objective_vertex_z_mm=optics.objective.z_vertex,
+                                             plane_mirror_centre_mount_mm=plane_mirror_centre_mount_mm)
+    obj = optics.objective
+    T = mi.ScalarTransform4f
+    mirror = mirror_target(rig, real, layout, pose_rad, mirror_reflectance)
+    if window_origin is None:
+        window = optics.window_for(optics.paraxial_uv(mirror), window_px)
+    else:
+        window = (int(window_origin[0]), int(window_origin[1]), int(window_px), int(window_px))
+    anchor = layout.anchor_A
+    if world_origin not in ("objective", "mirror"):
+        raise ValueError(f"world_origin = {world_origin!r}: must be 'objective' or 'mirror'")
+    shift = np.zeros(3) if world_origin == "objective" else anchor.copy()
+
+    def placed(M):  # A-frame matrix -> world (translate by -shift)
+        M = np.array(M, float)
+        M[:3, 3] -= shift
+        return T(M.tolist())
+
+    V, F = mirror_mesh_A(rig, real, layout, pose_rad)
+    mirror_local = trimesh.Trimesh(V - anchor, F, process=False)
+    files = {
+        "objective": mesh_ply(lens_mesh(obj), "ac_objective", mesh_dir),
+        "stop": mesh_ply(stop_mesh(obj), "ac_stop", mesh_dir),
+        "mirror": mesh_ply(mirror_local, "ac_cube" if layout.target == "face" else "ac_plane_mirror", mesh_dir),
+    }
+    omega = 2.0 * math.pi * (1.0 - math.cos(optics.cone_half_angle_rad))
+    intensity = source_photons / omega
+    lens_bsdf = {"type": "dielectric", "int_ior": float(obj.n), "ext_ior": 1.0}
+    if not lens_ghosts:
+        lens_bsdf["specular_reflectance"] = 0.0
+    mirror_bsdf = {"type": "conductor", "material": "none"}
+    if mirror_reflectance != 1.0:
+        mirror_bsdf["specular_reflectance"] = float(mirror_reflectance)
+    W, H = optics.width, optics.height
+    det = np.eye(4)
+    det[0, 0] = 0.5 * W * optics.pitch_mm
+    det[1, 1] = 0.5 * H * optics.pitch_mm
+    det[:3, 3] = [(W - 1) / 2.0 - optics.cx, (H - 1) / 2.0 - optics.cy, 0.0]
+    det[:2, 3] *= optics.pitch_mm
+    det[2, 3] = optics.z_detector
+    reticle = np.eye(4)
+    reticle[2, 3] = optics.z_source
+    cone_deg = math.degrees(optics.cone_half_angle_rad)
+    depth = MAIN_PATH_DEPTH if max_depth is None else int(max_depth)
+    d = {
+        "type": "scene",
+        "integrator": {"type": "ptracer", "max_depth": depth, "rr_depth": depth + 100, "hide_emitters": True},
+        "sensor": {
+            "type": "perspective",
+            "fov": _fov_deg(optics, window_px), "fov_axis": "x",
+            "near_clip": 1.0, "far_clip": 10.0 * CAMERA_STANDOFF_MM,
+            "to_world": placed(_camera_matrix(optics, window[:2], window_px)),
+            "film": {"type": "hdrfilm", "width": int(window_px), "height": int(window_px),
+                     "rfilter": {"type": "box"}, "pixel_format": "luminance", "component_format": "float32"},
+            "sampler": {"type": sampler, "sample_count": int(spp)},
+        },
+        "reticle": {"type": "spot", "intensity": float(intensity), "cutoff_angle": cone_deg,
+                    "beam_width": cone_deg, "to_world": placed(reticle)},
+        # the lens in its own shapegroup: a mirror update then rebuilds only the top-level BVH
+        "objective_group": {"type": "shapegroup",
+                            "objective": {"type": "ply", "filename": str(files["objective"]), "face_normals": False,
+                                          "bsdf": lens_bsdf}},
+        "objective": {"type": "instance", "shapegroup": {"type": "ref", "id": "objective_group"},
+                      "to_world": placed(np.eye(4))},
+        "stop": {"type": "ply", "filename": str(files["stop"]), "face_normals": True,
+                 "bsdf": {"type": "diffuse", "reflectance": 0.0}},
+        "detector": {"type": "rectangle", "to_world": placed(det),
+                     "bsdf": {"type": "diffuse", "reflectance": 1.0}},
+        "mirror_group": {"type": "shapegroup",
+                         "mirror": {"type": "ply", "filename": str(files["mirror"]), "face_normals": True,
+                                    "bsdf": mirror_bsdf}},
+        "mirror": {"type": "instance", "shapegroup": {"type": "ref", "id": "mirror_group"},
+                   "to_world": placed(np.array([[1, 0, 0, anchor[0]], [0, 1, 0, anchor[1]], [0, 0, 1, anchor[2]],
+                                                [0, 0, 0, 1]], float))},
+    }
+    if world_origin == "mirror":
+        d["stop"]["to_world"] = placed(np.eye(4))
+    # a Lambertian detector of reflectance 1 shows radiance E/π: photons per pixel = π·L·pitch²
+    return AutocollimatorScene(d, optics, layout, mirror, window, math.pi * optics.pitch_mm ** 2,
+                               float(source_photons), anchor, files, shift)
+
+
+def build_autocollimator_scene_dict(rig: CubeMirrorRig, real: Realization | None, pose_rad: dict, target: str = "face",
+                                    face: str | None = None, *, spp: int, mesh_dir=None, **kwargs) -> dict:
+    """The Mitsuba scene dict (millimetres, built-in plugins only) of the autocollimator looking at
+    ``target`` (``"face"``: cube face ``face``, default the procedure's first; ``"plane_mirror"``)
+    at turntable pose ``pose_rad``. Keyword arguments as :func:`autocollimator_scene`."""
+    return autocollimator_scene(rig, real, pose_rad, target, face, spp=spp, mesh_dir=mesh_dir, **kwargs).scene_dict
+
+
+# ------------------------------------------------------------------------------ renderer
+def _centroid(img: np.ndarray, origin) -> np.ndarray:
+    s = img.sum()
+    if not s > 0:
+        return np.array([np.nan, np.nan])
+    v, u = np.indices(img.shape)
+    return np.array([(img * u).sum() / s + origin[0], (img * v).sum() / s + origin[1]])
+
+
+@dataclass
+class AutocollimatorWindow:
+    """One rendered window: ``image[j, i]`` is detector pixel (origin_uv[0] + i, origin_uv[1] + j),
+    in expected photons per pixel."""
+
+    image: np.ndarray
+    origin_uv: tuple[int, int]
+    truth: SpotTruth
+    flags: dict
+    pose_rad: dict
+    spp: int
+    seed: int
+    seconds: float
+    rendered: bool
+    image_geometric: np.ndarray | None = None  # Mitsuba's ray-optics window (before diffraction)
+    origin_geometric: tuple[int, int] | None = None
+    seconds_mitsuba: float = 0.0  # of ``seconds``: parameter update + mi.render only
+
+    def centroid_geometric(self) -> np.ndarray:
+        if self.image_geometric is None:
+            return self.centroid()
+        return _centroid(self.image_geometric, self.origin_geometric)
+
+    def centroid(self) -> np.ndarray:
+        """First moment of ``image`` in detector pixel coordinates."""
+        return _centroid(self.image, self.origin_uv)
+
+    def paste_into(self, frame: np.ndarray) -> np.ndarray:
+        H, W = frame.shape
+        u0, v0 = self.origin_uv
+        h, w = self.image.shape
+        a0, b0, a1, b1 = max(0, u0), max(0, v0), min(W, u0 + w), min(H, v0 + h)
+        if a1 > a0 and b1 > b0:
+            frame[b0:b1, a0:a1] += self.image[b0 - v0:b1 - v0, a0 - u0:a1 - u0]
+        return frame
+
+
+@dataclass
+class AutocollimatorFrame:
+    photons: np.ndarray  # (H, W) expected photons per pixel
+    detector: DetectorFrame
+    sidecar: dict
+    window: AutocollimatorWindow
+
+    @property
+    def dn(self) -> np.ndarray:
+        return self.detector.dn
+
+
+class AutocollimatorRenderer:
+    """Render the autocollimator's detector frame per turntable pose.
+
+    Built once (the mirror at the layout's reference pose); :meth:`warm_up` compiles the
+    kernels; every :meth:`render_window` / :meth:`render_frame` then only writes the mirror's
+    vertex positions and the camera pose through ``mi.traverse`` (no rebuild, no recompile) and
+    renders a fixed ``window_px`` window centred on the exact spot. Exact truth (numpy) for every
+    frame comes from :class:`~rigsim.optics.autocollimator.AutocollimatorOptics`.
+    """
+
+    def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, target: str = "face", face: str | None = None, *,
+                 spp: int = 1024, window_px: int = DEFAULT_WINDOW_PX, source_photons: float | None = None,
+                 peak_fraction: float = 0.5, sampler: str = "stratified", truth_rays: int = 400_000, mesh_dir=None,
+                 lens_ghosts: bool = False,
+                 optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
+                 mirror_reflectance: float = 1.0, plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
+                 max_depth: int | None = None, world_origin: str = "objective", diffraction: bool = True,
+                 diffraction_half_px: int = 32):
+        import mitsuba as _mi  # noqa: F401  (ensure_variant happens in autocollimator_scene)
+
+        self.rig = rig
+        self.real = real if real is not None else realization_from_rig(rig)
+        self.optics = optics or AutocollimatorOptics(rig.autocollimator)
+        self.layout = layout or autocollimator_layout(
+            rig, self.real, target, face, objective_vertex_z_mm=self.optics.objective.z_vertex,
+            plane_mirror_centre_mount_mm=plane_mirror_centre_mount_mm)
+        if int(truth_rays) < 10_000:
+            raise ValueError(f"truth_rays = {truth_rays!r}: need at least 10000")
+        self.truth_rays = int(truth_rays)
+        _check_sampler(spp, sampler)
+        self.spp = int(spp)
+        self.window_px = int(window_px)
+        self.sampler = sampler
+        self.mirror_reflectance = float(mirror_reflectance)
+
+        self.lens_ghosts = bool(lens_ghosts)
+        self.world_origin = world_origin
+        self.diffraction = bool(diffraction)
+        self.diffraction_half_px = int(diffraction_half_px)
+        if source_photons is None:
+            source_photons = self.auto_source_photons(peak_fraction)
+        self.source_photons = float(source_photons)
+        self.variant = ensure_variant()
+        sc = autocollimator_scene(rig, self.real, self.layout.reference_pose_rad, self.layout.target, self.layout.face,
+                                  spp=spp, mesh_dir=mesh_dir, window_px=window_px, optics=self.optics,
+                                  layout=self.layout, source_photons=self.source_photons, sampler=sampler,
+                                  lens_ghosts=lens_ghosts, max_depth=max_depth, mirror_reflectance=mirror_reflectance,
+                                  world_origin=world_origin)
+        self.scene_info = sc
+        import mitsuba as mi
+
+        self._scene = mi.load_dict(sc.scene_dict)
+        self._params = mi.traverse(self._scene)
+        self._faces = mirror_mesh_A(rig, self.real, self.layout, self.layout.reference_pose_rad)[1]
+        self.max_depth = sc.scene_dict["integrator"]["max_depth"]
+        self.warmed_up = False
+
+    # -- per-frame state ---------------------------------------------------------------------
+    def _set(self, pose_rad: dict, window_origin) -> None:
+        import mitsuba as mi
+
+        V, F = mirror_mesh_A(self.rig, self.real, self.layout, pose_rad)
+        if F.shape != self._faces.shape or np.any(F != self._faces):
+            raise RuntimeError("mirror mesh topology changed")  # cannot happen: same builder
+        local = (V - self.scene_info.anchor_A).astype(np.float32)
+        self._params["mirror_group.mirror.vertex_positions"] = mi.Float(local.ravel())
+        M = _camera_matrix(self.optics, window_origin, self.window_px)
+        M[:3, 3] -= self.scene_info.world_shift_A
+        self._params["sensor.to_world"] = mi.ScalarTransform4f(M.tolist())
+        self._params.update()
+
+    def warm_up(self, seed: int = 0) -> float:
+        """Render one window at the reference pose (compiles the kernels). Returns seconds."""
+        t0 = time.perf_counter()
+        self.render_window(self.layout.reference_pose_rad, seed=seed)
+        self.warmed_up = True
+        return time.perf_counter() - t0
+
+    def auto_source_photons(self, peak_fraction: float = 0.5) -> float:
+        """Reticle photons per exposure that bring the brightest pixel of the spot at the
+        reference pose (the null) to ``peak_fraction`` of the detector's full well — an
+        autocollimator's brightness/exposure set for its target (the plane mirror returns ~3×
+        more light than a 25 mm cube face)."""
+        if not (0.0 < peak_fraction <= 1.0):
+            raise ValueError(f"peak_fraction = {peak_fraction!r}: must be in (0, 1]")
+        m = mirror_target(self.rig, self.real, self.layout, self.layout.reference_pose_rad, self.mirror_reflectance)
+        sp = self.optics.spot(m, n_rays=self.truth_rays, emitted_photons=1.0, window_px=self.window_px)
+        if not sp.valid:
+            raise ValueError("no light comes back at the reference pose; pass source_photons explicitly")
+        img = self.optics.binned_image(sp.bundle, sp.window)
+        if self.diffraction:
+            from scipy.signal import fftconvolve
+
+            img = fftconvolve(img, self.optics.diffraction_kernel(m, half_px=self.diffraction_half_px))
+        peak = img.max()
+        cfg = self.rig.autocollimator.detector
+        return float(peak_fraction * cfg.full_well_e / cfg.quantum_efficiency / peak)
+
+    def truth(self, pose_rad: dict, window: tuple[int, int, int, int] | None = None,
+              source_photons: float | None = None) -> SpotTruth:
+        """Exact spot (numpy) at ``pose_rad``; ``window`` defaults to the renderer's placement."""
+        m = mirror_target(self.rig, self.real, self.layout, pose_rad, self.mirror_reflectance)
+        return self.optics.spot(m, n_rays=self.truth_rays,
+                                emitted_photons=self.source_photons if source_photons is None else source_photons,
+                                window=window, window_px=None if window is not None else self.window_px)
+
+    def render_window(self, pose_rad: dict, seed: int = 0, *, window_origin=None,
+                      source_photons: float | None = None, spp: int | None = None) -> AutocollimatorWindow:
+        """Render the window around the exact spot for turntable pose ``pose_rad`` (true angles,
+        rad). ``window_origin`` (u0, v0) overrides the placement (the window is moved by moving
+        the camera, so any integer origin maps exactly). Geometry problems become flags and a
+        :class:`GeometryWarning`; when no light comes back onto the detector nothing is rendered
+        (zeros). Values are expected photons per pixel for ``source_photons`` (default: the
+        renderer's). ``spp`` overrides the renderer's (each new value compiles once)."""
+        import mitsuba as mi
+
+        spp = self.spp if spp is None else int(spp)
+        _check_sampler(spp, self.sampler)
+        t0 = time.perf_counter()
+        W = self.window_px
+        photons = self.source_photons if source_photons is None else float(source_photons)
+        if window_origin is not None:
+            win = (int(window_origin[0]), int(window_origin[1]), W, W)
+            tr = self.truth(pose_rad, window=win, source_photons=photons)
+        else:
+            tr = self.truth(pose_rad, source_photons=photons)
+        flags = dict(tr.flags)
+        if tr.window is not None:
+            origin = tr.window[:2]
+        else:
+            origin = self.optics.window_for(tr.paraxial_uv, W)[:2]
+        _warn(flags, tr)
+        if flags["beam_misses_face"] or flags["spot_off_detector"] or not tr.valid:
+            return AutocollimatorWindow(np.zeros((W, W)), tuple(origin), tr, flags, dict(pose_rad), spp, int(seed),
+                                        time.perf_counter() - t0, False, np.zeros((W, W)), tuple(origin))
+        t1 = time.perf_counter()
+        self._set(pose_rad, origin)
+        img = mi.render(self._scene, seed=int(seed), spp=spp)
+        arr = np.array(img, dtype=np.float64)
+        arr = arr[..., 0] if arr.ndim == 3 else arr
+        t_mi = time.perf_counter() - t1
+        arr = np.ascontiguousarray(arr[:, ::-1]) * (self.scene_info.photons_per_unit * photons
+                                                    / self.scene_info.source_photons)
+        geo, geo_origin = arr, tuple(origin)
+        if self.diffraction:
+            from scipy.signal import fftconvolve
+
+            m = mirror_target(self.rig, self.real, self.layout, pose_rad, self.mirror_reflectance)
+            K = self.optics.diffraction_kernel(m, half_px=self.diffraction_half_px)
+            h = self.diffraction_half_px
+            arr = np.clip(fftconvolve(arr, K, mode="full"), 0.0, None)
+            origin = (origin[0] - h, origin[1] - h)
+            v, u = np.indices(arr.shape)
+            off = ((u + origin[0] < 0) | (u + origin[0] >= self.optics.width)
+                   | (v + origin[1] < 0) | (v + origin[1] >= self.optics.height))
+            arr[off] = 0.0  # light spread beyond the detector's edge is not recorded
+        return AutocollimatorWindow(arr, tuple(origin), tr, flags, dict(pose_rad), spp, int(seed),
+                                    time.perf_counter() - t0, True, geo, geo_origin, t_mi)
+
+    def render_frame(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False,
+                     source_photons: float | None = None, spp: int | None = None) -> AutocollimatorFrame:
+        """Full detector frame: the window composited on black (exact: only the reticle emits and
+        ``spot_exceeds_window`` says whether light was lost), then the detector model with
+        ``rig.autocollimator.detector`` and this ``seed`` (Mitsuba and the detector noise both
+        take it); the sidecar holds the truth."""
+        win = self.render_window(pose_rad, seed, source_photons=source_photons, spp=spp)
+        H, W = self.optics.height, self.optics.width
+        photons = win.paste_into(np.zeros((H, W)))
+        cfg = self.rig.autocollimator.detector
+        det = apply_detector(photons, cfg, seed=int(seed), noiseless=noiseless)
+        if det.saturated_pixels > 0:
+            warnings.warn(f"{det.saturated_pixels} saturated pixels in the autocollimator frame: lower "
+                          "source_photons (the centroid is biased)", GeometryWarning, stacklevel=2)
+        sidecar = build_sidecar(truth=self.truth_dict(win.truth), render=self.settings(spp=win.spp,
+                                source_photons=source_photons), detector_frame=det,
+                                geometry_flags=win.flags, pose=_pose_dict(pose_rad), seed=int(seed),
+                                extra={"window_origin_uv": list(win.origin_uv), "rendered": win.rendered,
+                                       "render_seconds": win.seconds,
+                                       "window_centroid_uv": win.centroid().tolist(),
+                                       "window_centroid_geometric_uv": win.centroid_geometric().tolist()})
+        return AutocollimatorFrame(photons, det, sidecar, win)
+
+    def write(self, path, frame: AutocollimatorFrame):
+        return write_frame(path, frame.dn, frame.sidecar)
+
+    # -- descriptions ------------------------------------------------------------------------
+    def truth_dict(self, tr: SpotTruth) -> dict:
+        d = tr.as_dict()
+        reading = None
+        reading_par = None
+        if tr.mean_uv is not None:
+            reading = (self.optics.reading(tr.mean_uv) * ARCSEC_PER_RAD).tolist()
+            reading_par = (self.optics.reading_paraxial(tr.mean_uv) * ARCSEC_PER_RAD).tolist()
+        d.update({
+            "target": self.layout.target, "face": self.layout.face,
+            "reading_arcsec": reading,
+            "reading_paraxial_arcsec": reading_par,
+            "reading_error_arcsec": None if reading is None else (np.array(reading) - tr.tilt_rad * ARCSEC_PER_RAD).tolist(),
+            "reference_uv": [self.optics.cx, self.optics.cy],
+            "layout": self.layout.as_dict(),
+            "convention": "A frame: +z_A optical axis towards the mirror, u along +x_A, v along +y_A; "
+                          "reading (θx, θy) = (atan2(n_x, -n_z), atan2(n_y, -n_z)) of the mirror normal n",
+        })
+        return d
+
+    def settings(self, spp: int | None = None, source_photons: float | None = None) -> dict:
+        """Every render setting (for sidecars)."""
+        o = self.optics
+        return {
+            "primitive": "autocollimator",
+            "variant": self.variant,
+            "integrator": f"ptracer(max_depth={self.max_depth}, hide_emitters)",
+            "sampler": self.sampler,
+            "spp": self.spp if spp is None else int(spp),
+            "window_px": self.window_px,
+            "source_photons": self.source_photons if source_photons is None else float(source_photons),
+            "mirror_reflectance": self.mirror_reflectance,
+            "lens_ghosts": self.lens_ghosts,
+            "truth_rays": self.truth_rays,
+            "objective": o.objective.as_dict(),
+            "focus": o.focus,
+            "focus_shift_mm": o.focus_shift_mm,
+            "z_source_mm": o.z_source,
+            "z_detector_mm": o.z_detector,
+            "cone_half_angle_deg": math.degrees(o.cone_half_angle_rad),
+            "camera_standoff_mm": CAMERA_STANDOFF_MM,
+            "world_origin": self.world_origin,
+            "diffraction": (f"window convolved with the pixel-integrated Fraunhofer PSF of the return pupil "
+                            f"(±{self.diffraction_half_px} px)") if self.diffraction else "none (ray optics only)",
+            "units": "mm",
+        }
+
+
+def _check_sampler(spp, sampler: str) -> None:
+    if int(spp) != spp or spp < 1:
+        raise ValueError(f"spp = {spp!r}: must be an integer >= 1")
+    if sampler not in ("independent", "stratified", "multijitter", "ldsampler", "orthogonal"):
+        raise ValueError(f"sampler = {sampler!r}: not a Mitsuba sampler rigsim uses")
+    if sampler in ("stratified", "multijitter") and math.isqrt(int(spp)) ** 2 != int(spp):
+        raise ValueError(f"spp = {spp!r}: the {sampler} sampler needs a perfect square (e.g. 256, 1024, 4096); "
+                         "Mitsuba would silently round it up")
+    if sampler == "ldsampler" and int(spp) & (int(spp) - 1):
+        raise ValueError(f"spp = {spp!r}: the ldsampler needs a power of two; Mitsuba would round it")
+
+
+def _pose_dict(pose_rad: dict) -> dict:
+    return {"true_rad": {k: float(v) for k, v in pose_rad.items()},
+            "true_deg": {k: math.degrees(v) for k, v in pose_rad.items()}}
+
+
+def _warn(flags: dict, tr: SpotTruth) -> None:
+    if flags.get("beam_misses_face"):
+        warnings.warn("the autocollimator beam misses the mirror: nothing comes back, nothing rendered",
+                      GeometryWarning, stacklevel=3)
+        return
+    if flags.get("beam_partly_misses_face"):
+        warnings.warn("part of the mirror lies outside the autocollimator beam (it is off-centre): the "
+                      "effective pupil changes and with it the reading", GeometryWarning, stacklevel=3)
+    if flags.get("return_vignetted"):
+        warnings.warn("part of the reflected beam misses the objective on the way back (tilt near the "
+                      "edge of the measuring range)", GeometryWarning, stacklevel=3)
+    if flags.get("spot_off_detector"):
+        warnings.warn("the return spot is off the detector (out of the measuring range); nothing rendered",
+                      GeometryWarning, stacklevel=3)
+    elif flags.get("spot_cut_by_edge"):
+        warnings.warn("the return spot is cut by the detector edge (out of the measuring range): its "
+                      "centroid is biased", GeometryWarning, stacklevel=3)
+    if flags.get("spot_exceeds_window"):
+        warnings.warn("the return spot does not fit the render window; flux is lost", GeometryWarning,
+                      stacklevel=3)
+
+
+def export_autocollimator(rig: CubeMirrorRig, real: Realization | None = None, pose_rad: dict | None = None, *,
+                          spp: int = 64, mesh_dir=None):
+    """(scene dict, XML comments) for ``rigsim scene export``: the autocollimator looking at the
+    procedure's first face at ``pose_rad`` (default: that face's exact null pose). ``None`` if the
+    rig has no autocollimator."""
+    if rig.autocollimator is None:
+        return None
+    real = real if real is not None else realization_from_rig(rig)
+    optics = AutocollimatorOptics(rig.autocollimator)
+    layout = autocollimator_layout(rig, real, "face", None, objective_vertex_z_mm=optics.objective.z_vertex)
+    if not pose_rad:
+        pose_rad = dict(layout.reference_pose_rad)  # the face's exact null: the spot on the axis
+    sc = autocollimator_scene(rig, real, pose_rad, "face", None, spp=spp, mesh_dir=mesh_dir, optics=optics, layout=layout)
+    u0, v0, w, _ = sc.window
+    notes = [
+        f"rigsim autocollimator (seed 001), rig '{rig.name}', target {sc.layout.target}; millimetres; origin at the objective",
+        "turntable pose (true angles, deg): " + ", ".join(f"{k}={math.degrees(v):.6f}" for k, v in pose_rad.items()),
+        f"the film is a {w}x{w} px window whose pixel (0,0) is detector pixel ({u0}, {v0}); ptracer (caustic path)",
+    ]
+    return sc.scene_dict, notes

@@ -1,0 +1,512 @@
+"""Sun-spot primitive: a finite sun-simulator disk seen by the distorted pinhole sensor.
+
+The source is a Lambertian disk emitter of uniform radiance, perpendicular to the sun direction
+at ``distance_mm`` from the pinhole, with radius ``distance_mm * tan(full_angle / 2)``: seen from
+the pinhole it fills exactly the cone of the stated full angle (0.53 deg for the sun, 32' for the
+seed-001 simulator), so the distance does not matter (only directions reach a pinhole).
+
+Rendering happens in a fixed-size crop window (default 32 x 32 px) placed around the predicted
+spot. Per frame only two things change, both through ``mi.traverse`` (no scene rebuild, no
+kernel recompile): the disk's ``to_world`` and the sensor's integer ``window_origin``. Window
+pixel (i, j) is exactly detector pixel (u0 + i, v0 + j).
+
+Units: with the default ``response='flux'`` sensor, image values are expected photons per pixel;
+``spot_photons`` is the total number of photons the aperture collects from the whole disk at
+normal incidence, so a spot at field angle theta carries ``spot_photons * <cos theta>``.
+
+Truth (:func:`spot_truth`, numpy only): the flux-weighted mean of the distorted projection over
+the disk (the continuous image centroid) and its pixel-binned version (what a first moment over
+pixels returns for a perfect renderer). The projection of the disk *centre* differs from both by
+a small, field-dependent bias that :func:`spot_truth` reports (``disk_bias_px``,
+``pixel_bias_px``).
+
+The sun simulator seen by the rig's sun sensor at a turntable pose (seeds 000 step 1, 001 step B).
+
+Everything comes from the same CubeMirrorRig and Realization as the analytic campaign: the sun direction
+in the sensor frame is ``R_sun_from_mount · R_rot_from_mount(θ)ᵀ · d_sun`` with the *true*
+turntable kinematics, the camera is the rig's true intrinsics and Brown distortion, and the
+simulator is a uniform disk of ``collimation_full_angle_arcmin``. Rendering is done by
+:class:`rigsim.render.cube_mirror.sun_sensor.SunSpotRenderer` (fixed crop window, mi.traverse updates), the
+detector by :func:`rigsim.detector.apply_detector`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+import numpy as np
+from rigsim.render.backend import ensure_variant
+from rigsim.render.camera import PinholeCamera
+from rigsim.render.plugins import PINHOLE_PLUGIN, register_sensors
+from rigsim.errors import GeometryWarning
+from dataclasses import dataclass
+from rigsim.detector import apply_detector
+from rigsim.optics.camera import PinholeBrown
+from rigsim.render.frame import build_sidecar, write_frame
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
+
+__all__ = ['SUN_FULL_ANGLE_RAD', 'SIMULATOR_32ARCMIN_RAD', 'GeometryWarning', 'SpotWindow', 'SunSpotRenderer', 'disk_directions', 'spot_outline', 'spot_truth', 'spot_geometry_flags', 'window_centroid']
+
+SUN_FULL_ANGLE_RAD = math.radians(0.53)
+SIMULATOR_32ARCMIN_RAD = math.radians(32.0 / 60.0)
+_GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+
+
+def _check_spp(spp, sampler: str) -> None:
+    if int(spp) != spp or spp < 1:
+        raise ValueError(f"spp = {spp!r}: must be an integer >= 1")
+    spp = int(spp)
+    if sampler == "ldsampler" and (spp & (spp - 1) or (spp.bit_length() - 1) % 2):
+        raise ValueError(f"spp = {spp!r}: the ldsampler needs a power of 4 (e.g. 256, 1024, "
+                         "4096); Mitsuba would silently round it")
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64).reshape(3)
+    n = np.linalg.norm(v)
+    if not (np.isfinite(n) and n > 0):
+        raise ValueError(f"sun direction {v!r} must be a finite non-zero 3-vector")
+    return v / n
+
+
+def _basis(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing s to a right-handed orthonormal frame."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(s[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(s, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(s, e1)
+
+
+def disk_directions(sun_dir, full_angle_rad: float, n: int) -> np.ndarray:
+    """``n`` unit directions filling the cone of the given full angle with equal solid angle each.
+
+    Deterministic sunflower quadrature: ring position uniform in (1 - cos phi), azimuth stepped by
+    the golden angle. Each point carries solid angle ``2 pi (1 - cos(a/2)) / n``.
+    """
+    s = _unit(sun_dir)
+    e1, e2 = _basis(s)
+    i = np.arange(n, dtype=np.float64)
+    t = (i + 0.5) / n
+    cos_phi = 1.0 - t * (1.0 - math.cos(full_angle_rad / 2.0))
+    sin_phi = np.sqrt(np.maximum(0.0, 1.0 - cos_phi * cos_phi))
+    psi = i * _GOLDEN_ANGLE
+    return (cos_phi[:, None] * s + sin_phi[:, None] * (np.cos(psi)[:, None] * e1
+                                                      + np.sin(psi)[:, None] * e2))
+
+
+def spot_outline(camera: PinholeCamera, sun_dir, full_angle_rad: float, n: int = 90):
+    """Projected rim of the disk: (n, 2) pixel positions and a validity mask."""
+    s = _unit(sun_dir)
+    e1, e2 = _basis(s)
+    psi = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    h = full_angle_rad / 2.0
+    d = math.cos(h) * s + math.sin(h) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    return camera.project(d)
+
+
+def spot_truth(camera: PinholeCamera, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
+               response: str = "flux") -> dict:
+    """Exact (quadrature) description of the spot image of a uniform disk. Pure numpy.
+
+    Returns pixel positions (u, v) in the OpenCV convention:
+
+    * ``center_uv``: distorted projection of the disk centre (the sun direction itself);
+    * ``mean_uv``: flux-weighted mean of the projection over the disk = centroid of the continuous
+      image (weight per solid angle: cos(theta) for ``flux``, |dA/dOmega| for ``radiance``);
+    * ``pixel_centroid_uv``: the first moment of the pixel-integrated image (each quadrature point
+      binned into the pixel that contains it) -- what a perfect renderer's window centroid is;
+    * ``disk_bias_px`` = mean - centre, ``pixel_bias_px`` = pixel_centroid - mean;
+    * ``relative_flux``: flux relative to the same disk on axis (= <cos theta> for ``flux``).
+    """
+    d = disk_directions(sun_dir, full_angle_rad, n)
+    uv, valid = camera.project(d)
+    c_uv, c_valid = camera.project(_unit(sun_dir)[None, :])
+    if not (np.all(valid) and c_valid[0]):
+        return {"valid": False, "center_uv": c_uv[0].tolist() if c_valid[0] else None}
+    if response == "flux":
+        w = d[:, 2].copy()
+    elif response == "radiance":
+        x, y = d[:, 0] / d[:, 2], d[:, 1] / d[:, 2]
+        a, b, c, dd = camera.distort_jacobian(x, y)
+        w = (a * dd - b * c) / d[:, 2] ** 3
+    else:
+        raise ValueError(f"response = {response!r}: must be 'flux' or 'radiance'")
+    wsum = w.sum()
+    mean = (w[:, None] * uv).sum(axis=0) / wsum
+    binned = np.floor(uv + 0.5)
+    pix = (w[:, None] * binned).sum(axis=0) / wsum
+    return {
+        "valid": True,
+        "center_uv": c_uv[0].tolist(),
+        "mean_uv": mean.tolist(),
+        "pixel_centroid_uv": pix.tolist(),
+        "disk_bias_px": (mean - c_uv[0]).tolist(),
+        "pixel_bias_px": (pix - mean).tolist(),
+        "relative_flux": float(wsum / n),
+        "quadrature_points": int(n),
+    }
+
+
+def window_centroid(image: np.ndarray, origin_uv=(0, 0)) -> np.ndarray:
+    """First moment (u, v) of a non-negative image in detector pixel coordinates."""
+    img = np.asarray(image, dtype=np.float64)
+    tot = img.sum()
+    if not tot > 0:
+        return np.array([np.nan, np.nan])
+    v, u = np.indices(img.shape)
+    return np.array([(img * u).sum() / tot + origin_uv[0], (img * v).sum() / tot + origin_uv[1]])
+
+
+def spot_geometry_flags(camera: PinholeCamera, sun_dir, full_angle_rad: float,
+                        window: tuple[int, int, int, int] | None = None,
+                        margin_px: float = 1.0) -> dict:
+    """Geometry flags for a spot, from the projected rim.
+
+    ``spot_outside_model`` (behind the camera or beyond the distortion model's domain),
+    ``spot_off_detector`` (no part on the detector), ``spot_cut_by_edge`` (partly off),
+    ``spot_exceeds_window`` (rim closer than ``margin_px`` to the window edge; flux would be lost).
+    ``window`` is (u0, v0, width, height) in detector pixels.
+    """
+    s = _unit(sun_dir)
+    rim, rim_ok = spot_outline(camera, s, full_angle_rad)
+    c_uv, c_ok = camera.project(s[None, :])
+    flags = {"spot_outside_model": bool(not (np.all(rim_ok) and c_ok[0]))}
+    if flags["spot_outside_model"]:
+        flags.update(spot_off_detector=True, spot_cut_by_edge=False, spot_exceeds_window=False)
+        return flags
+    on = camera.on_detector(rim)
+    c_on = bool(camera.on_detector(c_uv)[0])
+    lo, hi = rim.min(axis=0), rim.max(axis=0)
+    overlaps = (hi[0] >= -0.5 and lo[0] < camera.width - 0.5 and hi[1] >= -0.5
+                and lo[1] < camera.height - 0.5)
+    flags["spot_off_detector"] = bool(not (np.any(on) or c_on or overlaps))
+    flags["spot_cut_by_edge"] = bool(not flags["spot_off_detector"] and not np.all(on))
+    if window is not None:
+        u0, v0, w, h = window
+        flags["spot_exceeds_window"] = bool(
+            lo[0] < u0 - 0.5 + margin_px or hi[0] > u0 + w - 0.5 - margin_px
+            or lo[1] < v0 - 0.5 + margin_px or hi[1] > v0 + h - 0.5 - margin_px)
+    else:
+        flags["spot_exceeds_window"] = False
+    flags["spot_extent_px"] = [float(hi[0] - lo[0]), float(hi[1] - lo[1])]
+    return flags
+
+
+@dataclass
+class SpotWindow:
+    """One rendered crop window. ``image[j, i]`` is detector pixel (origin_uv[0] + i, origin_uv[1] + j)."""
+
+    image: np.ndarray
+    origin_uv: tuple[int, int]
+    sun_dir_cam: np.ndarray
+    center_uv: np.ndarray | None
+    flags: dict
+    spp: int
+    seed: int
+    variant: str
+    seconds: float
+    settings: dict = field(default_factory=dict)
+
+    def paste_into(self, frame: np.ndarray) -> np.ndarray:
+        """Add the window into a full detector frame (in place; parts off the detector dropped)."""
+        H, W = frame.shape
+        u0, v0 = self.origin_uv
+        h, w = self.image.shape
+        a0, b0 = max(0, u0), max(0, v0)
+        a1, b1 = min(W, u0 + w), min(H, v0 + h)
+        if a1 > a0 and b1 > b0:
+            frame[b0:b1, a0:a1] += self.image[b0 - v0:b1 - v0, a0 - u0:a1 - u0]
+        return frame
+
+    def centroid(self) -> np.ndarray:
+        return window_centroid(self.image, self.origin_uv)
+
+
+class SunSpotRenderer:
+    """Render a finite sun disk through the distorted pinhole camera, window by window.
+
+    Build once (compiles on the first frame), then call :meth:`render` per sun direction; poses
+    change through ``mi.traverse`` only. ``sun_dir_cam`` is the unit vector from the camera
+    towards the sun in the camera frame (OpenCV axes: x right, y down, z along the optical axis).
+    """
+
+    def __init__(self, camera: PinholeCamera, *, full_angle_rad: float = SUN_FULL_ANGLE_RAD,
+                 window_px: int = 32, spp: int = 1024, spot_photons: float = 1.0e6,
+                 sampler: str = "ldsampler", response: str = "flux", distance_mm: float = 1000.0):
+        if not (0.0 < full_angle_rad < math.radians(20.0)):
+            raise ValueError(f"full_angle_rad = {full_angle_rad!r}: must be in (0, 0.349) rad")
+        if int(window_px) != window_px or not (4 <= window_px <= 4096):
+            raise ValueError(f"window_px = {window_px!r}: must be an integer in [4, 4096]")
+        _check_spp(spp, sampler)
+        if not (spot_photons > 0 and math.isfinite(spot_photons)):
+            raise ValueError(f"spot_photons = {spot_photons!r}: must be a finite number > 0")
+        if response not in ("flux", "radiance"):
+            raise ValueError(f"response = {response!r}: must be 'flux' or 'radiance'")
+        self.camera = camera
+        self.full_angle_rad = float(full_angle_rad)
+        self.window_px = int(window_px)
+        self.spp = int(spp)
+        self.spot_photons = float(spot_photons)
+        self.sampler = sampler
+        self.response = response
+        self.distance_mm = float(distance_mm)
+        self.variant = ensure_variant()
+        register_sensors()
+        on_axis = 2.0 * math.tan(full_angle_rad / 2.0) * max(camera.fx, camera.fy)
+        if on_axis + 2.0 > window_px:
+            raise ValueError(f"window_px = {window_px} is too small for a spot of {on_axis:.1f} px "
+                             "diameter on axis (need diameter + 2 px margin)")
+        self._scene, self._params = self._build(window_px, window_px, self.spp)
+        self._full = None  # (scene, params, spp) for render_full, built on demand
+
+    # -- scene --------------------------------------------------------------------------------
+    def _radiance(self) -> float:
+        omega = 2.0 * math.pi * (1.0 - math.cos(self.full_angle_rad / 2.0))
+        return self.spot_photons / (self.camera.fx * self.camera.fy * omega)
+
+    def _build(self, w: int, h: int, spp: int):
+        import mitsuba as mi
+
+        cam = self.camera
+        scene = mi.load_dict({
+            "type": "scene",
+            "integrator": {"type": "path", "max_depth": 1},
+            "sensor": {
+                "type": PINHOLE_PLUGIN,
+                "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+                "k1": cam.k1, "k2": cam.k2, "k3": cam.k3, "p1": cam.p1, "p2": cam.p2,
+                "detector_width": cam.width, "detector_height": cam.height,
+                "window_u0": 0, "window_v0": 0, "response": self.response,
+                "film": {"type": "hdrfilm", "width": w, "height": h,
+                         "rfilter": {"type": "box"}, "pixel_format": "luminance"},
+                "sampler": {"type": self.sampler, "sample_count": spp},
+            },
+            "sun": {
+                "type": "disk",
+                "to_world": mi.ScalarTransform4f(self._disk_matrix(np.array([0.0, 0.0, 1.0]))),
+                "emitter": {"type": "area", "radiance": {"type": "uniform",
+                                                         "value": self._radiance()}},
+            },
+        })
+        return scene, mi.traverse(scene)
+
+    def _disk_matrix(self, s: np.ndarray) -> np.ndarray:
+        """Disk (local z-normal, unit radius) -> world: centred at D s, facing the pinhole."""
+        e1, e2 = _basis(s)
+        rho = self.distance_mm * math.tan(self.full_angle_rad / 2.0)
+        M = np.eye(4)
+        # columns: local x, y, z (normal); z must point back to the camera (-s), right-handed
+        M[:3, 0] = e2 * rho
+        M[:3, 1] = e1 * rho
+        M[:3, 2] = -s
+        M[:3, 3] = s * self.distance_mm
+        return M
+
+    def window_origin_for(self, center_uv) -> tuple[int, int]:
+        half = self.window_px // 2
+        return (int(math.floor(center_uv[0] + 0.5)) - half,
+                int(math.floor(center_uv[1] + 0.5)) - half)
+
+    def _set_pose(self, params, s: np.ndarray, origin: tuple[int, int]) -> None:
+        import mitsuba as mi
+
+        params["sun.to_world"] = mi.Transform4f(self._disk_matrix(s))
+        params["sensor.window_origin"] = mi.Point2f(float(origin[0]), float(origin[1]))
+        params.update()
+
+    # -- rendering ----------------------------------------------------------------------------
+    def render(self, sun_dir_cam, seed: int = 0) -> SpotWindow:
+        """Render the crop window around the predicted spot. Geometry problems become flags
+        (and a :class:`GeometryWarning`); a spot outside the model/detector is not rendered."""
+        import mitsuba as mi
+
+        s = _unit(sun_dir_cam)
+        t0 = time.perf_counter()
+        c_uv, c_ok = self.camera.project(s[None, :])
+        center = c_uv[0] if c_ok[0] else None
+        W = self.window_px
+        origin = self.window_origin_for(center) if center is not None else (0, 0)
+        flags = spot_geometry_flags(self.camera, s, self.full_angle_rad,
+                                    window=(origin[0], origin[1], W, W))
+        settings = self.settings()
+        if flags["spot_outside_model"] or flags["spot_off_detector"]:
+            warnings.warn(f"sun direction {s.round(6).tolist()} puts the spot "
+                          f"{'outside the camera model' if flags['spot_outside_model'] else 'off the detector'}"
+                          "; nothing rendered", GeometryWarning, stacklevel=2)
+            return SpotWindow(np.zeros((W, W)), origin, s, center, flags, self.spp, int(seed),
+                              self.variant, time.perf_counter() - t0, settings)
+        if flags["spot_cut_by_edge"]:
+            warnings.warn("the spot is cut by the detector edge; its centroid is biased",
+                          GeometryWarning, stacklevel=2)
+        if flags["spot_exceeds_window"]:
+            warnings.warn(f"the spot ({flags['spot_extent_px']} px) does not fit the "
+                          f"{W} px window; flux is lost", GeometryWarning, stacklevel=2)
+        self._set_pose(self._params, s, origin)
+        img = mi.render(self._scene, seed=int(seed), spp=self.spp)
+        arr = np.array(img, dtype=np.float64)
+        arr = arr[..., 0] if arr.ndim == 3 else arr
+        return SpotWindow(arr, origin, s, center, flags, self.spp, int(seed), self.variant,
+                          time.perf_counter() - t0, settings)
+
+    def render_frame(self, sun_dir_cam, seed: int = 0) -> tuple[np.ndarray, SpotWindow]:
+        """Full detector frame (H, W) of expected photons: the window composited on black.
+
+        Exact for this scene (nothing but the disk emits) as long as the spot fits the window
+        (``flags['spot_exceeds_window']`` is False).
+        """
+        win = self.render(sun_dir_cam, seed)
+        frame = np.zeros((self.camera.height, self.camera.width))
+        return win.paste_into(frame), win
+
+    def render_full(self, sun_dir_cam, seed: int = 0, spp: int = 16) -> np.ndarray:
+        """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks."""
+        import mitsuba as mi
+
+        _check_spp(spp, self.sampler)
+        if self._full is None or self._full[2] != spp:
+            scene, params = self._build(self.camera.width, self.camera.height, spp)
+            self._full = (scene, params, spp)
+        scene, params, _ = self._full
+        self._set_pose(params, _unit(sun_dir_cam), (0, 0))
+        arr = np.array(mi.render(scene, seed=int(seed), spp=spp), dtype=np.float64)
+        return arr[..., 0] if arr.ndim == 3 else arr
+
+    def truth(self, sun_dir_cam, n: int = 2_000_000) -> dict:
+        return spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n,
+                          response=self.response)
+
+    def settings(self) -> dict:
+        """Every render setting, for frame sidecars."""
+        return {
+            "primitive": "sun_spot",
+            "variant": self.variant,
+            "integrator": "path(max_depth=1)",
+            "sampler": self.sampler,
+            "spp": self.spp,
+            "window_px": self.window_px,
+            "response": self.response,
+            "full_angle_rad": self.full_angle_rad,
+            "source_distance_mm": self.distance_mm,
+            "spot_photons": self.spot_photons,
+            "camera": self.camera.as_dict(),
+        }
+
+# ------------------------------------------------------------------------------------------ (from sun_sensor.py)
+@dataclass
+class SunSensorFrame:
+    dn: np.ndarray  # (H, W) uint16 — or only the crop window when rendered with full_frame=False
+    photons_window: SpotWindow
+    sidecar: dict
+    seconds: float
+    dn_origin_uv: tuple[int, int] = (0, 0)  # detector pixel of dn[0, 0]
+
+    def write(self, path) -> tuple:
+        return write_frame(path, self.dn, self.sidecar)
+
+
+def default_spot_photons(rig: CubeMirrorRig) -> float:
+    """Photons per spot that put the on-axis peak pixel near half the full well."""
+    ss = rig.sun_sensor
+    det = ss.detector
+    d_px = 2 * math.tan(math.radians(rig.sun_simulator.collimation_full_angle_arcmin / 60) / 2) * ss.fx_px
+    area_px = max(1.0, math.pi * d_px**2 / 4)
+    return 0.5 * det.full_well_e / det.quantum_efficiency * area_px
+
+
+class SunSensorScene:
+    """Render sun-sensor frames of a rig at turntable poses.
+
+    ``real``: the rig instance (default: the rig file's true errors). Poses are ``{label: rad}``
+    (true turntable angles; the sidecar records them as the truth).
+    """
+
+    def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, *, window_px: int = 32, spp: int = 1024,
+                 spot_photons: float | None = None):
+        self.rig = rig
+        self.real = real if real is not None else realization_from_rig(rig)
+        self.analytic_camera = PinholeBrown.from_sun_sensor(rig.sun_sensor)
+        self.camera = PinholeCamera.from_intrinsics(self.analytic_camera)
+        self.full_angle_rad = math.radians(rig.sun_simulator.collimation_full_angle_arcmin / 60.0)
+        self.spot_photons = float(spot_photons) if spot_photons is not None else default_spot_photons(rig)
+        self.renderer = SunSpotRenderer(self.camera, full_angle_rad=self.full_angle_rad, window_px=window_px,
+                                        spp=spp, spot_photons=self.spot_photons)
+
+    def sun_dir_cam(self, pose_rad: dict) -> np.ndarray:
+        R = self.real.turntable.R_rot_from_mount(pose_rad)
+        s = self.real.R_sun_from_mount @ (R.T @ self.real.d_sun_rot)
+        return s / np.linalg.norm(s)
+
+    def render(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False, truth_points: int = 400_000,
+               full_frame: bool = True) -> SunSensorFrame:
+        """Render one frame. ``full_frame=False`` digitises only the crop window (same pixels, same
+        fixed pattern, same noise statistics as the full frame; 10× faster for sweeps)."""
+        t0 = time.perf_counter()
+        s = self.sun_dir_cam(pose_rad)
+        ss = self.rig.sun_sensor
+        if full_frame:
+            photons, win = self.renderer.render_frame(s, seed=seed)
+            det = apply_detector(photons, ss.detector, seed=seed, noiseless=noiseless)
+            origin = (0, 0)
+        else:
+            win = self.renderer.render(s, seed=seed)
+            origin = tuple(win.origin_uv)
+            det = apply_detector(win.image, ss.detector, seed=seed, noiseless=noiseless, origin_uv=origin,
+                                 detector_shape=(ss.resolution_px[1], ss.resolution_px[0]))
+        truth = self.renderer.truth(s, n=truth_points) if not (win.flags.get("spot_off_detector") or win.flags.get("spot_outside_model")) else {"valid": False}
+        flags = dict(win.flags)
+        sidecar = build_sidecar(
+            truth={
+                "rig": self.rig.name,
+                "sun_dir_cam": s.tolist(),
+                "spot": truth,
+                "camera_true": self.camera.as_dict(),
+                "R_sun_from_mount": self.real.R_sun_from_mount.tolist(),
+            },
+            render={**win.settings, "noiseless": noiseless, "window_origin_uv": list(win.origin_uv)},
+            detector_frame=det,
+            geometry_flags=flags,
+            pose={k: math.degrees(v) for k, v in pose_rad.items()},
+            seed=seed,
+        )
+        return SunSensorFrame(det.dn, win, sidecar, time.perf_counter() - t0, origin)
+
+
+def sun_sensor_export_dict(scene: SunSensorScene, pose_rad: dict, spp: int = 64) -> tuple[dict, list[str]]:
+    """Built-in-plugins-only scene dict of the sun-sensor view (for XML export).
+
+    The plain ``mitsuba`` command cannot load the distorted ``rigsim_pinhole`` sensor, so the
+    export uses the built-in ``perspective`` sensor with the same fx and principal point and no
+    distortion (and square pixels): its spot sits at the *undistorted* projection.
+    """
+    from rigsim.render.export import cv_to_mitsuba_camera, perspective_from_intrinsics
+
+    cam = scene.camera
+    s = scene.sun_dir_cam(pose_rad)
+    sensor = perspective_from_intrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
+    sensor.update({
+        "to_world": cv_to_mitsuba_camera(np.eye(3), np.zeros(3)),
+        "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height, "pixel_format": "luminance",
+                 "rfilter": {"type": "box"}},
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+    })
+    r = scene.renderer
+    d = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 1},
+        "sensor": sensor,
+        "sun": {"type": "disk", "to_world": r._disk_matrix(s),
+                "emitter": {"type": "area", "radiance": {"type": "uniform", "value": r._radiance()}}},
+    }
+    x = (s[0] / s[2], s[1] / s[2])
+    notes = [
+        f"rigsim export: sun-sensor view of rig '{scene.rig.name}' at pose (deg) "
+        + ", ".join(f"{k}={math.degrees(v):.4f}" for k, v in pose_rad.items()),
+        "units: millimetres; camera frame = world frame (OpenCV axes: x right, y down, z forward)",
+        "the built-in perspective sensor replaces rigsim's distorted pinhole: NO Brown distortion here",
+        f"expected spot centre (undistorted projection, OpenCV pixel convention): "
+        f"u={cam.fx * x[0] + cam.cx:.4f}, v={cam.fy * x[1] + cam.cy:.4f}",
+    ]
+    return d, notes

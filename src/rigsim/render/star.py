@@ -1,0 +1,335 @@
+"""Star-field frames: truth → expected photons (analytic or Mitsuba) → detector DN.
+
+Rendering only: nothing here extracts, identifies or estimates. A :class:`StarFrame` carries
+the 16-bit frame and the truth it was rendered from (which the estimators never read).
+
+Fast analytic star-frame renderer: pixel-integrated Gaussian PSFs splatted in numpy.
+
+A star of ``photons`` centred at (u, v) puts into pixel (i, j) (which covers [i−½, i+½] ×
+[j−½, j+½], rigsim's OpenCV convention) exactly
+
+    photons · ½[erf((i+½−u)/(√2σ)) − erf((i−½−u)/(√2σ))] · ½[erf((j+½−v)/(√2σ)) − erf((j−½−v)/(√2σ))]
+
+(the Gaussian integrated over the pixel; separable). Each star is splatted over a square of
+half-width ⌈``nsigma``·σ⌉ px (the flux beyond 5σ is 6e-7 of the total, and symmetric); pixels
+off the detector are dropped. Motion smear = the sum of K sub-exposure Gaussians. Output:
+expected photons per pixel (float64, ``img[v, u]``), background included — feed it to
+:func:`rigsim.detector.apply_detector`.
+
+Star frames through Mitsuba 3: a sky patch with the PSF baked in, seen through the distorted
+``rigsim_pinhole`` sensor. Mitsuba is imported lazily (only when a renderer is built).
+
+Scene (millimetres, camera frame = world frame, OpenCV axes):
+
+* **Sky patch**: an emissive ``rectangle`` perpendicular to the boresight at distance D, facing
+  the camera. A plane at z = D is seen by a pinhole exactly as the *undistorted* image scaled
+  by f/D: world (X, Y, D) ↦ undistorted pixel (f X/D + cx, f Y/D + cy). Its radiance is a
+  bitmap (``bilinear``, ``raw``) sampled ``oversample`` times per pixel in undistorted pixel
+  coordinates, holding the ideal image: per star a point-sampled Gaussian of σ_u = σ/√det J
+  (J the distortion's Jacobian at the star, so the distorted image has σ ≈ σ px) with integral
+  photons / det J (so the star delivers its photons through the distortion's area change),
+  one Gaussian per smear sub-step.
+* **Sensor**: ``rigsim_pinhole`` with the true fx, fy, cx, cy, k1, k2, p1, p2 and
+  ``response='radiance'`` (a pixel records the mean radiance over its footprint): the Brown
+  distortion is applied per ray by the sensor, independently of the numpy camera model.
+* **Windows** (default): a ``window_px``² film moved to every star by ``window_origin`` (a
+  traversable parameter: no recompile), ``ldsampler`` at ``spp``; windows are pasted into a black
+  frame by assignment (overlapping windows hold the same scene). ``mode='full'`` renders the whole
+  detector instead. The uniform sky background is added in numpy afterwards.
+
+Per frame only the bitmap's data and the window origin change, through ``mi.traverse``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+import numpy as np
+from rigsim.detector import apply_detector
+from rigsim.truth.star import StarField, StarSky
+from scipy.special import erf
+import time
+
+__all__ = ['StarFrame', 'render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
+
+@dataclass
+class StarFrame:
+    index: int
+    time_s: float
+    dn: np.ndarray                 # uint16 (H, W), img[v, u]
+    truth: StarField
+    seed: int
+    renderer: str
+    detector_meta: dict
+    saturated: np.ndarray
+    photons: np.ndarray | None = None
+    settings: dict = field(default_factory=dict)
+
+
+def frame_seed(seed: int, k: int) -> int:
+    """Detector-noise seed of frame k of a run with ``seed`` (independent streams per frame)."""
+    return int(np.random.SeedSequence([int(seed), 0x57A4, int(k)]).generate_state(1, np.uint32)[0])
+
+
+def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, time_s: float = 0.0,
+                 omega_cam_rad_s=None, substeps: int = 1, renderer: str = "analytic",
+                 noiseless: bool = False, keep_photons: bool = False, mitsuba=None) -> StarFrame:
+    """One frame. ``renderer``: 'analytic' (default) or 'mitsuba' (pass a
+    :class:`rigsim.render.star.MitsubaStarRenderer` as ``mitsuba``)."""
+    s = sky.rig.sensor
+    sigma = s.psf_sigma_px
+    margin = -math.ceil(5.0 * sigma)  # stars just off the detector still put their wings on it
+    truth = sky.field(R_cam_from_icrs, omega_cam_rad_s=omega_cam_rad_s, substeps=substeps, margin_px=margin)
+    if renderer == "analytic":
+        photons = render_stars(truth.uv_substeps, truth.photons, truth.shape_hw, sigma,
+                               background=truth.background_photons_per_px)
+        settings = {"renderer": "analytic", "psf": "pixel-integrated gaussian", "sigma_px": sigma,
+                    "substeps": int(substeps)}
+    elif renderer == "mitsuba":
+        if mitsuba is None:
+            raise ValueError("renderer='mitsuba' needs a MitsubaStarRenderer (mitsuba=...)")
+        photons = mitsuba.render(truth, seed=seed)
+        settings = {"renderer": "mitsuba", **mitsuba.settings()}
+    else:
+        raise ValueError(f"renderer = {renderer!r}: allowed 'analytic' or 'mitsuba'")
+    det = apply_detector(photons, s.detector, seed=seed, noiseless=noiseless)
+    return StarFrame(index=int(index), time_s=float(time_s), dn=det.dn, truth=truth, seed=int(seed),
+                     renderer=renderer, detector_meta=det.meta, saturated=det.saturated,
+                     photons=photons if keep_photons else None, settings=settings)
+
+
+def render_sequence(sky: StarSky, seq, *, seed: int, renderer: str = "analytic", noiseless: bool = False,
+                    keep_photons: bool = False, mitsuba=None, substeps: int | None = None, progress=None):
+    """Render every frame of an :class:`rigsim.truth.star.AttitudeSequence` (a generator)."""
+    K = sky.rig.sequence.smear_substeps if substeps is None else int(substeps)
+    for k in range(len(seq)):
+        fr = render_frame(sky, seq.R_cam_from_icrs[k], seed=frame_seed(seed, k), index=k,
+                          time_s=float(seq.times_s[k]), omega_cam_rad_s=seq.omega_cam_rad_s[k], substeps=K,
+                          renderer=renderer, noiseless=noiseless, keep_photons=keep_photons, mitsuba=mitsuba)
+        if progress is not None:
+            progress.update(1)
+        yield fr
+
+# ------------------------------------------------------------------------------------------ (from analytic.py)
+def pixel_fractions_1d(centres: np.ndarray, lo: np.ndarray, n: int, sigma_px: float) -> np.ndarray:
+    """(M, n) fractions of a unit Gaussian (centre c) in pixels lo, lo+1, …, lo+n−1."""
+    edges = lo[:, None] + np.arange(n + 1)[None, :] - 0.5
+    c = erf((edges - centres[:, None]) * (1.0 / (math.sqrt(2.0) * sigma_px)))
+    return 0.5 * np.diff(c, axis=1)
+
+
+def render_stars(uv, photons, shape_hw: tuple[int, int], sigma_px: float, *, background: float = 0.0,
+                 nsigma: float = 5.0) -> np.ndarray:
+    """Expected photons per pixel of a star field.
+
+    ``uv``: (N, 2) or (N, K, 2) centres (K sub-exposures sharing each star's photons equally);
+    ``photons``: (N,) photons per star over the exposure; ``background``: photons per pixel.
+    """
+    H, W = int(shape_hw[0]), int(shape_hw[1])
+    if not (sigma_px > 0 and math.isfinite(sigma_px)):
+        raise ValueError(f"sigma_px = {sigma_px!r}: must be a finite number > 0")
+    uv = np.asarray(uv, dtype=float)
+    if uv.ndim == 2:
+        uv = uv[:, None, :]
+    ph = np.asarray(photons, dtype=float)
+    if uv.ndim != 3 or uv.shape[2] != 2 or ph.shape != uv.shape[:1]:
+        raise ValueError(f"uv must be (N, 2) or (N, K, 2) and photons (N,), got {uv.shape} and {ph.shape}")
+    N, K = uv.shape[:2]
+    img = np.full(H * W, float(background))
+    if N == 0:
+        return img.reshape(H, W)
+    uv = uv.reshape(N * K, 2)
+    ph = np.repeat(ph / K, K)
+    ok = np.all(np.isfinite(uv), axis=1) & (ph > 0)
+    uv, ph = uv[ok], ph[ok]
+    r = int(math.ceil(nsigma * sigma_px))
+    n = 2 * r + 1
+    lo = np.floor(uv + 0.5).astype(np.int64) - r  # (M, 2): first pixel of each star's box
+    fu = pixel_fractions_1d(uv[:, 0], lo[:, 0], n, sigma_px)
+    fv = pixel_fractions_1d(uv[:, 1], lo[:, 1], n, sigma_px)
+    vals = (ph[:, None, None] * fv[:, :, None] * fu[:, None, :]).ravel()
+    cols = lo[:, 0, None, None] + np.arange(n)[None, None, :]
+    rows = lo[:, 1, None, None] + np.arange(n)[None, :, None]
+    cols, rows = np.broadcast_arrays(cols, rows)
+    cols, rows = cols.ravel(), rows.ravel()
+    inside = (cols >= 0) & (cols < W) & (rows >= 0) & (rows < H)
+    if not inside.all():
+        vals, cols, rows = vals[inside], cols[inside], rows[inside]
+    img += np.bincount(rows * W + cols, weights=vals, minlength=H * W)
+    return img.reshape(H, W)
+
+# ------------------------------------------------------------------------------------------ (from render_mitsuba.py)
+class MitsubaStarRenderer:
+    def __init__(self, sensor, *, oversample: int = 2, window_px: int = 16, spp: int = 256,
+                 mode: str = "windows", distance_mm: float = 1000.0, margin_px: int = 12):
+        from rigsim.render.backend import ensure_variant
+        from rigsim.render.camera import PinholeCamera
+        from rigsim.render.plugins import register_sensors
+
+        if mode not in ("windows", "full"):
+            raise ValueError(f"mode = {mode!r}: allowed 'windows' or 'full'")
+        if int(oversample) != oversample or not 1 <= oversample <= 8:
+            raise ValueError(f"oversample = {oversample!r}: allowed integers 1..8")
+        if spp < 1 or (spp & (spp - 1)) or (spp.bit_length() - 1) % 2:
+            raise ValueError(f"spp = {spp!r}: must be a power of 4 (ldsampler), e.g. 64, 256, 1024")
+        if not 8 <= window_px <= 256:
+            raise ValueError(f"window_px = {window_px!r}: allowed 8..256")
+        self.sensor = sensor
+        self.sigma_px = sensor.psf_sigma_px
+        if window_px < 2 * math.ceil(5 * self.sigma_px) + 4:
+            raise ValueError(f"window_px = {window_px} is too small for a PSF of σ = {self.sigma_px:.2f} px "
+                             f"(need ≥ {2 * math.ceil(5 * self.sigma_px) + 4})")
+        self.cam = sensor.camera()
+        self.pcam = PinholeCamera.from_intrinsics(self.cam)
+        self.variant = ensure_variant()
+        register_sensors()
+        self.oversample = int(oversample)
+        self.window_px = int(window_px)
+        self.spp = int(spp)
+        self.mode = mode
+        self.D = float(distance_mm)
+        W, H = self.cam.width, self.cam.height
+        # undistorted bounding box of the detector (+ margin for PSF wings / off-detector stars)
+        edge = np.concatenate([
+            np.stack([np.linspace(-0.5, W - 0.5, 65), np.full(65, -0.5)], 1),
+            np.stack([np.linspace(-0.5, W - 0.5, 65), np.full(65, H - 0.5)], 1),
+            np.stack([np.full(65, -0.5), np.linspace(-0.5, H - 0.5, 65)], 1),
+            np.stack([np.full(65, W - 0.5), np.linspace(-0.5, H - 0.5, 65)], 1)])
+        xn = self.cam.pixel_to_normalized(edge)
+        Uu = xn[:, 0] * self.cam.fx + self.cam.cx
+        Vu = xn[:, 1] * self.cam.fy + self.cam.cy
+        self.U0 = math.floor(Uu.min()) - margin_px
+        self.V0 = math.floor(Vu.min()) - margin_px
+        self.tex_w = (math.ceil(Uu.max()) + margin_px - self.U0) * self.oversample
+        self.tex_h = (math.ceil(Vu.max()) + margin_px - self.V0) * self.oversample
+        self._build()
+
+    # ------------------------------------------------------------------ scene
+    def _patch_matrix(self) -> np.ndarray:
+        """Rectangle [-1,1]² → world; texel column i ↦ +X, row 0 (after the flip) ↦ smallest Y."""
+        s = 1.0 / self.oversample
+        U1 = self.U0 + self.tex_w * s
+        V1 = self.V0 + self.tex_h * s
+        cam = self.cam
+        X0, X1 = (self.U0 - cam.cx) / cam.fx * self.D, (U1 - cam.cx) / cam.fx * self.D
+        Y0, Y1 = (self.V0 - cam.cy) / cam.fy * self.D, (V1 - cam.cy) / cam.fy * self.D
+        M = np.eye(4)
+        # 180° about x (keeps det > 0) so that the emitting side (+z local) faces the camera
+        M[0, 0] = (X1 - X0) / 2.0
+        M[1, 1] = -(Y1 - Y0) / 2.0
+        M[2, 2] = -1.0
+        M[:3, 3] = [(X0 + X1) / 2.0, (Y0 + Y1) / 2.0, self.D]
+        return M
+
+    def _build(self):
+        import mitsuba as mi
+
+        cam = self.cam
+        w = self.window_px if self.mode == "windows" else cam.width
+        h = self.window_px if self.mode == "windows" else cam.height
+        tex = mi.TensorXf(np.zeros((self.tex_h, self.tex_w, 1), dtype=np.float32))
+        self.scene = mi.load_dict({
+            "type": "scene",
+            "integrator": {"type": "path", "max_depth": 1},
+            "sensor": {
+                "type": "rigsim_pinhole", "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+                "k1": cam.k1, "k2": cam.k2, "k3": cam.k3, "p1": cam.p1, "p2": cam.p2,
+                "detector_width": cam.width, "detector_height": cam.height,
+                "window_u0": 0, "window_v0": 0, "response": "radiance",
+                "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"},
+                         "pixel_format": "luminance"},
+                "sampler": {"type": "ldsampler", "sample_count": self.spp},
+            },
+            "sky": {
+                "type": "rectangle",
+                "to_world": mi.ScalarTransform4f(self._patch_matrix()),
+                "emitter": {"type": "area", "radiance": {"type": "bitmap", "data": tex, "raw": True,
+                                                         "filter_type": "bilinear", "wrap_mode": "clamp"}},
+            },
+        })
+        self.params = mi.traverse(self.scene)
+
+    # ------------------------------------------------------------------ bitmap
+    def bake(self, truth) -> np.ndarray:
+        """The sky bitmap (tex_h, tex_w) of a :class:`rigsim.truth.star.StarField`, rows from the top."""
+        cam = self.cam
+        uvs = truth.uv_substeps  # (N, K, 2) distorted
+        N, K = uvs.shape[:2]
+        tex = np.zeros((self.tex_h, self.tex_w))
+        if N == 0:
+            return tex
+        xn = cam.pixel_to_normalized(uvs.reshape(-1, 2))
+        a, b, c, d = self.pcam.distort_jacobian(xn[:, 0], xn[:, 1])
+        detJ = a * d - b * c
+        ok = np.all(np.isfinite(xn), axis=1) & (detJ > 0)
+        U = xn[:, 0] * cam.fx + cam.cx
+        V = xn[:, 1] * cam.fy + cam.cy
+        amp = np.repeat(truth.photons / K, K) / np.where(ok, detJ, 1.0)
+        sig_u = self.sigma_px / np.sqrt(np.where(ok, detJ, 1.0))
+        os_ = self.oversample
+        # texel (i, j) centre in undistorted px: U0 + (i + ½)/os
+        ti = (U - self.U0) * os_ - 0.5
+        tj = (V - self.V0) * os_ - 0.5
+        r = int(math.ceil(6.0 * self.sigma_px * os_ / np.sqrt(detJ[ok].min() if ok.any() else 1.0))) + 1
+        n = 2 * r + 1
+        i0 = np.floor(ti).astype(np.int64) - r + 1
+        j0 = np.floor(tj).astype(np.int64) - r + 1
+        ar = np.arange(n)
+        gi = np.exp(-0.5 * ((i0[:, None] + ar[None, :] - ti[:, None]) / (sig_u * os_)[:, None]) ** 2)
+        gj = np.exp(-0.5 * ((j0[:, None] + ar[None, :] - tj[:, None]) / (sig_u * os_)[:, None]) ** 2)
+        norm = amp * os_ * os_ / (2.0 * math.pi * (sig_u * os_) ** 2)  # texel value = photons per undistorted px²
+        vals = (norm[:, None, None] * gj[:, :, None] * gi[:, None, :])[ok].ravel()
+        cols = (i0[:, None, None] + ar[None, None, :] + 0 * ar[None, :, None])[ok].ravel()
+        rows = (j0[:, None, None] + ar[None, :, None] + 0 * ar[None, None, :])[ok].ravel()
+        inside = (cols >= 0) & (cols < self.tex_w) & (rows >= 0) & (rows < self.tex_h)
+        tex += np.bincount(rows[inside] * self.tex_w + cols[inside], weights=vals[inside],
+                           minlength=self.tex_w * self.tex_h).reshape(self.tex_h, self.tex_w)
+        return tex
+
+    def _upload(self, tex: np.ndarray) -> None:
+        import mitsuba as mi
+
+        self.params["sky.emitter.radiance.data"] = mi.TensorXf(np.ascontiguousarray(tex[::-1, :, None], dtype=np.float32))
+        self.params.update()
+
+    def _set_window(self, u0: int, v0: int) -> None:
+        import mitsuba as mi
+
+        self.params["sensor.window_origin"] = mi.Point2f(float(u0), float(v0))
+        self.params.update()
+
+    # ------------------------------------------------------------------ render
+    def render(self, truth, seed: int = 0) -> np.ndarray:
+        """Expected photons per pixel (H, W) of one frame (background included)."""
+        import mitsuba as mi
+
+        t0 = time.perf_counter()
+        cam = self.cam
+        self._upload(self.bake(truth))
+        frame = np.zeros((cam.height, cam.width))
+        if self.mode == "full":
+            self._set_window(0, 0)
+            arr = np.array(mi.render(self.scene, seed=int(seed), spp=self.spp), dtype=np.float64)
+            frame = arr[..., 0] if arr.ndim == 3 else arr
+        else:
+            Wp = self.window_px
+            half = Wp // 2
+            for k, (u, v) in enumerate(truth.uv):
+                u0 = int(math.floor(u + 0.5)) - half
+                v0 = int(math.floor(v + 0.5)) - half
+                if u0 + Wp <= 0 or v0 + Wp <= 0 or u0 >= cam.width or v0 >= cam.height:
+                    continue
+                self._set_window(u0, v0)
+                arr = np.array(mi.render(self.scene, seed=int(seed) * 100003 + k, spp=self.spp), dtype=np.float64)
+                arr = arr[..., 0] if arr.ndim == 3 else arr
+                a0, b0 = max(0, u0), max(0, v0)
+                a1, b1 = min(cam.width, u0 + Wp), min(cam.height, v0 + Wp)
+                frame[b0:b1, a0:a1] = arr[b0 - v0:b1 - v0, a0 - u0:a1 - u0]
+        self.last_seconds = time.perf_counter() - t0
+        return frame + truth.background_photons_per_px
+
+    def settings(self) -> dict:
+        return {"variant": self.variant, "mode": self.mode, "spp": self.spp, "window_px": self.window_px,
+                "oversample": self.oversample, "texture_px": [self.tex_w, self.tex_h], "sampler": "ldsampler",
+                "integrator": "path(max_depth=1)", "sensor": "rigsim_pinhole(response=radiance)",
+                "sky_patch_distance_mm": self.D}

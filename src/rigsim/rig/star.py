@@ -1,0 +1,198 @@
+"""The star-sensor rig (seed 004): typed, immutable, loaded from ``scenes/star_sensor.toml``.
+
+One file describes the *true* instrument (what is rendered; estimators never see it), the sky
+model, the attitude sequence, and the settings of identification, calibration and the study.
+Units are in the field names. Errors in a file become :class:`rigsim.rig.load.RigError` naming
+the file, the field, the value and the allowed range.
+
+Camera conventions are rigsim's (docs/conventions.md): OpenCV pixel origin (pixel (0,0)'s centre
+at (0,0)), camera frame x right (+u), y down (+v), z boresight; Brown distortion in OpenCV's
+normalised form. Attitudes are ``R_cam_from_icrs``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from rigsim.detector.config import DetectorConfig
+from rigsim.optics.camera import PinholeBrown, brown_undistort, radial_r2_max
+
+__all__ = ["PSF", "StarSensor", "Sky", "Sequence", "Identification", "Calibration", "Study", "StarRig"]
+
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+Pair = Annotated[list[float], Field(min_length=2, max_length=2)]
+
+
+class PSF(_Model):
+    """Defocused point-spread function.
+
+    A star sensor is defocused on purpose so that a star covers a few pixels (sub-pixel
+    centroiding needs it). Geometrically the defocused image of a point is the aperture's blur
+    disk of diameter ``defocus_um / N`` (N = f / D); rigsim uses the circular Gaussian with the
+    same second moments (σ = blur radius / 2), combined in quadrature with the Gaussian
+    approximation of the Airy core (σ = 0.42 λ N). ``sigma_px`` overrides the computed width.
+    """
+
+    model: Literal["gaussian"] = "gaussian"
+    defocus_um: float = Field(100.0, ge=0.0, le=5000.0, description="detector distance from best focus")
+    wavelength_nm: float = Field(600.0, gt=200.0, le=2000.0, description="effective wavelength of the band")
+    sigma_px: float | None = Field(None, gt=0.1, le=10.0, description="override: Gaussian σ in pixels")
+
+
+class StarSensor(_Model):
+    """The true star sensor: pinhole + Brown distortion, optics, PSF, detector."""
+
+    resolution_px: Annotated[list[Annotated[int, Field(ge=16, le=8192)]], Field(min_length=2, max_length=2)] = [1024, 1024]
+    pixel_pitch_um: float = Field(15.0, gt=0.5, le=100.0)
+    focal_length_mm: float = Field(43.3, gt=1.0, le=5000.0)
+    principal_point_px: Pair = [511.5, 511.5]
+    k1: float = Field(0.0, ge=-2.0, le=2.0, description="radial, OpenCV normalised")
+    k2: float = Field(0.0, ge=-20.0, le=20.0, description="radial, OpenCV normalised")
+    p1: float = Field(0.0, ge=-0.1, le=0.1, description="tangential (optional)")
+    p2: float = Field(0.0, ge=-0.1, le=0.1, description="tangential (optional)")
+    aperture_diameter_mm: float = Field(20.0, gt=0.1, le=1000.0)
+    optics_transmission: float = Field(0.7, gt=0.0, le=1.0)
+    psf: PSF = Field(default_factory=PSF)
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
+
+    @model_validator(mode="after")
+    def _check(self):
+        W, H = self.resolution_px
+        u0, v0 = self.principal_point_px
+        if not (0.0 <= u0 <= W - 1 and 0.0 <= v0 <= H - 1):
+            raise ValueError(f"principal_point_px = {self.principal_point_px} must lie on the detector "
+                             f"(0..{W - 1}, 0..{H - 1} px)")
+        # the whole detector must lie inside the distortion model's monotonic domain
+        corners_u = [-0.5 - u0, W - 0.5 - u0]
+        corners_v = [-0.5 - v0, H - 0.5 - v0]
+        xd = [cu / self.f_px for cu in corners_u for _ in corners_v]
+        yd = [cv / self.f_px for _ in corners_u for cv in corners_v]
+        r2max = radial_r2_max(self.k1, self.k2, 0.0)
+        _x, _y, ok = brown_undistort(xd, yd, self.k1, self.k2, self.p1, self.p2, 0.0, r2max)
+        if not ok.all():
+            raise ValueError(f"k1 = {self.k1}, k2 = {self.k2}, p1 = {self.p1}, p2 = {self.p2}: the distortion "
+                             f"folds back (or cannot be inverted) inside the detector")
+        return self
+
+    @property
+    def f_px(self) -> float:
+        return self.focal_length_mm * 1000.0 / self.pixel_pitch_um
+
+    @property
+    def f_number(self) -> float:
+        return self.focal_length_mm / self.aperture_diameter_mm
+
+    @property
+    def aperture_area_cm2(self) -> float:
+        return math.pi * (self.aperture_diameter_mm / 20.0) ** 2
+
+    @property
+    def psf_sigma_px(self) -> float:
+        if self.psf.sigma_px is not None:
+            return float(self.psf.sigma_px)
+        blur_radius_um = self.psf.defocus_um / self.f_number / 2.0
+        s_def = blur_radius_um / 2.0
+        s_diff = 0.42 * self.psf.wavelength_nm * 1e-3 * self.f_number
+        return math.hypot(s_def, s_diff) / self.pixel_pitch_um
+
+    @property
+    def fov_deg(self) -> tuple[float, float]:
+        W, H = self.resolution_px
+        return (2 * math.degrees(math.atan(W / 2 / self.f_px)), 2 * math.degrees(math.atan(H / 2 / self.f_px)))
+
+    def camera(self, *, f_px: float | None = None, principal_point_px=None, k1=None, k2=None) -> PinholeBrown:
+        """The true camera (or a variant with some intrinsics replaced)."""
+        f = self.f_px if f_px is None else float(f_px)
+        u0, v0 = self.principal_point_px if principal_point_px is None else principal_point_px
+        return PinholeBrown(f, f, float(u0), float(v0), self.k1 if k1 is None else float(k1),
+                            self.k2 if k2 is None else float(k2), self.p1, self.p2, 0.0,
+                            *self.resolution_px)
+
+
+class Sky(_Model):
+    """Star catalogue and radiometry."""
+
+    catalogue: Literal["hipparcos2"] = "hipparcos2"
+    epoch_year: float = Field(2025.0, ge=1900.0, le=2100.0, description="observation epoch (Julian year, TT)")
+    magnitude_limit: float = Field(6.5, ge=-2.0, le=12.0, description="faintest Hp magnitude rendered")
+    zero_point_photons_per_s_cm2: float = Field(1.5e6, gt=0.0, le=1e9,
+                                                description="photons per s per cm² from an Hp = 0 star in the sensor band")
+    background_mag_per_arcsec2: float = Field(21.0, ge=5.0, le=30.0, description="diffuse sky + stray light surface brightness")
+
+
+class Sequence(_Model):
+    """Attitude sequence of the observation (see rigsim.truth.star)."""
+
+    kind: Literal["inertial", "slew", "random"] = "slew"
+    n_frames: int = Field(20, ge=1, le=100000)
+    frame_interval_s: float = Field(1.0, gt=0.0, le=86400.0)
+    start_ra_deg: float = Field(80.0, ge=0.0, lt=360.0)
+    start_dec_deg: float = Field(20.0, ge=-90.0, le=90.0)
+    start_roll_deg: float = Field(0.0, ge=-360.0, le=360.0)
+    slew_rate_deg_per_s: float = Field(0.5, ge=0.0, le=10.0, description="kind = 'slew'")
+    slew_direction_deg: float = Field(30.0, ge=-360.0, le=360.0,
+                                      description="direction of the boresight's motion in the image, from +u towards +v")
+    roll_rate_deg_per_s: float = Field(0.2, ge=-10.0, le=10.0, description="kind = 'slew': rotation about the boresight")
+    jitter_arcsec: float = Field(0.0, ge=0.0, le=3600.0, description="random attitude noise per frame (1σ per axis)")
+    smear_substeps: int = Field(1, ge=1, le=64, description="sub-exposures per frame for motion smear (1 = snapshot)")
+
+
+class Identification(_Model):
+    """Matching detected stars against the catalogue near an approximate attitude."""
+
+    attitude_error_deg: float = Field(0.3, ge=0.0, le=20.0,
+                                      description="error of the a-priori attitude (rotation angle, random axis)")
+    search_radius_px: float = Field(60.0, gt=0.0, le=2000.0, description="largest offset of a star from its predicted position")
+    match_tolerance_px: float = Field(2.0, gt=0.0, le=50.0, description="final residual tolerance after the attitude fit")
+    min_matches: int = Field(4, ge=3, le=1000)
+
+
+class Calibration(_Model):
+    """Estimators: AD / ADS EKF over the sequence and batch least squares."""
+
+    principal_point_prior_px: Pair | None = Field(None, description="a-priori principal point (default: detector centre)")
+    principal_point_prior_sigma_px: float = Field(10.0, gt=0.0, le=1000.0)
+    focal_length_prior_sigma_px: float = Field(10.0, gt=0.0, le=1000.0)
+    f_bias_px: float = Field(3.0, ge=-200.0, le=200.0, description="error of the assumed focal length in the 'biased' case")
+    max_stars_per_frame: int = Field(20, ge=3, le=200)
+    weighting: Literal["propagated", "diagonal"] = "propagated"
+    ads_variant: Literal["exact", "improved"] = "exact"
+    process_noise_px: float = Field(0.0, ge=0.0, le=100.0, description="EKF process noise per frame (1σ)")
+    centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
+
+
+class Study(_Model):
+    """Monte-Carlo comparison of AD and ADS (u0/v0 accuracy over many trials)."""
+
+    trials: int = Field(200, ge=2, le=100000)
+    centroid_sigma_px: float | None = Field(None, gt=0.0, le=10.0,
+                                            description="per-axis centroid noise; None = measured on rendered frames")
+    seed: int = Field(4, ge=0)
+
+
+class StarRig(_Model):
+    name: str = Field(min_length=1)
+    seed_document: Literal["004"] = "004"
+    description: str = ""
+    sensor: StarSensor = Field(default_factory=StarSensor)
+    sky: Sky = Field(default_factory=Sky)
+    sequence: Sequence = Field(default_factory=Sequence)
+    identification: Identification = Field(default_factory=Identification)
+    calibration: Calibration = Field(default_factory=Calibration)
+    study: Study = Field(default_factory=Study)
+
+    def prior_principal_point(self) -> tuple[float, float]:
+        p = self.calibration.principal_point_prior_px
+        if p is not None:
+            return float(p[0]), float(p[1])
+        W, H = self.sensor.resolution_px
+        return (W - 1) / 2.0, (H - 1) / 2.0
