@@ -85,7 +85,7 @@ def main() -> int:
     proc.process(rois[0], rois[1], origins[0], origins[1])   # warm caches
     reps = 300 if args.quick else 2000
     t = _timeit(lambda: proc.process(rois[0], rois[1], origins[0], origins[1]), reps)
-    from rigsim.procedures.boresight.pipeline import tcom_fast
+    from rigsim.imaging.rois import tcom_fast
 
     stack = np.stack(rois)
     t_cen = _timeit(lambda: tcom_fast(stack, origins, noise=proc.noise), reps)

@@ -15,6 +15,7 @@ import time
 import warnings
 
 import numpy as np
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 
 def main() -> None:
@@ -34,7 +35,7 @@ def main() -> None:
     variant = ensure_variant()
     t_import = time.perf_counter() - t_import
     rig = load_rig(a.rig)
-    real = cm.realization_from_rig(rig)
+    real = realization_from_rig(rig)
     print(f"rig {rig.name}, variant {variant}, load average {os.getloadavg()[0]:.2f}, import + variant {t_import:.1f} s")
     t0 = time.perf_counter()
     with warnings.catch_warnings():

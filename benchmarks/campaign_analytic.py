@@ -14,6 +14,7 @@ from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
 from rigsim.errors import GeometryError
 from rigsim.rig.turntable import TurntableModel
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 
 def timeit(fn, n):
@@ -27,10 +28,10 @@ def main():
     for name in ("sun_sensor_2axis_diaphragm", "sun_sensor_3axis_autocollimator"):
         rig = load_rig(name)
         rng = np.random.default_rng(0)
-        real, noise = cm.realization_from_rig(rig), cm.noise_from_rig(rig)
+        real, noise = realization_from_rig(rig), cm.noise_from_rig(rig)
         t_full = timeit(lambda: cm.run_campaign(rig, real, noise, rng), 20)
         t_nofit = timeit(lambda: cm.run_campaign(rig, real, noise, rng, fit_calibration=False), 50)
-        ideal = cm.run_campaign(rig, cm.realization_from_rig(rig, ideal=True), cm.Noise(), rng)
+        ideal = cm.run_campaign(rig, realization_from_rig(rig, ideal=True), cm.Noise(), rng)
         print(f"{name}: campaign with sweep fit {t_full * 1e3:.1f} ms, without {t_nofit * 1e3:.1f} ms; "
               f"ideal-rig error |δ| = {np.linalg.norm(ideal.error_arcsec):.2e}″")
 

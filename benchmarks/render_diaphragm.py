@@ -39,6 +39,8 @@ from rigsim.frames import from_arcsec  # noqa: E402
 from rigsim.render.cube_mirror import diaphragm as D  # noqa: E402
 from rigsim.rig import load_rig  # noqa: E402
 from rigsim.truth.cube_mirror.realization import realization_from_rig  # noqa: E402
+from rigsim.truth.cube_mirror.diaphragm import rasterise_screen_disk
+from rigsim.imaging.screen import screen_centroid, screen_circle_fit
 
 RIG = load_rig("sun_sensor_2axis_diaphragm")
 REAL = realization_from_rig(RIG)
@@ -95,21 +97,21 @@ def fidelity(spps, tilts, seeds):
     for spp in spps:
         r = D.DiaphragmRenderer(RIG, REAL, 0, spp=spp, return_into_hole="diffuse", deterministic=False)
         g = r.geometry
-        ras_hole = D.screen_centroid(D.rasterise_screen_disk(g, [0.0, 0.0], g.hole_radius_mm), g)
+        ras_hole = screen_centroid(rasterise_screen_disk(g, [0.0, 0.0], g.hole_radius_mm), g)
         errs, rend = [], []
         for seed in range(seeds):
             fr = r.render(pose_of(g, {}), seed=1000 + seed, noiseless=True)
-            hole = D.screen_centroid(signal(fr.hole), g)
+            hole = screen_centroid(signal(fr.hole), g)
             for tilt in tilts:
                 pose = pose_of(g, tilt)
                 tr = g.trace(pose)
                 ph, _, _ = r.render_photons(pose, seed=seed * 100 + 7, hole=False)
                 frame = apply_detector(ph, DET, noiseless=True)
-                spot = D.screen_centroid(signal(frame), g)
+                spot = screen_centroid(signal(frame), g)
                 err = 1e3 * (spot - hole - tr.offset_mm)
-                ras = D.screen_centroid(D.rasterise_screen_disk(g, tr.offset_mm, g.hole_radius_mm), g)
+                ras = screen_centroid(rasterise_screen_disk(g, tr.offset_mm, g.hole_radius_mm), g)
                 bias = 1e3 * (ras - ras_hole - tr.offset_mm)
-                cf = D.screen_circle_fit(signal(frame), g)
+                cf = screen_circle_fit(signal(frame), g)
                 cerr = 1e3 * (np.array([cf.u, cf.v]) - tr.offset_mm)
                 errs.append(np.linalg.norm(err))
                 rend.append(np.linalg.norm(err - bias))

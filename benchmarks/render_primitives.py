@@ -33,10 +33,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from rigsim.detector import DetectorConfig, apply_detector  # noqa: E402
 from rigsim.render import backend  # noqa: E402
-from rigsim.render.camera import PinholeCamera  # noqa: E402
-from rigsim.render.cube_mirror.sun_sensor import SUN_FULL_ANGLE_RAD, SunSpotRenderer, spot_truth, window_centroid
+from rigsim.optics.camera import PinholeBrown  # noqa: E402
+from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, spot_truth, window_centroid
+from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
 
-CAM = PinholeCamera(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
+CAM = PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
                     k1=-0.15, k2=0.012, k3=-0.0003, p1=3e-4, p2=-2e-4)
 DET = DetectorConfig(quantum_efficiency=0.6, exposure_s=0.005, full_well_e=40000.0,
                      read_noise_e=7.0, dark_current_e_per_s=100.0, dsnu_e=2.0, prnu_frac=0.005,
@@ -53,8 +54,8 @@ def directions(n: int, seed: int = 7) -> list[np.ndarray]:
         az = rng.uniform(0.0, 2 * math.pi)
         s_ = math.sqrt(1 - c * c)
         d = np.array([s_ * math.cos(az), s_ * math.sin(az), c])
-        uv, ok = CAM.project(d[None])
-        if ok[0] and CAM.on_detector(uv, margin=20)[0]:
+        uv, ok = CAM.project_valid(d[None])
+        if ok[0] and CAM.on_detector(uv, margin_px=20)[0]:
             out.append(d)
     return out
 

@@ -31,6 +31,7 @@ Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
 
 
 from rigsim.errors import CliError, RigsimError  # noqa: E402
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 
 def _fmt_row(cells, widths):
@@ -135,7 +136,7 @@ def _run_cube_mirror_rendered(args) -> int:
         raise CliError(f"--axis-order = {axis_order!r}: must be a permutation of {[a.label for a in rig.turntable.axes]}")
     if args.ideal:
         rig = rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"command_resolution_deg": 0.0})})
-    real = cm.realization_from_rig(rig, ideal=args.ideal)
+    real = realization_from_rig(rig, ideal=args.ideal)
     noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
     out_dir = Path(args.out) if args.out else Path("renders") / f"cube_mirror_{rig.name}"
     threshold = args.threshold if args.threshold is not None else (0.01 if args.ideal and rig.procedure.method == "diaphragm"
@@ -218,7 +219,7 @@ def _run_cube_mirror_analytic(args) -> int:
     if sorted(axis_order) != sorted(a.label for a in rig.turntable.axes):
         raise CliError(f"--axis-order = {axis_order!r}: must be a permutation of {[a.label for a in rig.turntable.axes]}")
     rng = np.random.default_rng(args.seed)
-    real = cm.realization_from_rig(rig, ideal=args.ideal)
+    real = realization_from_rig(rig, ideal=args.ideal)
     noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
     res = cm.run_campaign(rig, real, noise, rng, axis_order)
 
@@ -336,7 +337,7 @@ def _parse_pose(text: str | None, rig) -> dict[str, float]:
 
 
 def cmd_scene_export(args) -> int:
-    from rigsim.render.export import export_rig
+    from rigsim.render.cube_mirror.export import export_rig
     from rigsim.rig import load_rig
 
     rig = load_rig(args.rig)

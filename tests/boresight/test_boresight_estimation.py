@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
-from rigsim.estimation.dvad import dvad, estimate, relative_rotation, simplified
+from rigsim.estimation.dvad import dvad, estimate, simplified
+from rigsim.optics.line_camera import relative_rotation
 from rigsim.rig.load import load_boresight_rig
-from rigsim.estimation.dvad import small_angles_arcsec
+from rigsim.optics.line_camera import small_angles_arcsec
 from rigsim.frames import ARCSEC_PER_RAD as AS
 
 RIG = load_boresight_rig()
@@ -122,7 +123,7 @@ def test_bad_inputs():
 
 def test_fast_thresholded_com_equals_rigsim_imaging():
     """The real-time centroider is rigsim.imaging.centroid_tcom without the flags: same numbers."""
-    from rigsim.procedures.boresight.pipeline import tcom_fast
+    from rigsim.imaging.rois import tcom_fast
     from rigsim.imaging import NoiseModel, centroid_tcom
     from rigsim.imaging.synth import disk_image
 

@@ -12,6 +12,7 @@ from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
 from rigsim.errors import GeometryError
 from rigsim.rig.turntable import TurntableModel
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 D = np.array([0.0, 0.0, 1.0])
 TABLE1 = [{"X": np.radians(181.398), "Y": np.radians(0.528)}, {"X": np.radians(91.386), "Y": np.radians(-0.048)}]
@@ -105,14 +106,14 @@ def test_round_trip_3axis():
 @pytest.mark.parametrize("rig_name", ["sun_sensor_2axis_diaphragm", "sun_sensor_3axis_autocollimator"])
 def test_ideal_campaign_recovers_truth(rig_name):
     rig = load_rig(rig_name)
-    res = cm.run_campaign(rig, cm.realization_from_rig(rig, ideal=True), cm.Noise(), np.random.default_rng(0))
+    res = cm.run_campaign(rig, realization_from_rig(rig, ideal=True), cm.Noise(), np.random.default_rng(0))
     assert np.all(np.abs(res.error_arcsec) < 1e-6)  # 1e-6″ ≈ 5e-12 rad
     assert rotation_angle(res.R_cube_from_sun_est, rig.R_cube_from_sun()) < 1e-10
 
 
 def test_seed000_default_rig_reproduces_table1_final_angles():
     rig = load_rig("sun_sensor_2axis_diaphragm")
-    res = cm.run_campaign(rig, cm.realization_from_rig(rig, ideal=True), cm.Noise(), np.random.default_rng(0), fit_calibration=False)
+    res = cm.run_campaign(rig, realization_from_rig(rig, ideal=True), cm.Noise(), np.random.default_rng(0), fit_calibration=False)
     p1, p2 = res.null_poses_deg
     assert p1["X"] == pytest.approx(181.398, abs=1e-5) and p1["Y"] == pytest.approx(0.528, abs=1e-5)
     assert p2["X"] == pytest.approx(91.386, abs=0.015) and p2["Y"] == pytest.approx(-0.048, abs=0.015)
@@ -120,7 +121,7 @@ def test_seed000_default_rig_reproduces_table1_final_angles():
 
 def test_wrong_axis_order_reading_costs_about_a_degree():
     rig = load_rig("sun_sensor_2axis_diaphragm")
-    real = cm.realization_from_rig(rig, ideal=True)
+    real = realization_from_rig(rig, ideal=True)
     res = cm.run_campaign(rig, real, cm.Noise(), np.random.default_rng(0), axis_order="YX")
     # TRIAD alone: about 1° (the two readings of Table 1 differ by 1.06°)
     assert 0.5 < np.degrees(rotation_angle(res.R_cube_from_rot_est, res.R_cube_from_rot_true)) < 2.0
@@ -132,7 +133,7 @@ def test_wrong_axis_order_reading_costs_about_a_degree():
 def test_rig_true_errors_show_up_and_match_their_size():
     """Only the aiming-camera mounting bias (1.3″, −0.9″ on both faces): the error is of that size."""
     rig = load_rig("sun_sensor_2axis_diaphragm")
-    real = cm.realization_from_rig(rig, ideal=True)
+    real = realization_from_rig(rig, ideal=True)
     real.null_bias_rad = [np.array([1.3, -0.9]) / ARCSEC_PER_RAD] * 2
     res = cm.run_campaign(rig, real, cm.Noise(), np.random.default_rng(0), fit_calibration=False)
     err = np.linalg.norm(res.error_arcsec)
@@ -149,7 +150,7 @@ def test_null_error_budget_matches_closed_form():
     noise = cm.Noise(null_sigma_rad=sigma1 / ARCSEC_PER_RAD)
     n = 400
     errs = np.array([
-        cm.run_campaign(rig, cm.realization_from_rig(rig, ideal=True), noise, rng, fit_calibration=False).error_arcsec
+        cm.run_campaign(rig, realization_from_rig(rig, ideal=True), noise, rng, fit_calibration=False).error_arcsec
         for _ in range(n)
     ])
     # sample σ of 400 normal draws: relative standard error 1/sqrt(2·399) = 3.5 %; allow 4 of those
@@ -161,4 +162,4 @@ def test_unreachable_face_is_reported():
     rig = load_rig("sun_sensor_2axis_diaphragm")
     bad = rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"faces": ["-X", "+Y"]})})
     with pytest.raises(GeometryError, match="aligns the face normal"):
-        cm.run_campaign(bad, cm.realization_from_rig(bad, ideal=True), cm.Noise(), np.random.default_rng(0), fit_calibration=False)
+        cm.run_campaign(bad, realization_from_rig(bad, ideal=True), cm.Noise(), np.random.default_rng(0), fit_calibration=False)

@@ -8,6 +8,7 @@ from rigsim.frames import small_angle_error
 from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
 from rigsim.rig.turntable import TurntableModel
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 RIG = load_rig("sun_sensor_2axis_diaphragm")
 
@@ -19,7 +20,7 @@ def _truth_vector(rig, names):
 
 
 def _fit(rig, sigma_px, rng):
-    real = cm.realization_from_rig(rig, ideal=True)
+    real = realization_from_rig(rig, ideal=True)
     noise = cm.Noise(centroid_sigma_px=sigma_px)
     readings, uv = cm.simulate_sweep(rig, real, noise, rng)
     ss = rig.sun_sensor
@@ -28,7 +29,7 @@ def _fit(rig, sigma_px, rng):
 
 
 def test_sweep_keeps_only_poses_on_the_detector():
-    readings, uv = cm.simulate_sweep(RIG, cm.realization_from_rig(RIG, ideal=True), cm.Noise(), np.random.default_rng(0))
+    readings, uv = cm.simulate_sweep(RIG, realization_from_rig(RIG, ideal=True), cm.Noise(), np.random.default_rng(0))
     assert 400 < len(uv) < 625  # 25×25 grid, the diagonal corners fall off the 1024² detector
     assert uv.min() >= 2.5 and uv.max() <= 1020.5
 

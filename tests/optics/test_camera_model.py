@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from rigsim.optics import camera as C
-from rigsim.optics.camera import (PARAM_NAMES, PinholeBrown, TelecentricCamera, distort, project,
-                                  radial_r2_max, unproject)
+from rigsim.optics.camera import (
+    PARAM_NAMES, PinholeBrown, TelecentricCamera, distort, project, radial_r2_max, unproject,
+)
 
 W = H = 1024
 

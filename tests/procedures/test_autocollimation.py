@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC, angle_between
-from rigsim.optics.autocollimator import autocollimator_layout, mirror_target, reference_axis_rot, reference_pose_rad
+from rigsim.truth.cube_mirror.autocollimator import (
+    autocollimator_layout, mirror_target, reference_axis_rot, reference_pose_rad,
+)
 from rigsim.procedures.cube_mirror import autocollimation as ac
 from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.errors import SearchError

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from rigsim.procedures.cube_mirror.concentricity import (
-    OffsetMeasurer, concentricity_search, hole_spot_offset, null_bias_offset_px, offset_model,
+    OffsetMeasurer, concentricity_search, null_bias_offset_px, offset_model,
 )
+from rigsim.imaging.screen import hole_spot_offset
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import numerical_jacobian
 from rigsim.rig import load_rig
@@ -83,7 +84,7 @@ def test_unreachable_start_is_reported_not_guessed():
 
 def _analytic_frames(renderer, offset_mm):
     """Exact images (no Mitsuba): the divergent spot = disk ⊛ divergence − hole, plus the glow."""
-    from rigsim.render.cube_mirror.diaphragm import rasterise_screen_disk
+    from rigsim.truth.cube_mirror.diaphragm import rasterise_screen_disk
 
     g = renderer.geometry
     pencil = rasterise_screen_disk(g, offset_mm, g.hole_radius_mm, value=1.0)
@@ -106,7 +107,8 @@ def test_offset_estimator_is_unbiased_at_the_null_and_scaled_off_it(conc_rendere
     for off_px in ([0.0, 0.0], [0.5, -0.3], [20.0, 0.0], [0.0, -30.0]):
         off_mm = np.asarray(off_px) * PX_MM
         hole, spot = _analytic_frames(conc_renderer, off_mm)
-        r = hole_spot_offset(hole, spot + hole, conc_renderer.geometry, offset_dn=0.0)
+        r = hole_spot_offset(hole, spot + hole, conc_renderer.geometry.H_screen_to_uv,
+                             object_pixel_mm=PX_MM, offset_dn=0.0)
         err = r["offset_px"] - np.asarray(off_px)
         assert np.all(np.abs(err) <= 0.02 + 0.06 * np.abs(off_px)), (off_px, r["offset_px"])
 
@@ -115,7 +117,7 @@ def test_offset_estimator_is_unbiased_at_the_null_and_scaled_off_it(conc_rendere
 def test_rendered_divergent_spot_matches_the_exact_image(conc_renderer):
     """Mitsuba pencil + convolution vs the exact pencil through the same convolution: the spot
     centre agrees to ≤ 0.02 px (0.3 µm on the screen) at the null and 40″ off it."""
-    from rigsim.procedures.cube_mirror.concentricity import _masked_screen_centroid
+    from rigsim.imaging.screen import masked_screen_centroid
 
     null = conc_renderer.geometry.layout.null_pose_rad
     for dx, dy, seed in ((0.0, 0.0, 1), (40.0, -25.0, 2)):
@@ -127,8 +129,8 @@ def test_rendered_divergent_spot_matches_the_exact_image(conc_renderer):
             warnings.simplefilter("ignore")
             rendered = conc_renderer.spot_photons(pose, seed)
         _, exact = _analytic_frames(conc_renderer, tr.offset_mm)
-        c_r, _ = _masked_screen_centroid(rendered, conc_renderer.geometry, 0.1)
-        c_e, _ = _masked_screen_centroid(exact, conc_renderer.geometry, 0.1)
+        c_r, _ = masked_screen_centroid(rendered, conc_renderer.geometry, 0.1)
+        c_e, _ = masked_screen_centroid(exact, conc_renderer.geometry, 0.1)
         assert np.all(np.abs(c_r - c_e) / PX_MM < 0.02), (dx, dy, (c_r - c_e) * 1e3)
         # the plateau is the requested brightness (half the full well, in photons)
         assert np.percentile(rendered, 99.5) == pytest.approx(conc_renderer.spot_photons_per_px, rel=0.05)

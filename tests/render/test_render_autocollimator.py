@@ -163,7 +163,7 @@ def test_scene_dict_is_builtin_millimetres_and_exports_to_xml(tmp_path):
 
 
 def _pose_ref():
-    from rigsim.optics.autocollimator import autocollimator_layout
+    from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout
     return autocollimator_layout(RIG, REAL, "face").reference_pose_rad
 
 

@@ -29,7 +29,7 @@ def _run(code: str, env_extra: dict | None = None, timeout=300):
 def test_importing_render_modules_does_not_import_mitsuba():
     r = _run("""
         import sys
-        import rigsim.render, rigsim.render.backend, rigsim.render.camera, rigsim.render.frame
+        import rigsim.render, rigsim.render.backend, rigsim.optics.camera, rigsim.render.frame
         import rigsim.render.plugins, rigsim.render.cube_mirror.sun_sensor, rigsim.detector
         print(sorted(m for m in ('mitsuba', 'drjit') if m in sys.modules))
     """)
@@ -112,9 +112,9 @@ def test_fallback_to_scalar_with_one_warning_line(tmp_path):
         v2 = backend.ensure_variant()
         import mitsuba as mi
         import numpy as np
-        from rigsim.render.camera import PinholeCamera
+        from rigsim.optics.camera import PinholeBrown
         from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
-        cam = PinholeCamera(fx=100.0, fy=100.0, cx=15.5, cy=15.5, width=32, height=32)
+        cam = PinholeBrown(fx=100.0, fy=100.0, cx=15.5, cy=15.5, width=32, height=32)
         win = SunSpotRenderer(cam, full_angle_rad=0.05, window_px=8, spp=4).render([0, 0, 1])
         print(v, v2, mi.variant(), round(float(win.image.sum()), 3))
     """, {"RIGSIM_CACHE_DIR": str(tmp_path), "DRJIT_LIBLLVM_PATH": ""})

@@ -19,6 +19,9 @@ from rigsim.render.frame import FLAG_KEYS, read_frame
 from rigsim.render.cube_mirror import diaphragm as D
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
+from rigsim.imaging.screen import pixel_area_mm2, screen_centroid, screen_circle_fit
+from rigsim.truth.cube_mirror.diaphragm import rasterise_screen_disk
+from rigsim.optics.meshes import HOLE_POLYGON_SIDES
 
 pytestmark = pytest.mark.render
 
@@ -114,11 +117,11 @@ def test_true_cube_mesh_faces_carry_the_true_normals():
 def test_screen_mesh_has_a_circumscribed_hole():
     m = D.screen_with_hole_mesh(150.0, 150.0, 1.25)
     assert np.allclose(m.face_normals, [0.0, 0.0, -1.0])
-    n = D.HOLE_POLYGON_SIDES
+    n = HOLE_POLYGON_SIDES
     polygon = n * 1.25**2 * math.tan(math.pi / n)  # circumscribed n-gon (+4 vertices at the corner angles)
     assert m.area == pytest.approx(150.0**2 - polygon, abs=2e-5)
     r = np.hypot(m.vertices[:, 0], m.vertices[:, 1])
-    rv = 1.25 / math.cos(math.pi / D.HOLE_POLYGON_SIDES)
+    rv = 1.25 / math.cos(math.pi / HOLE_POLYGON_SIDES)
     assert r.min() == pytest.approx(rv, rel=1e-12)  # edges tangent to the circle: never clips it
     assert (rv - 1.25) * 1e3 < 0.1  # sliver depth in µm
 
@@ -134,8 +137,8 @@ def hole_measured(diffuse):
     fr = diffuse.render(_pose(diffuse.geometry), seed=100, noiseless=True)
     g = diffuse.geometry
     img = _signal(fr.hole)
-    ras = D.rasterise_screen_disk(g, [0.0, 0.0], g.hole_radius_mm)
-    return {"centroid": D.screen_centroid(img, g), "raster_centroid": D.screen_centroid(ras, g)}
+    ras = rasterise_screen_disk(g, [0.0, 0.0], g.hole_radius_mm)
+    return {"centroid": screen_centroid(img, g), "raster_centroid": screen_centroid(ras, g)}
 
 
 @pytest.mark.parametrize("tilt", FIDELITY_TILTS, ids=lambda t: "_".join(f"{k}{v:g}" for k, v in t.items()) or "null")
@@ -148,12 +151,12 @@ def test_rendered_offset_matches_exact_trace(diffuse, hole_measured, tilt):
     photons, _, _ = diffuse.render_photons(pose, seed=7, hole=False)  # the hole is pose-independent
     frame = apply_detector(photons, DET, noiseless=True)
     assert not frame.saturated_pixels
-    spot = D.screen_centroid(_signal(frame), g)
+    spot = screen_centroid(_signal(frame), g)
     offset = spot - hole_measured["centroid"]
     err_um = 1e3 * (offset - tr.offset_mm)
     # like with like: the same estimator on the analytic raster of the exact disks
-    ras = D.rasterise_screen_disk(g, tr.offset_mm, g.hole_radius_mm)
-    est_bias_um = 1e3 * (D.screen_centroid(ras, g) - hole_measured["raster_centroid"] - tr.offset_mm)
+    ras = rasterise_screen_disk(g, tr.offset_mm, g.hole_radius_mm)
+    est_bias_um = 1e3 * (screen_centroid(ras, g) - hole_measured["raster_centroid"] - tr.offset_mm)
     render_err_um = err_um - est_bias_um
     print(f"tilt {tilt}: offset {1e3 * np.asarray(tr.offset_mm)} µm, error {err_um} µm "
           f"(estimator bias {est_bias_um}, rendering {render_err_um})")
@@ -163,7 +166,7 @@ def test_rendered_offset_matches_exact_trace(diffuse, hole_measured, tilt):
     # and 2·tilt·distance: |offset| = tan(2·tilt)·(face→screen path)
     assert abs(1e3 * (np.linalg.norm(offset) - tr.closed_form_offset_mm)) <= TOL_UM
     # an independent estimator (sub-pixel edge points mapped to the screen, circle fit) agrees
-    cf = D.screen_circle_fit(_signal(frame), g)
+    cf = screen_circle_fit(_signal(frame), g)
     assert np.linalg.norm(1e3 * (np.array([cf.u, cf.v]) - tr.offset_mm)) <= TOL_UM
     assert cf.radius_px == pytest.approx(g.hole_radius_mm, abs=1e-3)  # mm here
 
@@ -175,8 +178,8 @@ def test_second_face_with_its_true_tilt_nulls_exactly():
     g = r.geometry
     for tilt in (dict(), dict(Y=50.0)):
         fr = r.render(_pose(g, **tilt), seed=3, noiseless=True)
-        spot = D.screen_centroid(_signal(fr.spot), g)
-        hole = D.screen_centroid(_signal(fr.hole), g)
+        spot = screen_centroid(_signal(fr.spot), g)
+        hole = screen_centroid(_signal(fr.hole), g)
         err_um = 1e3 * (spot - hole - fr.truth.offset_mm)
         assert np.linalg.norm(err_um) <= TOL_UM, (tilt, err_um)
 
@@ -190,7 +193,7 @@ def test_physical_hole_spot_clear_of_the_hole(physical):
     assert fr.sidecars["spot"]["truth"]["frame_contains"] == ["spot", "hole_glow"]
     hole_img = _signal(fr.hole)
     spot_img = np.maximum(_signal(fr.spot) - hole_img, 0.0)
-    offset = D.screen_centroid(spot_img, g) - D.screen_centroid(hole_img, g)
+    offset = screen_centroid(spot_img, g) - screen_centroid(hole_img, g)
     assert np.linalg.norm(1e3 * (offset - fr.truth.offset_mm)) <= TOL_UM
     assert np.linalg.norm(fr.truth.offset_mm) > 2.5
 
@@ -206,7 +209,7 @@ def test_physical_hole_near_null_loses_the_overlap(physical):
     r, d = g.hole_radius_mm, float(np.linalg.norm(tr.offset_mm))
     lens = 2 * r * r * math.acos(d / (2 * r)) - 0.5 * d * math.sqrt(4 * r * r - d * d)
     vv, uu = np.nonzero(spot)
-    area = D._pixel_area_mm2(g, np.stack([uu, vv], axis=1).astype(float))
+    area = pixel_area_mm2(g, np.stack([uu, vv], axis=1).astype(float))
     visible_mm2 = float(np.sum(spot[vv, uu] * area)) / physical.spot_photons_per_px
     assert visible_mm2 == pytest.approx(math.pi * r * r - lens, rel=0.005)
     assert visible_mm2 < 0.4 * math.pi * r * r
@@ -220,7 +223,7 @@ def test_plateaus_and_units(physical):
     tr = g.trace(_pose(g, X=-260.0, Y=330.0))
     for img, centre, level in ((spot, tr.offset_mm, physical.spot_photons_per_px),
                                (hole, [0.0, 0.0], physical.hole_glow_ratio * physical.spot_photons_per_px)):
-        inner = D.rasterise_screen_disk(g, centre, 0.9 * g.hole_radius_mm) == 1.0
+        inner = rasterise_screen_disk(g, centre, 0.9 * g.hole_radius_mm) == 1.0
         assert img[inner].mean() == pytest.approx(level, rel=0.005)
         # Monte-Carlo noise per pixel at 16 spp (documented): ~5 %
         assert 0.03 < img[inner].std() / img[inner].mean() < 0.08
@@ -395,7 +398,7 @@ def test_divergent_beam_spreads_the_spot_and_keeps_its_power():
     assert b.sum() == pytest.approx(a.sum(), rel=0.01)
     vv, uu = np.nonzero(b)
     rad = np.linalg.norm(g.uv_to_screen(np.stack([uu, vv], axis=1).astype(float)) - tr.offset_mm, axis=1)
-    w = b[vv, uu] * D._pixel_area_mm2(g, np.stack([uu, vv], axis=1).astype(float))
+    w = b[vv, uu] * pixel_area_mm2(g, np.stack([uu, vv], axis=1).astype(float))
     order = np.argsort(rad)
     enclosed = np.cumsum(w[order]) / w.sum()
     # 99.9 % of the flux within the predicted outer radius (the rest: screen → cube → screen light,
@@ -403,7 +406,7 @@ def test_divergent_beam_spreads_the_spot_and_keeps_its_power():
     r999 = rad[order][np.searchsorted(enclosed, 0.999)]
     assert r999 == pytest.approx(tr.spot_radius_mm, rel=0.05)
     # the spot centre is still the trace (the quadrature is symmetric about the beam axis)
-    assert np.linalg.norm(D.screen_centroid(b, g) - tr.offset_mm) * 1e3 < 20.0
+    assert np.linalg.norm(screen_centroid(b, g) - tr.offset_mm) * 1e3 < 20.0
     # the default 1:1 aiming camera cannot hold it
     assert D.diaphragm_geometry(RIG, REAL, 0, beam="divergent").trace(pose).flags["spot_cut_by_edge"]
 
@@ -416,12 +419,12 @@ def test_slow_sweep_of_tilts(face_index):
     r = D.DiaphragmRenderer(RIG, REAL, face_index, spp=16, return_into_hole="diffuse")
     g = r.geometry
     rng = np.random.default_rng(100 + face_index)
-    hole = D.screen_centroid(_signal(r.render(_pose(g), seed=0, noiseless=True).hole), g)
+    hole = screen_centroid(_signal(r.render(_pose(g), seed=0, noiseless=True).hole), g)
     errs = []
     for k in range(24):
         tilt = dict(zip(("X", "Y"), rng.uniform(-200.0, 200.0, 2)))
         fr = r.render(_pose(g, **tilt), seed=k + 1, noiseless=True)
-        errs.append(1e3 * (D.screen_centroid(_signal(fr.spot), g) - hole - fr.truth.offset_mm))
+        errs.append(1e3 * (screen_centroid(_signal(fr.spot), g) - hole - fr.truth.offset_mm))
     errs = np.array(errs)
     print(f"face {g.face}: rms {np.sqrt((errs**2).mean(axis=0))} µm, max {np.abs(errs).max()} µm")
     assert np.abs(errs).max() <= TOL_UM

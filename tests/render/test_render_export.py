@@ -68,7 +68,7 @@ def test_nested_objects_with_equal_keys_export_and_load_back():
 def test_every_default_rig_exports_scenes_that_load(tmp_path):
     import mitsuba as mi
 
-    from rigsim.render.export import export_rig
+    from rigsim.render.cube_mirror.export import export_rig
     from rigsim.rig import load_rig
 
     names = {}

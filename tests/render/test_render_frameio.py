@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rigsim.detector import DetectorConfig, apply_detector
-from rigsim.render.camera import PinholeCamera
+from rigsim.optics.camera import PinholeBrown
 from rigsim.render.frame import FLAG_KEYS, build_sidecar, read_frame, write_frame
 
 
@@ -63,9 +63,10 @@ def test_bad_inputs_rejected(tmp_path):
 def test_sun_sensor_frame_end_to_end(tmp_path):
     """Render -> detector -> PNG -> read -> centroid: the truth in the sidecar is what the frame
     shows, to within the photon noise predicted for this spot."""
-    from rigsim.render.cube_mirror.sun_sensor import SUN_FULL_ANGLE_RAD, SunSpotRenderer
+    from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD
+    from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
 
-    cam = PinholeCamera(fx=700.0, fy=700.0, cx=255.5, cy=255.5, width=512, height=512, k1=-0.08,
+    cam = PinholeBrown(fx=700.0, fy=700.0, cx=255.5, cy=255.5, width=512, height=512, k1=-0.08,
                         k2=0.01)
     photons = 2.0e6
     r = SunSpotRenderer(cam, full_angle_rad=SUN_FULL_ANGLE_RAD, window_px=32, spp=1024,

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from rigsim.render.backend import ensure_variant
-from rigsim.render.camera import PinholeCamera
+from rigsim.optics.camera import PinholeBrown
 from rigsim.render.plugins import PINHOLE_PLUGIN, TELECENTRIC_PLUGIN, register_sensors
 
 ensure_variant()
@@ -26,7 +26,7 @@ register_sensors()
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
-WIDE = PinholeCamera(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
+WIDE = PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
                      k1=-0.15, k2=0.012, k3=-0.0003, p1=3e-4, p2=-2e-4)
 
 
@@ -75,8 +75,8 @@ def _dot_target():
     for i in np.linspace(-1, 1, 7):
         for j in np.linspace(-1, 1, 7):
             p = p0 + 420.0 * i * e_u + 300.0 * j * e_v
-            uv, ok = WIDE.project(p[None])
-            if ok[0] and WIDE.on_detector(uv, margin=16)[0]:
+            uv, ok = WIDE.project_valid(p[None])
+            if ok[0] and WIDE.on_detector(uv, margin_px=16)[0]:
                 dots.append(p)
     return np.array(dots), n
 
@@ -91,11 +91,11 @@ def _dot_truth(p, n, n_r=200, n_a=400):
     cos_e = np.abs(X @ nn) / d            # emission angle at the dot
     cos_c = X[:, 2] / d                   # angle at the (normal-to-axis) pupil
     w = cos_e * cos_c / d ** 2            # flux per unit area reaching the pupil
-    uv, _ = cv2.projectPoints(X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), WIDE.camera_matrix,
-                              WIDE.dist_coeffs)
+    uv, _ = cv2.projectPoints(X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), WIDE.camera_matrix(),
+                              WIDE.dist_coeffs())
     uv = uv.reshape(-1, 2)
     centre, _ = cv2.projectPoints(p.reshape(1, 1, 3), np.zeros(3), np.zeros(3),
-                                  WIDE.camera_matrix, WIDE.dist_coeffs)
+                                  WIDE.camera_matrix(), WIDE.dist_coeffs())
     return (w[:, None] * np.floor(uv + 0.5)).sum(0) / w.sum(), centre.reshape(2)
 
 
@@ -176,7 +176,7 @@ def _ray_plane(o, d):
     return o + t[..., None] * d
 
 
-SMALL = PinholeCamera(fx=60.0, fy=61.0, cx=31.7, cy=23.2, width=64, height=48, k1=-0.1,
+SMALL = PinholeBrown(fx=60.0, fy=61.0, cx=31.7, cy=23.2, width=64, height=48, k1=-0.1,
                       k2=0.01, p1=1e-3, p2=-5e-4)
 
 
@@ -191,7 +191,7 @@ def test_pinhole_radiometry_path_and_ptracer(response):
     L = _plane_radiance(X)
     if response == "flux":
         L = L * cam.flux_weight(uv)
-    edge_uv, _ = cam.project(np.array([[EDGE_X, y, PLANE_Z0 + y * math.tan(PLANE_TILT)]
+    edge_uv, _ = cam.project_valid(np.array([[EDGE_X, y, PLANE_Z0 + y * math.tan(PLANE_TILT)]
                                        for y in np.linspace(-60, 60, 400)]))
     # pixels at least 1.5 px left of the projected edge (the plane lies at x < EDGE_X)
     edge_u_at_v = np.interp(v[:, 0], edge_uv[:, 1], edge_uv[:, 0])
@@ -304,7 +304,7 @@ def test_sensor_parameters_are_traversable_and_update_without_recompile():
     assert not np.allclose(a, b)
     assert hist and all(h.get("cache_hit") for h in hist)
     # and the new parameters are the ones used: compare with a freshly built sensor
-    cam2 = PinholeCamera(fx=70.0, fy=cam.fy, cx=cam.cx, cy=cam.cy, width=64, height=48, k1=-0.05,
+    cam2 = PinholeBrown(fx=70.0, fy=cam.fy, cx=cam.cx, cy=cam.cy, width=64, height=48, k1=-0.05,
                          k2=cam.k2, p1=cam.p1, p2=cam.p2)
     fresh = _img(mi.render(_plane_scene(_pinhole_dict(cam2, 16, 16, 16, sampler="independent",
                                                       u0=20, v0=10), "path"), seed=0))

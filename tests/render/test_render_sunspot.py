@@ -18,15 +18,14 @@ import cv2
 import numpy as np
 import pytest
 
-from rigsim.render.camera import PinholeCamera
-from rigsim.render.cube_mirror.sun_sensor import (
-    SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, SunSpotRenderer, spot_truth,
-)
+from rigsim.optics.camera import PinholeBrown
+from rigsim.optics.sun_disk import SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, spot_truth
+from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
 from rigsim.errors import GeometryWarning
 
-WIDE = PinholeCamera(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
+WIDE = PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
                      k1=-0.15, k2=0.012, k3=-0.0003, p1=3e-4, p2=-2e-4)
-NARROW = PinholeCamera(fx=1000.0, fy=1001.5, cx=511.5, cy=511.5, width=1024, height=1024,
+NARROW = PinholeBrown(fx=1000.0, fy=1001.5, cx=511.5, cy=511.5, width=1024, height=1024,
                        k1=-0.05, k2=0.01, k3=0.0, p1=1e-4, p2=5e-5)
 REQUIREMENT_PX = 0.01
 
@@ -36,7 +35,7 @@ def _dir(theta_deg, az_deg):
     return np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
 
 
-def cv2_truth(cam: PinholeCamera, s, full_angle, n_rings=700, n_az=1400):
+def cv2_truth(cam: PinholeBrown, s, full_angle, n_rings=700, n_az=1400):
     """Independent truth: polar midpoint quadrature of the cone, projected with OpenCV."""
     s = s / np.linalg.norm(s)
     helper = np.array([0.0, 1.0, 0.0]) if abs(s[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
@@ -52,12 +51,12 @@ def cv2_truth(cam: PinholeCamera, s, full_angle, n_rings=700, n_az=1400):
     sp, _ = np.meshgrid(sin_phi, psi, indexing="ij")
     cp, sp, az = cp.ravel(), sp.ravel(), az.ravel()
     d = (cp[:, None] * s + (sp * np.cos(az))[:, None] * e1 + (sp * np.sin(az))[:, None] * e2)
-    uv, _ = cv2.projectPoints(d.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix,
-                              cam.dist_coeffs)
+    uv, _ = cv2.projectPoints(d.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix(),
+                              cam.dist_coeffs())
     uv = uv.reshape(-1, 2)
     w = d[:, 2]
-    centre, _ = cv2.projectPoints(s.reshape(1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix,
-                                  cam.dist_coeffs)
+    centre, _ = cv2.projectPoints(s.reshape(1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix(),
+                                  cam.dist_coeffs())
     return {
         "centre": centre.reshape(2),
         "mean": (w[:, None] * uv).sum(0) / w.sum(),
@@ -138,7 +137,7 @@ def test_disk_bias_matches_second_order_theory():
             d = s + a * e1 + b * e2
             d /= np.linalg.norm(d)
             uv, _ = cv2.projectPoints(d.reshape(1, 1, 3), np.zeros(3), np.zeros(3),
-                                      WIDE.camera_matrix, WIDE.dist_coeffs)
+                                      WIDE.camera_matrix(), WIDE.dist_coeffs())
             return uv.reshape(2), d[2]
 
         p0, w0 = proj(0, 0)
@@ -155,7 +154,7 @@ def test_disk_bias_matches_second_order_theory():
 
 def test_window_maps_exactly_to_full_frame():
     """A whole-detector Mitsuba render and the composited window agree pixel by pixel."""
-    cam = PinholeCamera(fx=180.0, fy=181.0, cx=95.2, cy=70.6, width=192, height=144,
+    cam = PinholeBrown(fx=180.0, fy=181.0, cx=95.2, cy=70.6, width=192, height=144,
                         k1=-0.1, k2=0.01, p1=2e-4, p2=-1e-4)
     r = SunSpotRenderer(cam, full_angle_rad=math.radians(2.0), window_px=16, spp=1024)
     s = _dir(25, 140)
@@ -211,7 +210,7 @@ def test_off_detector_and_edge_cut_are_flagged(wide_sun):
     # find a direction whose spot straddles the right edge (u = 1023.5)
     s = None
     for th in np.linspace(45, 60, 301):
-        uv, _ = WIDE.project(_dir(th, 0)[None])
+        uv, _ = WIDE.project_valid(_dir(th, 0)[None])
         if abs(uv[0, 0] - 1023.5) < 0.3:
             s = _dir(th, 0)
             break

@@ -10,7 +10,8 @@ import pytest
 
 pytest.importorskip("pyvista")
 
-from rigsim.optics.autocollimator import AutocollimatorOptics, autocollimator_layout, mirror_target
+from rigsim.optics.autocollimator import AutocollimatorOptics
+from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout, mirror_target
 from rigsim.optics.cube import reflect
 from rigsim.truth.cube_mirror.placement import diaphragm_layout, face_in_rot, trace_return_spot
 from rigsim.rig import load_rig

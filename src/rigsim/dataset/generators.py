@@ -139,7 +139,10 @@ class SunSensorGenerator:
     # -- rendering (worker side) ---------------------------------------------------------------
     def _real(self, draws: dict):
         from rigsim.frames import RAD_PER_ARCSEC
-        from rigsim.truth.cube_mirror.realization import perpendicularity_perturbed, realization_from_rig
+        from rigsim.truth.cube_mirror.realization import (
+            perpendicularity_perturbed,
+            realization_from_rig,
+        )
 
         real = realization_from_rig(self.rig, ideal=True)
         real.turntable = perpendicularity_perturbed(
@@ -151,9 +154,9 @@ class SunSensorGenerator:
 
         if self._scene is None:
             if self.threads:
-                import drjit as dr
+                from rigsim.render.backend import set_thread_count
 
-                dr.set_thread_count(int(self.threads))
+                set_thread_count(int(self.threads))
             from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 
             self._scene = SunSensorScene(self.rig, spp=self.spp)
@@ -252,14 +255,14 @@ class StarFieldGenerator:
 
         if "quat_cam_from_icrs_xyzw" in att:
             return Rotation.from_quat(att["quat_cam_from_icrs_xyzw"]).as_matrix()
-        from rigsim.truth.star import pointing
+        from rigsim.optics.sky import pointing
 
         return pointing(att["ra_deg"], att["dec_deg"], att["roll_deg"])
 
     def render(self, index: int, params: dict):
         from scipy.spatial.transform import Rotation
 
-        from rigsim.truth.star import boresight_radec
+        from rigsim.optics.sky import boresight_radec
         from rigsim.render.star import render_frame
 
         if self._sky is None:

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rigsim.errors import DatasetError
 from rigsim.dataset.store import decode_image, frame_files, read_json, sha256_file
+from rigsim.errors import DatasetError
 
 
 class Dataset:

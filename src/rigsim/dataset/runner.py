@@ -25,7 +25,13 @@ from pathlib import Path
 
 from rigsim.dataset.generators import GENERATORS, make_generator, worker_generator
 from rigsim.dataset.store import (
-    FORMAT, atomic_write_json, frame_complete, frame_files, read_json, sha256_file, write_frame_atomic,
+    FORMAT,
+    atomic_write_json,
+    frame_complete,
+    frame_files,
+    read_json,
+    sha256_file,
+    write_frame_atomic,
 )
 from rigsim.errors import DatasetError
 
@@ -181,9 +187,9 @@ def _init_worker(threads: int | None) -> None:
     """One thread per worker process when several share the machine (no oversubscription)."""
     if threads:
         try:
-            import drjit as dr
+            from rigsim.render.backend import set_thread_count
 
-            dr.set_thread_count(int(threads))
+            set_thread_count(int(threads))
         except Exception:
             pass
         try:

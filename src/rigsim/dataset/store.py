@@ -24,6 +24,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+
 from rigsim.errors import DatasetError
 
 FORMAT = "rigsim.dataset/1"

@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
-
 from rigsim.optics.line_camera import CameraGeometry, euler_xyz, rotation_xyz
 
 __all__ = ["BoresightEstimate", "DVADSolver", "READINGS", "METHODS", "simplified", "dvad", "estimate", "relative_rotation",
@@ -274,22 +273,3 @@ def estimate(geom: CameraGeometry, ref_uv, meas_uv, method: str = "dvad", readin
         return simplified(geom, ref_uv, meas_uv, reading)
     raise ValueError(f"method = {method!r}: allowed {METHODS}")
 
-
-# ------------------------------------------------------------------------------ two cameras
-def relative_rotation(E1: np.ndarray, E2: np.ndarray, geom1: CameraGeometry, geom2: CameraGeometry) -> np.ndarray:
-    """Change of the angle between the two cameras, as a rotation in camera 1's HRC axes.
-
-    With R(prism ← HRC_k) = R_k⁰·E_k (design orientation, measured rotation against the prism),
-    R(C1 ← C2) = E1ᵀ·R1⁰ᵀ·R2⁰·E2; the returned ΔR = R(C1 ← C2)·R⁰(C1 ← C2)ᵀ is independent of the
-    prism's own motion (it cancels). Shape (..., 3, 3)."""
-    R0 = geom1.R_prism_from_hrc.T @ geom2.R_prism_from_hrc
-    R = np.swapaxes(E1, -1, -2) @ R0 @ E2
-    return R @ R0.T
-
-
-def small_angles_arcsec(R: np.ndarray) -> np.ndarray:
-    """Rotation vector (x, y, z) of R in arcsec (small angles: the per-axis angles)."""
-    from scipy.spatial.transform import Rotation
-
-    R = np.asarray(R, float)
-    return Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(*R.shape[:-2], 3) * ARCSEC_PER_RAD

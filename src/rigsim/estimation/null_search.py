@@ -26,7 +26,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from rigsim.errors import SearchError
 
 
 @dataclass

@@ -15,7 +15,15 @@ from .centroid import (
     centroid_wcom,
 )
 from .crlb import CRLB, crlb_gaussian, crlb_psf, fisher_information
-from .detect import Background, Detections, Rois, detect, estimate_background, extract_rois, find_spots
+from .detect import (
+    Background,
+    Detections,
+    Rois,
+    detect,
+    estimate_background,
+    extract_rois,
+    find_spots,
+)
 from .edges import (
     CircleFit,
     Concentricity,

@@ -32,7 +32,14 @@ import math
 import numpy as np
 from scipy.special import erf
 
-from ._common import Prepared, edge_flags, finish, prepare, secondary_peak_flags, trivial_result
+from ._common import (
+    Prepared,
+    edge_flags,
+    finish,
+    prepare,
+    secondary_peak_flags,
+    trivial_result,
+)
 from .result import Centroid, CentroidBatch, Flag, NoiseModel
 
 __all__ = [

@@ -52,13 +52,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.optics.cube import FACE_NORMALS
-from rigsim.truth.cube_mirror.placement import cube_pose
-from rigsim.rig.cube_mirror import Autocollimator, CubeMirrorRig
 from rigsim.errors import GeometryError
-from rigsim.rig.turntable import pose_deg_to_rad
-from rigsim.truth.cube_mirror.realization import Realization
+from rigsim.frames import ARCSEC_PER_RAD
 
 __all__ = [
     "SCHOTT_N_BK7",
@@ -68,14 +63,10 @@ __all__ = [
     "RayBundle",
     "SpotTruth",
     "AutocollimatorOptics",
-    "AutocollimatorLayout",
-    "autocollimator_layout",
-    "mirror_target",
     "flat_mirror",
     "retilt",
     "cone_directions",
-    "reference_axis_rot",
-    "reference_pose_rad",
+    "a_frame_basis",
 ]
 
 SCHOTT_N_BK7 = ((1.03961212, 0.00600069867), (0.231792344, 0.0200179144), (1.01046945, 103.560653))
@@ -309,7 +300,7 @@ class SpotTruth:
 class AutocollimatorOptics:
     """Exact model of one autocollimator (numpy, float64). See the module docstring.
 
-    Parameters: the rig's :class:`~rigsim.rig.cube_mirror.Autocollimator`; ``wavelength_nm`` of the
+    Parameters: ``ac``, the instrument's specification (any object with the fields of the rig file's ``[autocollimator]`` table: focal_length_mm, aperture_mm, resolution_px, pixel_pitch_um, distance_mm); ``wavelength_nm`` of the
     (monochromatic) reticle light; ``center_thickness_mm`` of the singlet; ``focus``:
     ``"collimated"`` (reticle at the best-collimation position, default) or ``"paraxial"``
     (paraxial focal point); ``source_offset_mm``: the detector plane lies this far behind the
@@ -317,7 +308,7 @@ class AutocollimatorOptics:
     the reticle's cone reaches the stop plane at ``overfill`` × the stop radius.
     """
 
-    def __init__(self, ac: Autocollimator, *, wavelength_nm: float = 587.56, center_thickness_mm: float = 5.0,
+    def __init__(self, ac, *, wavelength_nm: float = 587.56, center_thickness_mm: float = 5.0,
                  focus: str = "collimated", source_offset_mm: float = 0.005, overfill: float = 1.01):
         if focus not in ("collimated", "paraxial"):
             raise ValueError(f"focus = {focus!r}: must be 'collimated' or 'paraxial'")
@@ -738,44 +729,6 @@ def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) + K + K @ K / (1.0 + c)
 
 
-# ------------------------------------------------------------------------------ rig layout
-@dataclass(frozen=True)
-class AutocollimatorLayout:
-    """Where the autocollimator sits in the rot (lab) frame for one target.
-
-    ``R_rot_from_A`` has the A frame's axes as columns; ``origin_rot`` is the A frame's origin
-    (the lens centre) in rot, mm. ``anchor_rot`` is the target's centre at ``reference_pose_rad``
-    (the face's exact null pose, or the zero pose for the plane mirror); the axis passes through
-    it and the objective's convex vertex is ``distance_mm`` from it.
-    """
-
-    target: str
-    face: str | None
-    axis_rot: np.ndarray  # unit, from the target towards the autocollimator (the documents' d)
-    R_rot_from_A: np.ndarray
-    origin_rot: np.ndarray
-    anchor_rot: np.ndarray
-    reference_pose_rad: dict
-    plane_mirror_centre_mount_mm: np.ndarray
-
-    def to_A(self, p_rot) -> np.ndarray:
-        return (np.asarray(p_rot, float) - self.origin_rot) @ self.R_rot_from_A
-
-    def dir_to_A(self, v_rot) -> np.ndarray:
-        return np.asarray(v_rot, float) @ self.R_rot_from_A
-
-    @property
-    def anchor_A(self) -> np.ndarray:
-        return self.to_A(self.anchor_rot)
-
-    def as_dict(self) -> dict:
-        return {"target": self.target, "face": self.face, "axis_rot": self.axis_rot.tolist(),
-                "R_rot_from_A": self.R_rot_from_A.tolist(), "origin_rot_mm": self.origin_rot.tolist(),
-                "anchor_rot_mm": self.anchor_rot.tolist(),
-                "reference_pose_deg": {k: math.degrees(v) for k, v in self.reference_pose_rad.items()},
-                "plane_mirror_centre_mount_mm": self.plane_mirror_centre_mount_mm.tolist()}
-
-
 def a_frame_basis(axis_rot) -> np.ndarray:
     """R_rot_from_A of an autocollimator whose axis (unit, from the mirror towards the instrument)
     is ``axis_rot``: z_A = −axis, x_A = X′ made perpendicular to it (Y′ if the axis is near X′),
@@ -790,94 +743,18 @@ def a_frame_basis(axis_rot) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def reference_pose_rad(rig: CubeMirrorRig, real: Realization) -> dict:
-    """The true turntable pose at which every axis *reads* zero (step A's pose)."""
-    return {a.label: -real.encoder_bias_rad.get(a.label, 0.0) for a in rig.turntable.axes}
+# ------------------------------------------------------------------------------ geometry
+def exact_reading_rad(R_rot_from_A: np.ndarray, normal_rot) -> np.ndarray:
+    """The instrument's ideal reading of a mirror with outward normal ``normal_rot``:
+    (θx, θy) = (atan2(n_x, −n_z), atan2(n_y, −n_z)) with n in the A frame
+    (:meth:`rigsim.optics.autocollimator.MirrorTarget.tilt_rad`)."""
+    n = np.asarray(normal_rot, float) @ R_rot_from_A
+    return np.array([math.atan2(n[0], -n[2]), math.atan2(n[1], -n[2])])
 
 
-def reference_axis_rot(rig: CubeMirrorRig, real: Realization) -> np.ndarray:
-    """Step A: the autocollimator adjusted to read zero on the inner-frame plane mirror, all axes
-    reading zero — its axis is the plane mirror's normal in rot (noise-free; same formula as
-    :func:`rigsim.procedures.cube_mirror.campaign.reference_direction`)."""
-    if real.plane_mirror_normal_mount is None:
-        raise GeometryError("this rig has no plane mirror; pass axis_rot explicitly")
-    m = real.turntable.R_rot_from_mount(reference_pose_rad(rig, real)) @ real.plane_mirror_normal_mount
-    return m / np.linalg.norm(m)
-
-
-def _plane_mirror_centre_rot(real: Realization, pose_rad: dict, centre_mount) -> np.ndarray:
-    return real.turntable.R_rot_from_mount(pose_rad) @ np.asarray(centre_mount, float)
-
-
-def autocollimator_layout(rig: CubeMirrorRig, real: Realization, target: str = "face", face: str | None = None, *,
-                          axis_rot=None, reference_pose=None, objective_vertex_z_mm: float = 2.5,
-                          plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0)) -> AutocollimatorLayout:
-    """Place the autocollimator for ``target`` = ``"face"`` (cube face ``face``, default the
-    procedure's first face) or ``"plane_mirror"``.
-
-    The axis direction is ``axis_rot`` (unit, towards the autocollimator), by default the step-A
-    direction (:func:`reference_axis_rot`). For a face, the reference pose is the exact pose near
-    the procedure's nominal pose (middle and outer axes adjusted) at which the face's true normal
-    is along the axis — its null; for the plane mirror it is the all-zero reading pose. The
-    axis passes through the target's centre at that pose, and the objective's convex vertex
-    (``objective_vertex_z_mm`` from the lens centre) is ``rig.autocollimator.distance_mm`` from it.
-    ``plane_mirror_centre_mount_mm``: where the plane mirror sits on the inner frame (the rig
-    schema does not say; default the axes' intersection).
-    """
-    if rig.autocollimator is None:
-        raise GeometryError("this rig has no autocollimator")
-    if target not in ("face", "plane_mirror"):
-        raise ValueError(f"target = {target!r}: must be 'face' or 'plane_mirror'")
-    d = reference_axis_rot(rig, real) if axis_rot is None else np.asarray(axis_rot, float)
-    R = a_frame_basis(d)  # from the axis as given: a_frame_basis normalises it once, as below
-    d = d / np.linalg.norm(d)
-    pm_c = np.asarray(plane_mirror_centre_mount_mm, float)
-    if target == "face":
-        face = face or rig.procedure.faces[0]
-        if face not in real.face_normals_mount:
-            raise ValueError(f"face {face!r} has no true normal in this realisation (faces: {sorted(real.face_normals_mount)})")
-        if reference_pose is None:
-            idx = rig.procedure.faces.index(face) if face in rig.procedure.faces else 0
-            start = pose_deg_to_rad(rig.procedure.nominal_poses_deg[idx])
-            free = [a.label for a in rig.turntable.axes if a.label in ("X", "Y")]
-            fixed = {a.label: start.get(a.label, 0.0) for a in rig.turntable.axes if a.label not in free}
-            reference_pose = real.turntable.solve_alignment(real.face_normals_mount[face], d, free, start, fixed)
-        cp = cube_pose(rig, real, reference_pose)
-        anchor = cp.apply(0.5 * rig.cube.edge_mm * FACE_NORMALS[face])
-    else:
-        face = None
-        if real.plane_mirror_normal_mount is None:
-            raise GeometryError("this rig has no plane mirror")
-        if reference_pose is None:
-            reference_pose = reference_pose_rad(rig, real)
-        anchor = _plane_mirror_centre_rot(real, reference_pose, pm_c)
-    origin = anchor + d * (rig.autocollimator.distance_mm + objective_vertex_z_mm)
-    return AutocollimatorLayout(target, face, d, R, origin, anchor, dict(reference_pose), pm_c)
-
-
-def mirror_target(rig: CubeMirrorRig, real: Realization, layout: AutocollimatorLayout, pose_rad: dict,
-                  reflectance: float = 1.0) -> MirrorTarget:
-    """The target mirror at turntable pose ``pose_rad`` (true kinematics), in the A frame."""
-    if layout.target == "face":
-        cp = cube_pose(rig, real, pose_rad)
-        R_rm = real.turntable.R_rot_from_mount(pose_rad)
-        n_rot = R_rm @ real.face_normals_mount[layout.face]
-        n_rot /= np.linalg.norm(n_rot)
-        nominal = FACE_NORMALS[layout.face]
-        centre_rot = cp.apply(0.5 * rig.cube.edge_mm * nominal)
-        # in-plane edge directions of the (ideal) cube face, re-orthogonalised to the true normal
-        k = int(np.argmax(np.abs(nominal)))
-        axes = [cp.R[:, i] for i in range(3) if i != k]
-        n = layout.dir_to_A(n_rot)
-        e1 = layout.dir_to_A(axes[0])
-        e1 = e1 - (e1 @ n) * n
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(n, e1)
-        return MirrorTarget(layout.to_A(centre_rot), n, "square", 0.5 * rig.cube.edge_mm, e1, e2, reflectance,
-                            f"cube face {layout.face}")
-    R_rm = real.turntable.R_rot_from_mount(pose_rad)
-    n_rot = R_rm @ real.plane_mirror_normal_mount
-    n = layout.dir_to_A(n_rot / np.linalg.norm(n_rot))
-    e1, e2 = _plane_axes(n)
-    centre = layout.to_A(_plane_mirror_centre_rot(real, pose_rad, layout.plane_mirror_centre_mount_mm))
-    return MirrorTarget(centre, n, "disk", 0.5 * rig.plane_mirror.diameter_mm, e1, e2, reflectance, "plane mirror")
+def normal_from_reading(R_rot_from_A: np.ndarray, reading_rad) -> np.ndarray:
+    """Inverse of :func:`exact_reading_rad`: the unit normal (rot frame) that reads ``reading_rad``
+    — n_A ∝ (tan θx, tan θy, −1)."""
+    tx, ty = (float(x) for x in reading_rad)
+    n = R_rot_from_A @ np.array([math.tan(tx), math.tan(ty), -1.0])
+    return n / np.linalg.norm(n)

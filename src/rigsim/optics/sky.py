@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 __all__ = ["StarCatalogue", "load_hipparcos", "propagate", "radec_to_unit", "unit_to_radec",
            "photon_rate", "star_photons", "CATALOGUE_EPOCH_YEAR", "MAS_TO_RAD"]
@@ -144,3 +145,21 @@ def load_hipparcos(path: str | None = None) -> StarCatalogue:
 
     return StarCatalogue(col("hip").astype(np.int64), col("ra"), col("dec"), col("plx"), col("pmra"),
                          col("pmdec"), col("hp"), col("bv"))
+
+
+def pointing(ra_deg: float, dec_deg: float, roll_deg: float = 0.0) -> np.ndarray:
+    """R_cam_from_icrs with the boresight at (ra, dec), north up (−v) at roll 0."""
+    ra, dec = np.radians(ra_deg), np.radians(dec_deg)
+    z = radec_to_unit(ra, dec)
+    east = np.array([-np.sin(ra), np.cos(ra), 0.0])
+    north = np.array([-np.sin(dec) * np.cos(ra), -np.sin(dec) * np.sin(ra), np.cos(dec)])
+    R0 = np.stack([-east, -north, z])  # rows: camera x, y, z in ICRS
+    Rroll = Rotation.from_rotvec([0.0, 0.0, np.radians(roll_deg)]).as_matrix()
+    return Rroll.T @ R0
+
+
+def boresight_radec(R_cam_from_icrs) -> tuple[float, float]:
+    z = np.asarray(R_cam_from_icrs)[..., 2, :]
+    ra = np.degrees(np.mod(np.arctan2(z[..., 1], z[..., 0]), 2 * np.pi))
+    dec = np.degrees(np.arcsin(np.clip(z[..., 2], -1, 1)))
+    return ra, dec

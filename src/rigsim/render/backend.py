@@ -429,3 +429,12 @@ def doctor_report(test_all: bool = True) -> dict:
         "fallback_variant": SCALAR_VARIANT,
         "notes": notes,
     }
+
+
+def set_thread_count(threads: int) -> None:
+    """Dr.Jit's worker threads in this process. The libLLVM is chosen first (:func:`ensure_variant`):
+    importing drjit before that would load whatever library it finds."""
+    ensure_variant()
+    import drjit as dr
+
+    dr.set_thread_count(int(threads))

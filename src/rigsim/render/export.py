@@ -12,7 +12,9 @@ import math
 from pathlib import Path
 
 import numpy as np
+
 from rigsim.errors import ExportError
+
 
 def _check_builtin(d, where="scene"):
     for k, v in d.items():
@@ -119,33 +121,3 @@ def localise_files(scene: dict, out_dir: Path) -> dict:
 
     return walk(scene)
 
-
-def export_rig(rig, out_dir: Path, pose_deg: dict | None = None, spp: int = 64) -> list[Path]:
-    """Write every scene rigsim can build for ``rig`` as Mitsuba XML (plus meshes) into ``out_dir``."""
-    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene, sun_sensor_export_dict
-    from rigsim.truth.cube_mirror.realization import realization_from_rig
-
-    out_dir = Path(out_dir)
-    real = realization_from_rig(rig)
-    pose_rad = {k: math.radians(v) for k, v in (pose_deg or {}).items()}
-    written = []
-    sc = SunSensorScene(rig, real, spp=64)
-    d, notes = sun_sensor_export_dict(sc, pose_rad, spp=spp)
-    written.append(write_xml(out_dir / "sun_sensor.xml", d, notes))
-    for builder_name, module_name, fname in (
-        ("export_diaphragm", "rigsim.render.cube_mirror.diaphragm", "diaphragm_screen.xml"),
-        ("export_autocollimator", "rigsim.render.cube_mirror.autocollimator", "autocollimator.xml"),
-    ):
-        try:
-            mod = __import__(module_name, fromlist=[builder_name])
-        except ImportError:
-            continue
-        builder = getattr(mod, builder_name, None)
-        if builder is None:
-            continue
-        res = builder(rig, real, pose_rad or None, spp=spp)
-        if res is None:  # not applicable to this rig
-            continue
-        d, notes = res
-        written.append(write_xml(out_dir / fname, localise_files(d, out_dir), notes))
-    return written

@@ -10,8 +10,9 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-import numpy as np
 import trimesh
+
+from rigsim.optics.meshes import cube_mesh
 
 DEFAULT_MESH_DIR = Path.home() / ".cache" / "rigsim" / "meshes"
 
@@ -29,16 +30,6 @@ def _write(mesh: trimesh.Trimesh, name: str, out_dir: Path | None) -> Path:
     return path
 
 
-def cube_mesh(edge_mm: float) -> trimesh.Trimesh:
-    """Axis-aligned cube of side ``edge_mm`` centred at the origin of the cube frame.
-
-    Its faces' outward normals are the cube frame's ±X, ±Y, ±Z (face "+Z" = the XY face).
-    """
-    box = trimesh.creation.box(extents=[edge_mm] * 3)
-    box.unmerge_vertices()  # flat faces: no shared, averaged vertex normals
-    return box
-
-
 def cube_ply(edge_mm: float, out_dir: Path | None = None) -> Path:
     return _write(cube_mesh(edge_mm), f"cube_{edge_mm:g}mm", out_dir)
 
@@ -47,8 +38,3 @@ def mesh_ply(mesh: trimesh.Trimesh, name: str, out_dir: Path | None = None) -> P
     """Write any trimesh mesh (content-addressed file name, so repeated builds reuse it)."""
     return _write(mesh, name, out_dir)
 
-
-def face_normals_ok(mesh: trimesh.Trimesh) -> bool:
-    """True if every face normal is one of the six axis directions (a sanity check for tests)."""
-    n = np.round(mesh.face_normals, 12)
-    return bool(np.all(np.sum(np.abs(n) == 1.0, axis=1) == 1))

@@ -1,6 +1,6 @@
 """Mitsuba Python sensors: a distorted pinhole camera and a telecentric camera.
 
-Both use the project's pixel convention (see :mod:`rigsim.render.camera`): OpenCV camera frame
+Both use the project's pixel convention (see :mod:`rigsim.optics.camera`): OpenCV camera frame
 (x right, y down, z forward), pixel (0,0)'s centre at (0.0, 0.0), +u right, +v down. The film
 attached to a sensor is a *window* of the detector: film pixel (i, j) is detector pixel
 (window_u0 + i, window_v0 + j). Never set the film's own crop (changing it recompiles every
@@ -39,8 +39,8 @@ import math
 
 import numpy as np
 
+from rigsim.optics.camera import radial_r2_max
 from rigsim.render.backend import ensure_variant
-from rigsim.render.camera import radial_r2_max
 
 __all__ = ["register_sensors", "sensor_classes", "PINHOLE_PLUGIN", "TELECENTRIC_PLUGIN",
            "NEWTON_ITERATIONS"]
@@ -180,7 +180,7 @@ def _make_classes():  # noqa: C901 - one closure per variant keeps mitsuba out o
         def parameters_changed(self, keys=None):
             self._update()
 
-        # Brown model and its Jacobian (same formulas as rigsim.render.camera.PinholeCamera)
+        # Brown model and its Jacobian (same formulas as rigsim.optics.camera.PinholeBrown)
         def _distort(self, x, y):
             r2 = dr.fma(x, x, y * y)
             rad = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
@@ -321,3 +321,119 @@ def _make_classes():  # noqa: C901 - one closure per variant keeps mitsuba out o
                     f"cy={self.cy}, window_origin={self.window_origin}]")
 
     return DistortedPinholeSensor, TelecentricSensor
+
+
+LENS_PLUGIN = "rigsim_ideal_lens"
+
+
+MIRROR_PLUGIN = "rigsim_normal_mirror"
+
+
+_bsdfs_registered: set = set()
+
+
+def register_plugins() -> None:
+    """Register the ideal-lens and normal-mirror BSDFs (and rigsim's sensors) for the variant."""
+    variant = ensure_variant()
+    register_sensors()
+    if variant in _bsdfs_registered:
+        return
+    import drjit as dr
+    import mitsuba as mi
+
+    def _vec(props, name, default):
+        v = props[name] if name in props else default
+        return mi.Vector3f(*[float(x) for x in v])
+
+    def _delta_sample(si, d_world, kind, active):
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = si.to_local(d_world)
+        bs.pdf = mi.Float(1.0)
+        bs.eta = mi.Float(1.0)
+        bs.sampled_type = mi.UInt32(+kind)
+        bs.sampled_component = mi.UInt32(0)
+        return bs, dr.select(active, mi.Spectrum(1.0), mi.Spectrum(0.0))
+
+    class IdealLens(mi.BSDF):
+        """Thin ideal lens: focal_length (mm), centre (world), axis e3, in-plane axes e1, e2."""
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.f = mi.Float(float(props["focal_length"]))
+            self.C = _vec(props, "centre", (0.0, 0.0, 0.0))
+            self.e1 = _vec(props, "e1", (1.0, 0.0, 0.0))
+            self.e2 = _vec(props, "e2", (0.0, 1.0, 0.0))
+            self.e3 = _vec(props, "e3", (0.0, 0.0, 1.0))
+            fl = mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+            self.m_components = [fl]
+            self.m_flags = fl
+            dr.make_opaque(self.f, self.C, self.e1, self.e2, self.e3)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            p = -si.to_world(si.wi)                      # propagation direction (world)
+            px, py, pz = dr.dot(p, self.e1), dr.dot(p, self.e2), dr.dot(p, self.e3)
+            r = si.p - self.C
+            x, y = dr.dot(r, self.e1), dr.dot(r, self.e2)
+            az = dr.abs(pz)
+            qx = px / az - x / self.f                    # transverse slope per unit travel, minus r/f
+            qy = py / az - y / self.f
+            sz = dr.select(pz >= 0, 1.0, -1.0)
+            d = dr.normalize(qx * self.e1 + qy * self.e2 + sz * self.e3)
+            return _delta_sample(si, d, mi.BSDFFlags.DeltaTransmission, active)
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+
+        def traverse(self, cb):
+            cb.put("focal_length", self.f, mi.ParamFlags.NonDifferentiable)
+            cb.put("centre", self.C, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys=None):
+            dr.make_opaque(self.f, self.C)
+
+        def to_string(self):
+            return f"IdealLens[f={self.f}, centre={self.C}]"
+
+    class NormalMirror(mi.BSDF):
+        """Perfect mirror about the given world-space unit normal (independent of the carrier)."""
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.N = _vec(props, "normal", (0.0, 0.0, 1.0))
+            fl = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+            self.m_components = [fl]
+            self.m_flags = fl
+            dr.make_opaque(self.N)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            d = -si.to_world(si.wi)
+            wo = d - 2.0 * dr.dot(d, self.N) * self.N
+            return _delta_sample(si, wo, mi.BSDFFlags.DeltaReflection, active)
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+
+        def traverse(self, cb):
+            cb.put("normal", self.N, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys=None):
+            dr.make_opaque(self.N)
+
+        def to_string(self):
+            return f"NormalMirror[normal={self.N}]"
+
+    mi.register_bsdf(LENS_PLUGIN, lambda props: IdealLens(props))
+    mi.register_bsdf(MIRROR_PLUGIN, lambda props: NormalMirror(props))
+    _bsdfs_registered.add(variant)

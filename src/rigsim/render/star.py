@@ -43,12 +43,14 @@ Per frame only the bitmap's data and the window origin change, through ``mi.trav
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
+
 import numpy as np
+from scipy.special import erf
+
 from rigsim.detector import apply_detector
 from rigsim.truth.star import StarField, StarSky
-from scipy.special import erf
-import time
 
 __all__ = ['StarFrame', 'render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
 
@@ -163,7 +165,6 @@ class MitsubaStarRenderer:
     def __init__(self, sensor, *, oversample: int = 2, window_px: int = 16, spp: int = 256,
                  mode: str = "windows", distance_mm: float = 1000.0, margin_px: int = 12):
         from rigsim.render.backend import ensure_variant
-        from rigsim.render.camera import PinholeCamera
         from rigsim.render.plugins import register_sensors
 
         if mode not in ("windows", "full"):
@@ -180,7 +181,7 @@ class MitsubaStarRenderer:
             raise ValueError(f"window_px = {window_px} is too small for a PSF of σ = {self.sigma_px:.2f} px "
                              f"(need ≥ {2 * math.ceil(5 * self.sigma_px) + 4})")
         self.cam = sensor.camera()
-        self.pcam = PinholeCamera.from_intrinsics(self.cam)
+        self.pcam = self.cam
         self.variant = ensure_variant()
         register_sensors()
         self.oversample = int(oversample)

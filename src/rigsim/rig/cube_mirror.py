@@ -24,7 +24,6 @@ from scipy.spatial.transform import Rotation
 
 from rigsim.detector.config import DetectorConfig
 
-
 FaceName = Literal["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
 AxisLabel = Literal["X", "Y", "Z"]
 

@@ -6,17 +6,17 @@ value and the allowed range — never a traceback from inside pydantic or tomlli
 
 from __future__ import annotations
 
-import tomllib
 import typing
 from pathlib import Path
 
 import annotated_types as at
+import tomllib
 from pydantic import BaseModel, ValidationError
 
+from rigsim.errors import RigError  # noqa: F401  (re-exported)
 from rigsim.rig.boresight import BoresightRig
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.star import StarRig
-from rigsim.errors import RigError  # noqa: F401  (re-exported)
 
 SCENES_DIR = Path(__file__).resolve().parents[3] / "scenes"
 

@@ -13,7 +13,6 @@ normalised form. Attitudes are ``R_cam_from_icrs``.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator

@@ -21,9 +21,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from rigsim.errors import GeometryError  # noqa: F401  (re-exported)
 from rigsim.frames import RAD_PER_ARCSEC, rot_axis
 from rigsim.rig.cube_mirror import Turntable
-from rigsim.errors import GeometryError  # noqa: F401  (re-exported)
 
 _E = {"X": np.array([1.0, 0.0, 0.0]), "Y": np.array([0.0, 1.0, 0.0]), "Z": np.array([0.0, 0.0, 1.0])}
 

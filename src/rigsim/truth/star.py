@@ -25,31 +25,20 @@ entrance pupil seen obliquely; a point source has no cos⁴ law). Sky background
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial.transform import Rotation
-from rigsim.optics.sky import radec_to_unit
-import math
-from rigsim.optics.sky import StarCatalogue, load_hipparcos, star_photons
+
+from rigsim.optics.sky import (
+    StarCatalogue,
+    load_hipparcos,
+    pointing,
+    star_photons,
+)
 
 __all__ = ['AttitudeSequence', 'pointing', 'inertial', 'slew', 'random_pointings', 'from_rig', 'boresight_radec', 'perturb', 'StarField', 'StarSky']
-
-def pointing(ra_deg: float, dec_deg: float, roll_deg: float = 0.0) -> np.ndarray:
-    """R_cam_from_icrs with the boresight at (ra, dec), north up (−v) at roll 0."""
-    ra, dec = np.radians(ra_deg), np.radians(dec_deg)
-    z = radec_to_unit(ra, dec)
-    east = np.array([-np.sin(ra), np.cos(ra), 0.0])
-    north = np.array([-np.sin(dec) * np.cos(ra), -np.sin(dec) * np.sin(ra), np.cos(dec)])
-    R0 = np.stack([-east, -north, z])  # rows: camera x, y, z in ICRS
-    Rroll = Rotation.from_rotvec([0.0, 0.0, np.radians(roll_deg)]).as_matrix()
-    return Rroll.T @ R0
-
-
-def boresight_radec(R_cam_from_icrs) -> tuple[float, float]:
-    z = np.asarray(R_cam_from_icrs)[..., 2, :]
-    ra = np.degrees(np.mod(np.arctan2(z[..., 1], z[..., 0]), 2 * np.pi))
-    dec = np.degrees(np.arcsin(np.clip(z[..., 2], -1, 1)))
-    return ra, dec
 
 
 @dataclass(frozen=True)

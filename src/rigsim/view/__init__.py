@@ -5,9 +5,15 @@ viewpoints); ``rig_picture(rig_or_path, out_png)`` renders it off screen; ``rigs
 is the command (docs/view.md).
 """
 
-from rigsim.view.api import build_scene, export_scene, load_view_rig, rig_picture, show_scene
-from rigsim.view.scene import Beam, Item, Label, RigScene, ViewSpec
 from rigsim.errors import ViewError
+from rigsim.view.api import (
+           build_scene,
+           export_scene,
+           load_view_rig,
+           rig_picture,
+           show_scene,
+)
+from rigsim.view.scene import Beam, Item, Label, RigScene, ViewSpec
 
 __all__ = ["build_scene", "rig_picture", "export_scene", "show_scene", "load_view_rig", "RigScene", "Item", "Label",
            "Beam", "ViewSpec", "ViewError"]

@@ -11,8 +11,8 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from rigsim.view.scene import RigScene
 from rigsim.errors import ViewError
+from rigsim.view.scene import RigScene
 
 __all__ = ["register_view_builder", "builder_for", "load_view_rig", "build_scene", "rig_picture", "export_scene",
            "show_scene", "VIEW_BUILDERS", "parse_size"]

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
-from rigsim.errors import CliError, ViewError
+from rigsim.errors import CliError
 
 __all__ = ["add_cli", "cmd_view", "parse_pose_arg"]
 
@@ -64,8 +63,8 @@ def add_cli(run_subparsers, top=None) -> None:
 
 
 def _check_outputs(args) -> None:
-    from rigsim.view.plot import html_available
     from rigsim.errors import ViewError
+    from rigsim.view.plot import html_available
 
     if args.screenshot is not None and Path(args.screenshot).suffix.lower() != ".png":
         raise ViewError(f"--screenshot = {args.screenshot!r}: must end in .png")

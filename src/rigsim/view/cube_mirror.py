@@ -29,15 +29,19 @@ import math
 
 import numpy as np
 
+from rigsim.errors import GeometryError, ViewError
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.cube import DOCUMENT_FACE_NAMES, FACE_NORMALS, reflect
-from rigsim.truth.cube_mirror.placement import cube_pose, face_in_rot, plane_hit, trace_return_spot
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.errors import GeometryError
+from rigsim.truth.cube_mirror.placement import (
+    cube_pose,
+    face_in_rot,
+    plane_hit,
+    trace_return_spot,
+)
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 from rigsim.view import primitives as P
-from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec
-from rigsim.errors import ViewError
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec
 
 __all__ = ["build_cube_rig_scene", "resolve_pose_deg", "resolve_face", "POSE_KEYWORDS"]
 
@@ -74,7 +78,7 @@ def _null_pose_rad(rig: CubeMirrorRig, real: Realization, fi: int) -> dict:
         from rigsim.truth.cube_mirror.placement import diaphragm_layout
 
         return dict(diaphragm_layout(rig, real, fi).null_pose_rad)
-    from rigsim.optics.autocollimator import autocollimator_layout
+    from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout
 
     return dict(autocollimator_layout(rig, real, "face", rig.procedure.faces[fi]).reference_pose_rad)
 
@@ -204,7 +208,7 @@ def _sensor(scene: RigScene, rig: CubeMirrorRig, real: Realization, R_rm: np.nda
 
 
 def _cube(scene: RigScene, rig: CubeMirrorRig, real: Realization, pose_rad: dict, measured: str) -> None:
-    from rigsim.render.cube_mirror.diaphragm import true_cube_mesh
+    from rigsim.truth.cube_mirror.diaphragm import true_cube_mesh
 
     cp = cube_pose(rig, real, pose_rad)
     R_rm = real.turntable.R_rot_from_mount(pose_rad)
@@ -253,7 +257,8 @@ def _simulator(scene: RigScene, exit_centre, d, rig: CubeMirrorRig, note: str, l
 # ------------------------------------------------------------------------------------------
 
 def _diaphragm(scene: RigScene, rig: CubeMirrorRig, real: Realization, fi: int, pose_rad: dict) -> dict:
-    from rigsim.render.cube_mirror.diaphragm import diaphragm_geometry, screen_with_hole_mesh
+    from rigsim.optics.meshes import screen_with_hole_mesh
+    from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
 
     geom = diaphragm_geometry(rig, real, fi)
     lay = geom.layout
@@ -373,7 +378,11 @@ def autocollimator_central_ray(rig: CubeMirrorRig, real: Realization, face: str,
     return trace (refraction in the singlet included; the drawn segment through the lens joins
     the traced stop-plane and detector-plane points with a straight line).
     """
-    from rigsim.optics.autocollimator import AutocollimatorOptics, autocollimator_layout, mirror_target
+    from rigsim.optics.autocollimator import AutocollimatorOptics
+    from rigsim.truth.cube_mirror.autocollimator import (
+        autocollimator_layout,
+        mirror_target,
+    )
 
     lay = layout if layout is not None else autocollimator_layout(rig, real, "face", face)
     opt = optics if optics is not None else AutocollimatorOptics(rig.autocollimator)
@@ -403,8 +412,9 @@ def autocollimator_central_ray(rig: CubeMirrorRig, real: Realization, face: str,
 
 
 def _autocollimator(scene: RigScene, rig: CubeMirrorRig, real: Realization, fi: int, pose_rad: dict) -> dict:
-    from rigsim.optics.autocollimator import AutocollimatorOptics, autocollimator_layout
-    from rigsim.render.cube_mirror.autocollimator import lens_mesh
+    from rigsim.optics.autocollimator import AutocollimatorOptics
+    from rigsim.optics.meshes import lens_mesh
+    from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout
 
     face = rig.procedure.faces[fi]
     lay = autocollimator_layout(rig, real, "face", face)

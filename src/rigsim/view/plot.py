@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rigsim.errors import ViewError
 from rigsim.view.display import has_display, prepare_offscreen
 from rigsim.view.scene import COLOURS, RigScene, ViewSpec
-from rigsim.errors import ViewError
 
 __all__ = ["make_plotter", "populate", "screenshot", "export_scene", "show", "EXPORT_SUFFIXES",
            "html_available"]

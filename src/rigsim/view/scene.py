@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from rigsim.errors import ViewError
 
 __all__ = ["Item", "Label", "Beam", "ViewSpec", "RigScene", "ALL_VIEWS", "COLOURS", "ViewError"]

@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from rigsim.view import primitives as P
-from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec, _pose_text
 from rigsim.errors import ViewError
+from rigsim.view import primitives as P
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec, _pose_text
 
 __all__ = ["build_star_scene", "RAY_LENGTH_MM", "first_attitude"]
 
@@ -58,7 +58,7 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
         raise ViewError(f"--face = {face!r}: the star-sensor rig (seed 004) has no mirror cube")
     if not 0 <= int(n_bright) <= 50:
         raise ViewError(f"n_bright = {n_bright}: allowed range is 0 to 50")
-    from rigsim.truth.star import boresight_radec
+    from rigsim.optics.sky import boresight_radec
     from rigsim.truth.star import StarSky
 
     s = rig.sensor

@@ -45,10 +45,9 @@ def cmd_run_boresight(args) -> int:
     from tqdm import tqdm
 
     import rigsim
-    from rigsim.rig.load import load_boresight_rig
     from rigsim.procedures.boresight.report import key_numbers, write_report
     from rigsim.procedures.boresight.studies import run_study
-    from rigsim.rig.load import resolve_rig_path
+    from rigsim.rig.load import load_boresight_rig, resolve_rig_path
 
     rig = load_boresight_rig(args.rig)
     if args.runs is not None and not 10 <= args.runs <= 1_000_000:

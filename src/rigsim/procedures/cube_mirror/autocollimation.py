@@ -42,11 +42,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
-from rigsim.imaging import Background, Flag, centroid_tcom, detect, estimate_background, extract_rois
-from rigsim.optics.autocollimator import a_frame_basis  # noqa: F401  (re-exported)
 from rigsim.errors import SearchError
-from rigsim.estimation.null_search import SearchResult, encoder_reading_to_true, null_search
+from rigsim.estimation.null_search import (
+    SearchResult,
+    encoder_reading_to_true,
+    null_search,
+)
+from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
+from rigsim.imaging.spot import ROI_PX, SpotMeasurement, measure_spot
+from rigsim.optics.autocollimator import (
+    a_frame_basis,  # noqa: F401  (re-exported)
+    exact_reading_rad,
+    normal_from_reading,
+)
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import NOMINAL_D, Realization, tilt
@@ -72,31 +80,6 @@ DEFAULT_SPP = 1024
 """Stratified samples per pixel of the rendered frames (the renderer's default; 0.005 px rms
 rendering noise on the spot centroid, docs/render_autocollimator.md)."""
 
-ROI_PX = 49
-"""Side of the centroid window. The diffraction cross of a square face stays above 3σ of the
-background out to ~20 px from the centre; a 31 px window cuts it asymmetrically (0.05 px bias
-with a plain centre of mass, measured), 49 px holds it."""
-
-THRESHOLD_SIGMA = 3.0
-"""Thresholded centre of mass: pixels above background + 3σ count (their excess over it)."""
-
-
-# ------------------------------------------------------------------------------ geometry
-def exact_reading_rad(R_rot_from_A: np.ndarray, normal_rot) -> np.ndarray:
-    """The instrument's ideal reading of a mirror with outward normal ``normal_rot``:
-    (θx, θy) = (atan2(n_x, −n_z), atan2(n_y, −n_z)) with n in the A frame
-    (:meth:`rigsim.optics.autocollimator.MirrorTarget.tilt_rad`)."""
-    n = np.asarray(normal_rot, float) @ R_rot_from_A
-    return np.array([math.atan2(n[0], -n[2]), math.atan2(n[1], -n[2])])
-
-
-def normal_from_reading(R_rot_from_A: np.ndarray, reading_rad) -> np.ndarray:
-    """Inverse of :func:`exact_reading_rad`: the unit normal (rot frame) that reads ``reading_rad``
-    — n_A ∝ (tan θx, tan θy, −1)."""
-    tx, ty = (float(x) for x in reading_rad)
-    n = R_rot_from_A @ np.array([math.tan(tx), math.tan(ty), -1.0])
-    return n / np.linalg.norm(n)
-
 
 def _fmt_pose(pose_rad: Mapping[str, float]) -> str:
     return ", ".join(f"{k} = {math.degrees(v):.5f}°" for k, v in pose_rad.items())
@@ -121,73 +104,6 @@ def _optics(rig: CubeMirrorRig):
     from rigsim.optics.autocollimator import AutocollimatorOptics
 
     return AutocollimatorOptics(rig.autocollimator)
-
-
-# ------------------------------------------------------------------------------ frame pipeline
-@dataclass
-class SpotMeasurement:
-    """What the instrument's software makes of one DN frame (no truth)."""
-
-    uv: np.ndarray | None  # spot centroid (px), None when unusable
-    flags: int  # rigsim.imaging Flag bits of the centroid (and of its detection)
-    problem: str | None  # None when ``uv`` is usable; otherwise why not
-    n_detections: int
-    peak_dn: float
-    background_dn: float
-    background_rms_dn: float
-
-    @property
-    def ok(self) -> bool:
-        return self.problem is None
-
-
-def measure_spot(dn: np.ndarray, detector, *, roi_px: int = ROI_PX, threshold_sigma: float = THRESHOLD_SIGMA,
-                 detect_sigma: float = 5.0) -> SpotMeasurement:
-    """Find and centroid the autocollimator's return spot on a full DN frame.
-
-    Background: sigma-clipped median and rms of the frame, the rms floored at the detector's
-    read noise and quantisation √((K·R)² + 1/12) DN (a noise-free frame has rms 0). Detection:
-    ``detect_sigma`` above it; the brightest peak is the spot (the diffraction cross of a square
-    face or the Airy rings may be detected as separate faint sources: they are ignored). Centroid:
-    thresholded centre of mass (``centroid_tcom``, background + ``threshold_sigma``·rms,
-    subtract mode) over a ``roi_px`` window on the brightest pixel. The centroid is refused
-    (``problem`` set) if nothing is detected, if any pixel of the window is saturated (ADC
-    maximum), or if the window leaves the detector (the spot is at the edge of the measuring
-    range)."""
-    a = np.asarray(dn)
-    if a.ndim != 2:
-        raise ValueError(f"dn must be a 2-D frame, got shape {a.shape}")
-    max_dn = float(detector.max_dn)
-    floor = math.sqrt((detector.gain_dn_per_e * detector.read_noise_e) ** 2 + 1.0 / 12.0)
-    bg = estimate_background(a, saturation=max_dn)
-    level = float(bg.level) if np.isfinite(bg.level) else float(np.median(a))
-    rms = max(float(bg.rms), floor) if np.isfinite(bg.rms) else floor
-    peak_all = float(a.max())
-
-    def out(uv, fl, problem, n=0):
-        return SpotMeasurement(uv, int(fl), problem, n, peak_all, level, rms)
-
-    det = detect(a, threshold_sigma=detect_sigma, saturation=max_dn, background=Background(level, rms, bg.flags))
-    if len(det) == 0:
-        if peak_all >= max_dn:
-            return out(None, Flag.SATURATED | Flag.INVALID, "the frame is saturated (no measurable spot)")
-        return out(None, Flag.EMPTY | Flag.INVALID, "no spot on the detector (nothing above the background)")
-    i = int(np.argmax(det.peak))
-    rois = extract_rois(a.astype(float), det.peak_u[i:i + 1].astype(float), det.peak_v[i:i + 1].astype(float), roi_px)
-    c = centroid_tcom(rois.stack[0], threshold=level + threshold_sigma * rms, background=level,
-                      saturation=max_dn, origin_uv=rois.origin_uv[0])
-    fl = int(c.flags) | int(rois.flags[0]) | int(det.flags[i])
-    n = len(det)
-    if fl & Flag.SATURATED:
-        nsat = int(np.sum(a >= max_dn))
-        return out(None, fl, f"the spot is saturated ({nsat} pixels at the ADC maximum {max_dn:g} DN): "
-                             "lower the source brightness", n)
-    if fl & Flag.EDGE or int(rois.flags[0]) & Flag.EDGE:
-        return out(None, fl, f"the spot (at u, v ≈ {det.peak_u[i]}, {det.peak_v[i]}) is at the detector's edge "
-                             f"(its {roi_px} px centroid window leaves the detector): edge of the measuring range", n)
-    if fl & (Flag.INVALID | Flag.EMPTY) or not np.all(np.isfinite([c.u, c.v])):
-        return out(None, fl, "no usable centroid (empty or invalid spot window)", n)
-    return out(np.array([c.u, c.v]), fl, None, n)
 
 
 # ------------------------------------------------------------------------------ step A
@@ -251,7 +167,7 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
     when a frame has no measurable spot."""
     if rig.autocollimator is None or rig.plane_mirror is None or real.plane_mirror_normal_mount is None:
         raise ValueError(f"rig {rig.name!r}: step A needs an autocollimator and a plane mirror on the inner frame")
-    from rigsim.optics.autocollimator import reference_pose_rad
+    from rigsim.truth.cube_mirror.autocollimator import reference_pose_rad
 
     ac = rig.autocollimator
     thr = float(ac.null_threshold_arcsec if threshold_arcsec is None else threshold_arcsec)
@@ -284,8 +200,12 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
             ex = exact_reading_rad(R, pm)
             fi: dict = {"seed": _derived_seed(base_seed, k)}
             if rendered:
-                from rigsim.optics.autocollimator import autocollimator_layout
-                from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
+                from rigsim.render.cube_mirror.autocollimator import (
+                    AutocollimatorRenderer,
+                )
+                from rigsim.truth.cube_mirror.autocollimator import (
+                    autocollimator_layout,
+                )
 
                 tb = time.perf_counter()
                 layout = autocollimator_layout(rig, real, "plane_mirror", axis_rot=d,
@@ -404,8 +324,8 @@ class FaceReadingMeasurer:
         self.renderer = None
         self.build_seconds = 0.0
         if self.rendered:
-            from rigsim.optics.autocollimator import autocollimator_layout
             from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
+            from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout
 
             t0 = time.perf_counter()
             self.optics = optics or _optics(rig)

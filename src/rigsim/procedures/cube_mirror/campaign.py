@@ -20,13 +20,22 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from rigsim.estimation.cube_attitude import cube_from_rot_triad
-from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor, sweep_poses
+from rigsim.estimation.sun_calibration import (
+    SunCalibration,
+    calibrate_sun_sensor,
+    sweep_poses,
+)
 from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
 from rigsim.optics.camera import PinholeBrown
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import (
-    NOMINAL_D, Noise, Realization, draw_realization, noise_from_rig, realization_from_rig, tilt,
+    NOMINAL_D,
+    Noise,
+    Realization,
+    draw_realization,
+    noise_from_rig,
+    tilt,
 )
 
 PAPER_RSS_ARCSEC = 3.69

@@ -24,51 +24,17 @@ from collections.abc import Callable
 import numpy as np
 
 from rigsim.errors import SearchError
-from rigsim.estimation.null_search import SearchResult, encoder_reading_to_true, null_search
+from rigsim.estimation.null_search import (
+    SearchResult,
+    encoder_reading_to_true,
+    null_search,
+)
+from rigsim.imaging.screen import hole_spot_offset
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import NOMINAL_D, Realization, tilt
 
 FREE_AXES = ("X", "Y")
-
-
-# ------------------------------------------------------------------ image side
-
-def _masked_screen_centroid(img: np.ndarray, geom, level: float) -> tuple[np.ndarray, int]:
-    """Centroid on the screen plane (mm) of the pixels whose smoothed value exceeds ``level``
-    times the smoothed image's robust peak; weights = value × screen area of the pixel."""
-    import cv2
-
-    from rigsim.render.cube_mirror.diaphragm import _pixel_area_mm2
-
-    a = np.asarray(img, np.float64)
-    sm = cv2.GaussianBlur(a.astype(np.float32), (0, 0), 2.0)
-    peak = float(np.percentile(sm, 99.95))
-    if not (peak > 0):
-        return np.array([np.nan, np.nan]), 0
-    vv, uu = np.nonzero(sm > level * peak)
-    if len(uu) < 10:
-        return np.array([np.nan, np.nan]), len(uu)
-    uv = np.stack([uu, vv], axis=1).astype(float)
-    w = np.clip(a[vv, uu], 0.0, None) * _pixel_area_mm2(geom, uv)
-    st = geom.uv_to_screen(uv)
-    return (w[:, None] * st).sum(axis=0) / w.sum(), len(uu)
-
-
-def hole_spot_offset(hole_dn: np.ndarray, spot_dn: np.ndarray, geom, *, offset_dn: float,
-                     hole_level: float = 0.5, spot_level: float = 0.1) -> dict:
-    """Centres of the hole and of the returned spot on the screen (mm) and their offset in
-    aiming-camera pixels (spot − hole, x = X′, y = Y′; 1 px = the camera's object pixel).
-
-    The hole is fitted on the hole frame (the paper: spot blocked); the spot on spot − hole frame
-    (the glow, in both frames, cancels). ``geom`` supplies the nominal screen → image homography."""
-    hole = np.asarray(hole_dn, float) - offset_dn
-    spot = np.asarray(spot_dn, float) - np.asarray(hole_dn, float)
-    hc, nh = _masked_screen_centroid(hole, geom, hole_level)
-    sc, ns = _masked_screen_centroid(spot, geom, spot_level)
-    px = geom.rig.aiming_camera.object_pixel_mm
-    return {"hole_mm": hc, "spot_mm": sc, "offset_mm": sc - hc, "offset_px": (sc - hc) / px,
-            "hole_pixels": nh, "spot_pixels": ns}
 
 
 # ------------------------------------------------------------------ operator's model
@@ -136,7 +102,7 @@ class OffsetMeasurer:
     def _in_view(self, offset_px: np.ndarray) -> bool:
         """Does the divergent spot (radius hole + path·tan(α/2)) lie inside the camera's field?"""
         if self._geom is None:
-            from rigsim.render.cube_mirror.diaphragm import diaphragm_geometry
+            from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
 
             self._geom = diaphragm_geometry(self.rig, self.real, self.face_index)
         from rigsim.render.cube_mirror.aiming import divergence_radius_mm
@@ -177,7 +143,9 @@ class OffsetMeasurer:
             raise SearchError(
                 f"face {self.face}: cannot measure the hole/spot offset at true pose {pose_txt}: {', '.join(bad)}. "
                 "Start the search closer to the null (procedure.search_start_deg) or widen the aiming camera's field.")
-        m = hole_spot_offset(fr.hole.dn, fr.spot.dn, self.renderer.geometry, offset_dn=self.renderer.detector.offset_dn)
+        m = hole_spot_offset(fr.hole.dn, fr.spot.dn, self.renderer.geometry.H_screen_to_uv,
+                             object_pixel_mm=self.rig.aiming_camera.object_pixel_mm,
+                             offset_dn=self.renderer.detector.offset_dn)
         if not np.all(np.isfinite(m["offset_px"])):
             raise SearchError(f"face {self.face}: no spot found in the aiming-camera frame at true pose {pose_txt}")
         exact = np.asarray(fr.truth.offset_mm, float) / self.rig.aiming_camera.object_pixel_mm

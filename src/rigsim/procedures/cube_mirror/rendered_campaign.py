@@ -28,17 +28,27 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from rigsim.errors import SearchError
 from rigsim.estimation.cube_attitude import cube_from_rot_triad
+from rigsim.estimation.null_search import SearchResult
 from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.procedures.cube_mirror.campaign import (
-    BudgetRow, CampaignResult, PAPER_RSS_ARCSEC, default_axis_order, simulate_sweep,
+    PAPER_RSS_ARCSEC,
+    BudgetRow,
+    CampaignResult,
+    default_axis_order,
+    simulate_sweep,
 )
-from rigsim.errors import SearchError
-from rigsim.estimation.null_search import SearchResult
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableModel
-from rigsim.truth.cube_mirror.realization import NOMINAL_D, Noise, Realization, draw_realization, noise_from_rig
+from rigsim.truth.cube_mirror.realization import (
+    NOMINAL_D,
+    Noise,
+    Realization,
+    draw_realization,
+    noise_from_rig,
+)
 
 
 class _NullProgress:
@@ -142,7 +152,10 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     step_a = None
     search_seed = int(rng.integers(2**31))
     if rig.procedure.method == "diaphragm":
-        from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search
+        from rigsim.procedures.cube_mirror.concentricity import (
+            OffsetMeasurer,
+            concentricity_search,
+        )
         from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
 
         resid = []
@@ -171,7 +184,9 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
         measured.update(_null_noise(resid, "px"))
     else:
         from rigsim.procedures.cube_mirror.autocollimation import (
-            FaceReadingMeasurer, autocollimator_face_search, step_a_align,
+            FaceReadingMeasurer,
+            autocollimator_face_search,
+            step_a_align,
         )
 
         pb.set_description("step A: autocollimator on the plane mirror")
@@ -251,7 +266,10 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
     sig = null_sigma if null_mode == "search" else 0.0
     null_readings = []
     if rig.procedure.method == "diaphragm":
-        from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search
+        from rigsim.procedures.cube_mirror.concentricity import (
+            OffsetMeasurer,
+            concentricity_search,
+        )
 
         q = math.radians(r.procedure.command_resolution_deg)
         for fi in range(2):
@@ -263,7 +281,10 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
                 raise SearchError(f"face {res.face}: surrogate search did not converge ({res.message})")
             null_readings.append(res.final_reading_rad)
     else:
-        from rigsim.procedures.cube_mirror.autocollimation import autocollimator_face_search, step_a_align
+        from rigsim.procedures.cube_mirror.autocollimation import (
+            autocollimator_face_search,
+            step_a_align,
+        )
 
         sa = step_a_align(r, real, rng, rendered=False, reading_sigma_arcsec=sig)
         for fi in range(2):

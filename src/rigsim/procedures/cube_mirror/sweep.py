@@ -13,7 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor, sweep_poses
+from rigsim.estimation.sun_calibration import (
+    SunCalibration,
+    calibrate_sun_sensor,
+    sweep_poses,
+)
 from rigsim.imaging import Flag, centroid_tcom
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableModel
@@ -50,9 +54,9 @@ def render_sweep(
     on this 2.5 px sun disk)."""
     if centroider not in ("scurve", "tcom"):
         raise ValueError(f"centroider = {centroider!r}: must be 'scurve' or 'tcom'")
-    from rigsim.imaging.scurve import centroid_disk_scurve
     import time
 
+    from rigsim.imaging.scurve import centroid_disk_scurve
     from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 
     t0 = time.perf_counter()
@@ -70,8 +74,8 @@ def render_sweep(
     for i in range(n):
         pose = {k: float(v[i]) for k, v in poses.items()}
         s = scene.sun_dir_cam(pose)
-        c, ok = scene.camera.project(s[None, :])
-        if not (ok[0] and scene.camera.on_detector(c, margin=3.0)[0]):
+        c, ok = scene.camera.project_valid(s[None, :])
+        if not (ok[0] and scene.camera.on_detector(c, margin_px=3.0)[0]):
             if progress:
                 progress(1)
             continue  # the sun is outside the field at this pose: no spot to record

@@ -52,8 +52,9 @@ def cmd_run_star_calibration(args) -> int:
     import rigsim
     from rigsim.procedures.star.pipeline import run_pipeline
     from rigsim.procedures.star.report import summary_lines, write_report
-    from rigsim.rig.load import load_star_rig, resolve_rig_path as resolve_star_rig_path
     from rigsim.procedures.star.study import CentroidNoise, run_study
+    from rigsim.rig.load import load_star_rig
+    from rigsim.rig.load import resolve_rig_path as resolve_star_rig_path
 
     _check(args)
     rig = load_star_rig(args.rig)

@@ -14,14 +14,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rigsim.truth import star as att
-from rigsim.estimation.star_calibration import FrameObs, MODELS, batch_lsq, run_ekf
-from rigsim.imaging.stars import extract_stars
-from rigsim.truth.star import StarSky
-from rigsim.estimation.star_id import identify
 from rigsim.estimation.observability import observability
-from rigsim.render.star import render_sequence
+from rigsim.estimation.star_calibration import MODELS, FrameObs, batch_lsq, run_ekf
+from rigsim.estimation.star_id import identify
+from rigsim.imaging.stars import extract_stars
 from rigsim.procedures.star.study import CASES, CentroidNoise, case_setup
+from rigsim.render.star import render_sequence
+from rigsim.truth import star as att
+from rigsim.truth.star import StarSky
 
 __all__ = ["PipelineResult", "run_pipeline", "per_star_residuals"]
 

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.truth import star as att
 from rigsim.estimation.star_calibration import FrameObs, batch_lsq, run_ekf
+from rigsim.truth import star as att
 
 __all__ = ["CASES", "CentroidNoise", "usable_truth_obs", "simulate_frames", "StudyResult", "run_study",
            "improvement", "CLAIM"]

@@ -42,24 +42,29 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from rigsim.detector import DetectorFrame, apply_detector
+from rigsim.errors import GeometryWarning
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.autocollimator import (
-    AutocollimatorLayout, AutocollimatorOptics, MirrorTarget, PlanoConvexObjective, SpotTruth, autocollimator_layout,
-    mirror_target,
+    AutocollimatorOptics,
+    MirrorTarget,
+    SpotTruth,
 )
-from rigsim.optics.cube import FACE_NORMALS, face_normal_cube
-from rigsim.truth.cube_mirror.placement import cube_pose
+from rigsim.optics.meshes import lens_mesh, stop_mesh
 from rigsim.render.backend import ensure_variant
 from rigsim.render.frame import build_sidecar, write_frame
 from rigsim.render.meshes import mesh_ply
-from rigsim.errors import GeometryWarning
 from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.truth.cube_mirror.autocollimator import (
+    AutocollimatorLayout,
+    autocollimator_layout,
+    mirror_mesh_A,
+    mirror_target,
+)
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 
 __all__ = [
@@ -87,130 +92,6 @@ gets about half the full well (the diffraction blur lowers the peak ~2.5×); the
 own from ``peak_fraction`` (diffraction included) unless told."""
 
 MAIN_PATH_DEPTH = 7  # Mitsuba counts the emitter vertex: reticle, flat, convex, mirror, convex, flat, detector
-
-
-# ------------------------------------------------------------------------------ meshes
-def lens_mesh(obj: PlanoConvexObjective, n_rings: int = 64, n_seg: int = 256) -> trimesh.Trimesh:
-    """Closed plano-convex lens in the A frame, outward analytic vertex normals (sphere: from
-    the centre of curvature; rim: radial; flat face: −z). Split vertices along the edges."""
-    R, rl = obj.radius_mm, obj.lens_radius_mm
-    C = np.array([0.0, 0.0, obj.z_centre])
-    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
-    cph, sph = np.cos(ph), np.sin(ph)
-    V, N, F = [], [], []
-
-    def add(v, n):
-        V.append(np.asarray(v, float))
-        N.append(np.asarray(n, float))
-        return sum(len(x) for x in V[:-1])
-
-    def rings(z_of_r, n_of_p, facing_up: bool, n_rings: int):
-        r = rl * np.arange(1, n_rings + 1) / n_rings
-        pts = [np.array([[0.0, 0.0, z_of_r(0.0)]])]
-        for rk in r:
-            pts.append(np.column_stack([rk * cph, rk * sph, np.full(n_seg, z_of_r(rk))]))
-        P = np.vstack(pts)
-        base = add(P, n_of_p(P))
-        tri = []
-        for j in range(n_seg):  # centre fan
-            a, b = 1 + j, 1 + (j + 1) % n_seg
-            tri.append((0, a, b))
-        for k in range(n_rings - 1):
-            o0, o1 = 1 + k * n_seg, 1 + (k + 1) * n_seg
-            for j in range(n_seg):
-                j1 = (j + 1) % n_seg
-                tri.append((o0 + j, o1 + j, o1 + j1))
-                tri.append((o0 + j, o1 + j1, o0 + j1))
-        tri = np.array(tri)
-        if not facing_up:
-            tri = tri[:, ::-1]
-        F.append(tri + base)
-        return P
-
-    def cap_z(r):
-        return obj.z_centre + math.sqrt(R * R - r * r)
-
-    rings(cap_z, lambda P: (P - C) / R, True, n_rings)
-    # the flat face needs no tessellation (one fan of n_seg triangles)
-    rings(lambda r: obj.z_flat, lambda P: np.tile([0.0, 0.0, -1.0], (len(P), 1)), False, 1)
-    # rim wall from the flat face (z_flat) up to the cap's edge
-    z_top = cap_z(rl)
-    bot = np.column_stack([rl * cph, rl * sph, np.full(n_seg, obj.z_flat)])
-    top = np.column_stack([rl * cph, rl * sph, np.full(n_seg, z_top)])
-    radial = np.column_stack([cph, sph, np.zeros(n_seg)])
-    base = add(np.vstack([bot, top]), np.vstack([radial, radial]))
-    tri = []
-    for j in range(n_seg):
-        j1 = (j + 1) % n_seg
-        tri.append((j, j1, n_seg + j1))
-        tri.append((j, n_seg + j1, n_seg + j))
-    F.append(np.array(tri) + base)
-    V, N, F = np.vstack(V), np.vstack(N), np.vstack(F)
-    m = trimesh.Trimesh(V, F, vertex_normals=N, process=False)
-    return m
-
-
-def stop_mesh(obj: PlanoConvexObjective, outer_radius_mm: float | None = None, n_seg: int = 512) -> trimesh.Trimesh:
-    """Flat annulus (the clear-aperture stop) at ``obj.z_stop``, facing +z."""
-    r0 = obj.stop_radius_mm
-    r1 = outer_radius_mm or max(2.5 * r0, r0 + 20.0)
-    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
-    inner = np.column_stack([r0 * np.cos(ph), r0 * np.sin(ph), np.full(n_seg, obj.z_stop)])
-    outer = np.column_stack([r1 * np.cos(ph), r1 * np.sin(ph), np.full(n_seg, obj.z_stop)])
-    tri = []
-    for j in range(n_seg):
-        j1 = (j + 1) % n_seg
-        tri.append((j, n_seg + j, n_seg + j1))
-        tri.append((j, n_seg + j1, j1))
-    return trimesh.Trimesh(np.vstack([inner, outer]), np.array(tri), process=False)
-
-
-def _quad(centre, e1, e2, n, h):
-    V = np.array([centre - h * e1 - h * e2, centre + h * e1 - h * e2, centre + h * e1 + h * e2,
-                  centre - h * e1 + h * e2])
-    F = np.array([[0, 1, 2], [0, 2, 3]])
-    if np.cross(V[1] - V[0], V[2] - V[0]) @ n < 0:
-        F = F[:, ::-1]
-    return V, F
-
-
-def mirror_mesh_A(rig: CubeMirrorRig, real: Realization, layout: AutocollimatorLayout, pose_rad: dict,
-                  n_seg: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (A frame, float64) and faces of the target at ``pose_rad``.
-
-    Cube: six square faces (split vertices), each with its true normal (the measured faces from
-    the realisation, the others ideal), so the mesh's face normals are the truth's. Plane
-    mirror: a 512-gon fan in the mirror plane (its outline is within 5e-4 mm of the disk).
-    """
-    if layout.target == "face":
-        cp = cube_pose(rig, real, pose_rad)
-        R_rm = real.turntable.R_rot_from_mount(pose_rad)
-        h = 0.5 * rig.cube.edge_mm
-        Vs, Fs = [], []
-        for f, nom in FACE_NORMALS.items():
-            n_mount = real.face_normals_mount.get(f)
-            if n_mount is None:
-                n_mount = real.R_cube_from_mount.T @ face_normal_cube(f, None)
-            n = layout.dir_to_A(R_rm @ n_mount)
-            n /= np.linalg.norm(n)
-            centre = layout.to_A(cp.apply(h * nom))
-            k = int(np.argmax(np.abs(nom)))
-            e1 = layout.dir_to_A(cp.R[:, (k + 1) % 3])
-            e1 = e1 - (e1 @ n) * n
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(n, e1)
-            V, F = _quad(centre, e1, e2, n, h)
-            Fs.append(F + 4 * len(Vs))
-            Vs.append(V)
-        return np.vstack(Vs), np.vstack(Fs)
-    m = mirror_target(rig, real, layout, pose_rad)
-    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
-    rim = m.centre + m.half_size_mm * (np.cos(ph)[:, None] * m.e1 + np.sin(ph)[:, None] * m.e2)
-    V = np.vstack([m.centre[None, :], rim])
-    F = np.array([(0, 1 + j, 1 + (j + 1) % n_seg) for j in range(n_seg)])
-    if np.cross(V[F[0, 1]] - V[0], V[F[0, 2]] - V[0]) @ m.normal < 0:
-        F = F[:, ::-1]
-    return V, F
 
 
 # ------------------------------------------------------------------------------ scene

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rigsim.errors import GeometryError
 from rigsim.optics.cube import FACE_NORMALS, reflect
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.errors import GeometryError
 from rigsim.rig.turntable import pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import Realization
 

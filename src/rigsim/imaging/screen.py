@@ -1,0 +1,110 @@
+"""Measuring on a plane seen obliquely through a homography: centroids, circle fits and the
+hole/spot offset of the diaphragm screen (seed 000) as the aiming camera sees it.
+
+``H`` is the 3×3 homography from plane coordinates (s, t) in mm to pixels (u, v), OpenCV's pixel
+convention. Every function also accepts an object carrying it as ``H_screen_to_uv``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["plane_to_uv", "uv_to_plane", "pixel_area_mm2", "screen_centroid", "screen_circle_fit",
+           "masked_screen_centroid", "hole_spot_offset"]
+
+
+def _H(H) -> np.ndarray:
+    return np.asarray(getattr(H, "H_screen_to_uv", H), float)
+
+
+def plane_to_uv(H, st) -> np.ndarray:
+    """Plane points (..., 2) mm → pixels (..., 2)."""
+    H = _H(H)
+    st = np.asarray(st, float)
+    h = st @ H[:, :2].T + H[:, 2]
+    return h[..., :2] / h[..., 2:3]
+
+
+def uv_to_plane(H, uv) -> np.ndarray:
+    """Pixels (..., 2) → plane points (..., 2) mm."""
+    Hi = np.linalg.inv(_H(H))
+    uv = np.asarray(uv, float)
+    h = uv @ Hi[:, :2].T + Hi[:, 2]
+    return h[..., :2] / h[..., 2:3]
+
+
+def pixel_area_mm2(H, uv: np.ndarray) -> np.ndarray:
+    """Plane area (mm²) seen by a pixel at ``uv``: |det d(s,t)/d(u,v)| of the homography."""
+    Hi = np.linalg.inv(_H(H))
+    h = np.asarray(uv, float) @ Hi[:, :2].T + Hi[:, 2]
+    w = h[:, 2]
+    # for a homography x = (A u + b) / (c·u + d): det J = det(Hi) / w^3
+    return np.abs(np.linalg.det(Hi) / w**3)
+
+
+def screen_centroid(img, H, *, threshold: float = 0.0, mask=None) -> np.ndarray:
+    """Centroid on the plane (s, t mm) of an image of plane radiance (or photons).
+
+    Every pixel above ``threshold`` is mapped onto the plane and weighted by its value (minus the
+    threshold) times the plane area it sees, so a uniformly lit disk gives the disk's centre up to
+    pixel-phase effects at its rim.
+    """
+    a = np.asarray(img, float)
+    use = a > threshold
+    if mask is not None:
+        use &= np.asarray(mask, bool)
+    vv, uu = np.nonzero(use)
+    if len(uu) == 0:
+        return np.array([np.nan, np.nan])
+    uv = np.stack([uu, vv], axis=1).astype(float)
+    w = (a[vv, uu] - threshold) * pixel_area_mm2(H, uv)
+    st = uv_to_plane(H, uv)
+    return (w[:, None] * st).sum(axis=0) / w.sum()
+
+
+def screen_circle_fit(img, H, *, level: float | None = None, mask=None):
+    """Sub-pixel edge points of the image (:func:`rigsim.imaging.edge_points`) mapped onto the
+    plane and fitted with a circle (:func:`rigsim.imaging.fit_circle_points`): centre (s, t) mm and
+    radius mm in ``CircleFit.u, .v, .radius_px`` (the units are mm here). None: too few edges."""
+    from rigsim.imaging.edges import edge_points, fit_circle_points
+
+    ep = edge_points(np.asarray(img, float), level=level, mask=mask)
+    if len(ep.uv) < 5:
+        return None
+    return fit_circle_points(uv_to_plane(H, ep.uv))
+
+
+def masked_screen_centroid(img: np.ndarray, H, level: float) -> tuple[np.ndarray, int]:
+    """Centroid on the plane (mm) of the pixels whose smoothed value exceeds ``level`` times the
+    smoothed image's robust peak (its 99.95th percentile); weights = value × plane area of the
+    pixel. Returns (centre, number of pixels); NaN when fewer than 10 pixels pass."""
+    import cv2
+
+    a = np.asarray(img, np.float64)
+    sm = cv2.GaussianBlur(a.astype(np.float32), (0, 0), 2.0)
+    peak = float(np.percentile(sm, 99.95))
+    if not (peak > 0):
+        return np.array([np.nan, np.nan]), 0
+    vv, uu = np.nonzero(sm > level * peak)
+    if len(uu) < 10:
+        return np.array([np.nan, np.nan]), len(uu)
+    uv = np.stack([uu, vv], axis=1).astype(float)
+    w = np.clip(a[vv, uu], 0.0, None) * pixel_area_mm2(H, uv)
+    st = uv_to_plane(H, uv)
+    return (w[:, None] * st).sum(axis=0) / w.sum(), len(uu)
+
+
+def hole_spot_offset(hole_dn: np.ndarray, spot_dn: np.ndarray, H, *, object_pixel_mm: float, offset_dn: float,
+                     hole_level: float = 0.5, spot_level: float = 0.1) -> dict:
+    """Centres of the hole and of the returned spot on the screen (mm) and their offset in the
+    aiming camera's object pixels (spot − hole; x, y = the plane's s, t axes).
+
+    The hole is fitted on the hole frame (the spot blocked); the spot on spot − hole frame (the
+    hole's glow, present in both frames, cancels). ``object_pixel_mm``: the size of one camera pixel
+    on the screen, the unit of the offset (seed 000's Table 1 counts in it)."""
+    hole = np.asarray(hole_dn, float) - offset_dn
+    spot = np.asarray(spot_dn, float) - np.asarray(hole_dn, float)
+    hc, nh = masked_screen_centroid(hole, H, hole_level)
+    sc, ns = masked_screen_centroid(spot, H, spot_level)
+    return {"hole_mm": hc, "spot_mm": sc, "offset_mm": sc - hc, "offset_px": (sc - hc) / object_pixel_mm,
+            "hole_pixels": nh, "spot_pixels": ns}

@@ -1,0 +1,157 @@
+"""TODO docstring"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import trimesh
+
+from rigsim.optics.autocollimator import PlanoConvexObjective
+
+HOLE_POLYGON_SIDES = 256
+
+
+def screen_with_hole_mesh(width_mm: float, height_mm: float, hole_radius_mm: float | None,
+                          sides: int = HOLE_POLYGON_SIDES, aspect: float = 4.0):
+    """Screen rectangle centred on the hole, in its local frame (z = 0), front normal −z.
+
+    The hole is a ``sides``-gon whose edges are tangent to the circle of ``hole_radius_mm``
+    (vertices at r / cos(π / sides)): the circle is never clipped. ``hole_radius_mm=None``: no
+    hole (two triangles).
+    """
+    import trimesh
+
+    w2, h2 = 0.5 * width_mm, 0.5 * height_mm
+    if hole_radius_mm is None:
+        v = np.array([[-w2, -h2, 0.0], [w2, -h2, 0.0], [w2, h2, 0.0], [-w2, h2, 0.0]])
+        f = np.array([[0, 1, 2], [0, 2, 3]])
+    else:
+        rv = hole_radius_mm / math.cos(math.pi / sides)
+        if rv >= min(w2, h2):
+            raise ValueError("the hole does not fit on the screen")
+        corners = [math.atan2(h2, w2), math.atan2(h2, -w2), math.atan2(-h2, -w2), math.atan2(-h2, w2)]
+        ang = np.unique(np.mod(np.concatenate([np.linspace(0.0, 2 * math.pi, sides, endpoint=False),
+                                               np.mod(corners, 2 * math.pi)]), 2 * math.pi))
+        c, s = np.cos(ang), np.sin(ang)
+        n = len(ang)
+        with np.errstate(divide="ignore"):
+            tx = np.where(np.abs(c) > 1e-15, w2 / np.abs(c), np.inf)
+            ty = np.where(np.abs(s) > 1e-15, h2 / np.abs(s), np.inf)
+        t_edge = np.minimum(tx, ty)
+        # concentric rings whose cells are at most ``aspect`` times longer (radially) than wide:
+        # long slivers have overlapping bounding boxes, so every ray near the hole would test
+        # hundreds of them (measured: a fan of slivers made renders 5x slower than a plain
+        # rectangle); the last ring joins the rectangle's edge
+        q = 1.0 + aspect * 2.0 * math.pi / sides
+        radii = [rv]
+        while q * radii[-1] < 0.9 * min(w2, h2):
+            radii.append(q * radii[-1])
+        rings = [np.stack([r_ * c, r_ * s, np.zeros_like(c)], axis=1) for r_ in radii]
+        rings.append(np.stack([t_edge * c, t_edge * s, np.zeros_like(c)], axis=1))
+        v = np.vstack(rings)
+        j = np.arange(n)
+        k = (j + 1) % n
+        faces = []
+        for q in range(len(rings) - 1):
+            a, b = q * n, (q + 1) * n
+            faces += [np.stack([a + j, a + k, b + k], axis=1), np.stack([a + j, b + k, b + j], axis=1)]
+        f = np.vstack(faces)
+    # wind every triangle clockwise seen from +z, so that the front normal is −z (towards the cube)
+    e = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])[:, 2]
+    f = np.where((e > 0)[:, None], f[:, ::-1], f)
+    m = trimesh.Trimesh(vertices=v, faces=f, process=False)
+    m.unmerge_vertices()
+    return m
+
+
+def cube_mesh(edge_mm: float) -> trimesh.Trimesh:
+    """Axis-aligned cube of side ``edge_mm`` centred at the origin of the cube frame.
+
+    Its faces' outward normals are the cube frame's ±X, ±Y, ±Z (face "+Z" = the XY face).
+    """
+    box = trimesh.creation.box(extents=[edge_mm] * 3)
+    box.unmerge_vertices()  # flat faces: no shared, averaged vertex normals
+    return box
+
+
+def face_normals_ok(mesh: trimesh.Trimesh) -> bool:
+    """True if every face normal is one of the six axis directions (a sanity check for tests)."""
+    n = np.round(mesh.face_normals, 12)
+    return bool(np.all(np.sum(np.abs(n) == 1.0, axis=1) == 1))
+
+
+# ------------------------------------------------------------------------------ meshes
+def lens_mesh(obj: PlanoConvexObjective, n_rings: int = 64, n_seg: int = 256) -> trimesh.Trimesh:
+    """Closed plano-convex lens in the A frame, outward analytic vertex normals (sphere: from
+    the centre of curvature; rim: radial; flat face: −z). Split vertices along the edges."""
+    R, rl = obj.radius_mm, obj.lens_radius_mm
+    C = np.array([0.0, 0.0, obj.z_centre])
+    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
+    cph, sph = np.cos(ph), np.sin(ph)
+    V, N, F = [], [], []
+
+    def add(v, n):
+        V.append(np.asarray(v, float))
+        N.append(np.asarray(n, float))
+        return sum(len(x) for x in V[:-1])
+
+    def rings(z_of_r, n_of_p, facing_up: bool, n_rings: int):
+        r = rl * np.arange(1, n_rings + 1) / n_rings
+        pts = [np.array([[0.0, 0.0, z_of_r(0.0)]])]
+        for rk in r:
+            pts.append(np.column_stack([rk * cph, rk * sph, np.full(n_seg, z_of_r(rk))]))
+        P = np.vstack(pts)
+        base = add(P, n_of_p(P))
+        tri = []
+        for j in range(n_seg):  # centre fan
+            a, b = 1 + j, 1 + (j + 1) % n_seg
+            tri.append((0, a, b))
+        for k in range(n_rings - 1):
+            o0, o1 = 1 + k * n_seg, 1 + (k + 1) * n_seg
+            for j in range(n_seg):
+                j1 = (j + 1) % n_seg
+                tri.append((o0 + j, o1 + j, o1 + j1))
+                tri.append((o0 + j, o1 + j1, o0 + j1))
+        tri = np.array(tri)
+        if not facing_up:
+            tri = tri[:, ::-1]
+        F.append(tri + base)
+        return P
+
+    def cap_z(r):
+        return obj.z_centre + math.sqrt(R * R - r * r)
+
+    rings(cap_z, lambda P: (P - C) / R, True, n_rings)
+    # the flat face needs no tessellation (one fan of n_seg triangles)
+    rings(lambda r: obj.z_flat, lambda P: np.tile([0.0, 0.0, -1.0], (len(P), 1)), False, 1)
+    # rim wall from the flat face (z_flat) up to the cap's edge
+    z_top = cap_z(rl)
+    bot = np.column_stack([rl * cph, rl * sph, np.full(n_seg, obj.z_flat)])
+    top = np.column_stack([rl * cph, rl * sph, np.full(n_seg, z_top)])
+    radial = np.column_stack([cph, sph, np.zeros(n_seg)])
+    base = add(np.vstack([bot, top]), np.vstack([radial, radial]))
+    tri = []
+    for j in range(n_seg):
+        j1 = (j + 1) % n_seg
+        tri.append((j, j1, n_seg + j1))
+        tri.append((j, n_seg + j1, n_seg + j))
+    F.append(np.array(tri) + base)
+    V, N, F = np.vstack(V), np.vstack(N), np.vstack(F)
+    m = trimesh.Trimesh(V, F, vertex_normals=N, process=False)
+    return m
+
+
+def stop_mesh(obj: PlanoConvexObjective, outer_radius_mm: float | None = None, n_seg: int = 512) -> trimesh.Trimesh:
+    """Flat annulus (the clear-aperture stop) at ``obj.z_stop``, facing +z."""
+    r0 = obj.stop_radius_mm
+    r1 = outer_radius_mm or max(2.5 * r0, r0 + 20.0)
+    ph = np.arange(n_seg) * (2 * math.pi / n_seg)
+    inner = np.column_stack([r0 * np.cos(ph), r0 * np.sin(ph), np.full(n_seg, obj.z_stop)])
+    outer = np.column_stack([r1 * np.cos(ph), r1 * np.sin(ph), np.full(n_seg, obj.z_stop)])
+    tri = []
+    for j in range(n_seg):
+        j1 = (j + 1) % n_seg
+        tri.append((j, n_seg + j, n_seg + j1))
+        tri.append((j, n_seg + j1, j1))
+    return trimesh.Trimesh(np.vstack([inner, outer]), np.array(tri), process=False)

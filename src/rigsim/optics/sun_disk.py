@@ -1,0 +1,148 @@
+"""TODO docstring"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rigsim.optics.camera import PinholeBrown
+
+SUN_FULL_ANGLE_RAD = math.radians(0.53)
+
+
+SIMULATOR_32ARCMIN_RAD = math.radians(32.0 / 60.0)
+
+
+_GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64).reshape(3)
+    n = np.linalg.norm(v)
+    if not (np.isfinite(n) and n > 0):
+        raise ValueError(f"sun direction {v!r} must be a finite non-zero 3-vector")
+    return v / n
+
+
+def _basis(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing s to a right-handed orthonormal frame."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(s[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(s, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(s, e1)
+
+
+def disk_directions(sun_dir, full_angle_rad: float, n: int) -> np.ndarray:
+    """``n`` unit directions filling the cone of the given full angle with equal solid angle each.
+
+    Deterministic sunflower quadrature: ring position uniform in (1 - cos phi), azimuth stepped by
+    the golden angle. Each point carries solid angle ``2 pi (1 - cos(a/2)) / n``.
+    """
+    s = _unit(sun_dir)
+    e1, e2 = _basis(s)
+    i = np.arange(n, dtype=np.float64)
+    t = (i + 0.5) / n
+    cos_phi = 1.0 - t * (1.0 - math.cos(full_angle_rad / 2.0))
+    sin_phi = np.sqrt(np.maximum(0.0, 1.0 - cos_phi * cos_phi))
+    psi = i * _GOLDEN_ANGLE
+    return (cos_phi[:, None] * s + sin_phi[:, None] * (np.cos(psi)[:, None] * e1
+                                                      + np.sin(psi)[:, None] * e2))
+
+
+def spot_outline(camera: PinholeBrown, sun_dir, full_angle_rad: float, n: int = 90):
+    """Projected rim of the disk: (n, 2) pixel positions and a validity mask."""
+    s = _unit(sun_dir)
+    e1, e2 = _basis(s)
+    psi = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    h = full_angle_rad / 2.0
+    d = math.cos(h) * s + math.sin(h) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    return camera.project_valid(d)
+
+
+def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
+               response: str = "flux") -> dict:
+    """Exact (quadrature) description of the spot image of a uniform disk. Pure numpy.
+
+    Returns pixel positions (u, v) in the OpenCV convention:
+
+    * ``center_uv``: distorted projection of the disk centre (the sun direction itself);
+    * ``mean_uv``: flux-weighted mean of the projection over the disk = centroid of the continuous
+      image (weight per solid angle: cos(theta) for ``flux``, |dA/dOmega| for ``radiance``);
+    * ``pixel_centroid_uv``: the first moment of the pixel-integrated image (each quadrature point
+      binned into the pixel that contains it) -- what a perfect renderer's window centroid is;
+    * ``disk_bias_px`` = mean - centre, ``pixel_bias_px`` = pixel_centroid - mean;
+    * ``relative_flux``: flux relative to the same disk on axis (= <cos theta> for ``flux``).
+    """
+    d = disk_directions(sun_dir, full_angle_rad, n)
+    uv, valid = camera.project_valid(d)
+    c_uv, c_valid = camera.project_valid(_unit(sun_dir)[None, :])
+    if not (np.all(valid) and c_valid[0]):
+        return {"valid": False, "center_uv": c_uv[0].tolist() if c_valid[0] else None}
+    if response == "flux":
+        w = d[:, 2].copy()
+    elif response == "radiance":
+        x, y = d[:, 0] / d[:, 2], d[:, 1] / d[:, 2]
+        a, b, c, dd = camera.distort_jacobian(x, y)
+        w = (a * dd - b * c) / d[:, 2] ** 3
+    else:
+        raise ValueError(f"response = {response!r}: must be 'flux' or 'radiance'")
+    wsum = w.sum()
+    mean = (w[:, None] * uv).sum(axis=0) / wsum
+    binned = np.floor(uv + 0.5)
+    pix = (w[:, None] * binned).sum(axis=0) / wsum
+    return {
+        "valid": True,
+        "center_uv": c_uv[0].tolist(),
+        "mean_uv": mean.tolist(),
+        "pixel_centroid_uv": pix.tolist(),
+        "disk_bias_px": (mean - c_uv[0]).tolist(),
+        "pixel_bias_px": (pix - mean).tolist(),
+        "relative_flux": float(wsum / n),
+        "quadrature_points": int(n),
+    }
+
+
+def window_centroid(image: np.ndarray, origin_uv=(0, 0)) -> np.ndarray:
+    """First moment (u, v) of a non-negative image in detector pixel coordinates."""
+    img = np.asarray(image, dtype=np.float64)
+    tot = img.sum()
+    if not tot > 0:
+        return np.array([np.nan, np.nan])
+    v, u = np.indices(img.shape)
+    return np.array([(img * u).sum() / tot + origin_uv[0], (img * v).sum() / tot + origin_uv[1]])
+
+
+def spot_geometry_flags(camera: PinholeBrown, sun_dir, full_angle_rad: float,
+                        window: tuple[int, int, int, int] | None = None,
+                        margin_px: float = 1.0) -> dict:
+    """Geometry flags for a spot, from the projected rim.
+
+    ``spot_outside_model`` (behind the camera or beyond the distortion model's domain),
+    ``spot_off_detector`` (no part on the detector), ``spot_cut_by_edge`` (partly off),
+    ``spot_exceeds_window`` (rim closer than ``margin_px`` to the window edge; flux would be lost).
+    ``window`` is (u0, v0, width, height) in detector pixels.
+    """
+    s = _unit(sun_dir)
+    rim, rim_ok = spot_outline(camera, s, full_angle_rad)
+    c_uv, c_ok = camera.project_valid(s[None, :])
+    flags = {"spot_outside_model": bool(not (np.all(rim_ok) and c_ok[0]))}
+    if flags["spot_outside_model"]:
+        flags.update(spot_off_detector=True, spot_cut_by_edge=False, spot_exceeds_window=False)
+        return flags
+    on = camera.on_detector(rim)
+    c_on = bool(camera.on_detector(c_uv)[0])
+    lo, hi = rim.min(axis=0), rim.max(axis=0)
+    overlaps = (hi[0] >= -0.5 and lo[0] < camera.width - 0.5 and hi[1] >= -0.5
+                and lo[1] < camera.height - 0.5)
+    flags["spot_off_detector"] = bool(not (np.any(on) or c_on or overlaps))
+    flags["spot_cut_by_edge"] = bool(not flags["spot_off_detector"] and not np.all(on))
+    if window is not None:
+        u0, v0, w, h = window
+        flags["spot_exceeds_window"] = bool(
+            lo[0] < u0 - 0.5 + margin_px or hi[0] > u0 + w - 0.5 - margin_px
+            or lo[1] < v0 - 0.5 + margin_px or hi[1] > v0 + h - 0.5 - margin_px)
+    else:
+        flags["spot_exceeds_window"] = False
+    flags["spot_extent_px"] = [float(hi[0] - lo[0]), float(hi[1] - lo[1])]
+    return flags
