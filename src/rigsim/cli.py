@@ -1,20 +1,17 @@
-"""The ``rigsim`` command."""
+"""The ``rigsim`` command: the root parser, ``doctor`` and ``rig``; every rig family adds its own
+commands (:mod:`rigsim.families`), datasets and the 3D view serve all of them."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
-from pathlib import Path
-
-import numpy as np
 
 import rigsim
-
-DEFAULT_RIG = "sun_sensor_2axis_diaphragm"
-# modules with an ``add_cli(run_subparsers, top=top_level_subparsers)`` function (optional)
-PLUGIN_MODULES = ("rigsim.procedures.boresight.cli", "rigsim.procedures.star.cli",
-                  "rigsim.dataset.cli", "rigsim.view.cli")
+from rigsim.dataset import cli as dataset_cli
+from rigsim.errors import RigsimError
+from rigsim.families import FAMILIES, family_of
+from rigsim.view import cli as view_cli
 
 EPILOG = """\
 examples:
@@ -22,247 +19,14 @@ examples:
   rigsim run cube-mirror --rig sun_sensor_3axis_autocollimator      seed 001 on rendered frames
   rigsim run cube-mirror --ideal --no-budget    noise-free ideal rig: the simulator's own error
   rigsim run cube-mirror --analytic             the same campaign without rendering (seconds)
+  rigsim run boresight                          seed 003: dual line-array camera, DVAD vs simplified
+  rigsim run star-calibration                   seed 004: star-sensor calibration, AD vs ADS
   rigsim triad 181.398 0.528 91.386 -0.048      R(pm<-rot) from Table 1's final angles
   rigsim rig check scenes/my_rig.toml           validate a rig file
   rigsim doctor                                 versions, libLLVM and Mitsuba variant
 
 Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
 """
-
-
-from rigsim.errors import CliError, RigsimError  # noqa: E402
-from rigsim.truth.cube_mirror.realization import realization_from_rig
-
-
-def _fmt_row(cells, widths):
-    return "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
-
-
-def _table(header, rows) -> str:
-    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
-    out = [_fmt_row(header, widths), _fmt_row(["-" * w for w in widths], widths)]
-    out += [_fmt_row(r, widths) for r in rows]
-    return "\n".join(out)
-
-
-# ------------------------------------------------------------------------------ triad
-
-def cmd_triad(args) -> int:
-    from rigsim.estimation.cube_attitude import AXIS_ORDERS_2AXIS, cube_from_rot_triad
-    from rigsim.frames import angle_between
-
-    if args.axis_order not in AXIS_ORDERS_2AXIS:
-        raise CliError(f"--axis-order = {args.axis_order!r}: allowed {sorted(AXIS_ORDERS_2AXIS)}")
-    for name, v in zip(("θ1", "θ2", "θ3", "θ4"), args.angles_deg):
-        if not -360.0 <= v <= 360.0:
-            raise CliError(f"{name} = {v}: allowed range is -360 to 360 degrees")
-    t1, t2, t3, t4 = np.radians(args.angles_deg)
-    poses = [{"X": t1, "Y": t2}, {"X": t3, "Y": t4}]
-    try:
-        R, r1, r2 = cube_from_rot_triad(poses, args.faces, args.axis_order)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
-    np.set_printoptions(precision=7, suppress=True)
-    print(f"R(pm<-rot) by TRIAD (seed 000 eqs 1-10), faces n1={args.faces[0]} n2={args.faces[1]} (cube frame)")
-    print(f"reading: axis order {args.axis_order} — {AXIS_ORDERS_2AXIS[args.axis_order]}")
-    print("normals r = R_rot_from_mount(θ)ᵀ·d with d = (0,0,1), the beam direction (towards the source)")
-    print(f"θ1={args.angles_deg[0]}° θ2={args.angles_deg[1]}° θ3={args.angles_deg[2]}° θ4={args.angles_deg[3]}°")
-    print(R)
-    print(f"r1 (rot) = {r1}\nr2 (rot) = {r2}")
-    ang = np.degrees(angle_between(r1, r2))
-    print(f"angle between the two measured normals: {ang:.5f}° (a perfect cube: 90°; deviation {(ang - 90) * 3600:+.1f}″)")
-    other = "YX" if args.axis_order == "XY" else "XY"
-    R2, _, _ = cube_from_rot_triad(poses, args.faces, other)
-    from rigsim.frames import rotation_angle
-    print(f"the other reading ({other}) differs by {np.degrees(rotation_angle(R, R2)):.4f}°")
-    if args.json:
-        print(json.dumps({"R_pm_from_rot": R.tolist(), "axis_order": args.axis_order, "normal_angle_deg": float(ang)}))
-    return 0
-
-
-# ------------------------------------------------------------------------------ run
-
-def _progress(total, desc, enabled=True):
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=desc, unit="campaign", disable=None if enabled else True, file=sys.stderr, dynamic_ncols=True)
-
-
-def _print_truth_vs_recovered(res, labels) -> None:
-    """The three recovered rotations of a cube-mirror campaign against the truth (arcsec)."""
-    from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
-
-    rows = []
-    for label, (est, tru) in zip(labels, ((res.R_sun_from_rot_est, res.R_sun_from_rot_true),
-                                          (res.R_cube_from_rot_est, res.R_cube_from_rot_true),
-                                          (res.R_cube_from_sun_est, res.R_cube_from_sun_true))):
-        e = small_angle_error(est, tru) * ARCSEC_PER_RAD
-        rows.append([label, *(f"{x:+.3f}" for x in e), f"{np.linalg.norm(e):.3f}"])
-    print("\nTruth vs recovered (small-angle error of the recovered rotation, about the target frame's axes, arcsec):")
-    print(_table(["rotation", "x″", "y″", "z″", "|δ|″"], rows))
-
-
-def cmd_run_cube_mirror(args) -> int:
-    if args.trials is None:
-        args.trials = 300 if args.analytic else 200
-    if args.analytic:
-        return _run_cube_mirror_analytic(args)
-    return _run_cube_mirror_rendered(args)
-
-
-def _run_cube_mirror_rendered(args) -> int:
-    import time
-    import warnings
-
-    from tqdm import tqdm
-
-    from rigsim.procedures.cube_mirror import campaign as cm
-    from rigsim.procedures.cube_mirror import rendered_campaign as rc
-    from rigsim.procedures.cube_mirror.report import write_report
-    from rigsim.rig import load_rig
-    from rigsim.rig.load import resolve_rig_path
-
-    rig = load_rig(args.rig)
-    if not 2 <= args.trials <= 100000:
-        raise CliError(f"--trials = {args.trials}: allowed range is 2 to 100000")
-    if args.sweep_spp < 1 or args.sweep_spp > 65536:
-        raise CliError(f"--sweep-spp = {args.sweep_spp}: allowed range is 1 to 65536")
-    if args.threshold is not None and not (0 < args.threshold <= 1000):
-        raise CliError(f"--threshold = {args.threshold}: allowed range is (0, 1000] (px for seed 000, arcsec for 001)")
-    if args.repeat_frames < 0 or args.repeat_frames > 100:
-        raise CliError(f"--repeat-frames = {args.repeat_frames}: allowed range is 0 to 100")
-    axis_order = args.axis_order or cm.default_axis_order(rig)
-    if sorted(axis_order) != sorted(a.label for a in rig.turntable.axes):
-        raise CliError(f"--axis-order = {axis_order!r}: must be a permutation of {[a.label for a in rig.turntable.axes]}")
-    if args.ideal:
-        rig = rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"command_resolution_deg": 0.0})})
-    real = realization_from_rig(rig, ideal=args.ideal)
-    noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
-    out_dir = Path(args.out) if args.out else Path("renders") / f"cube_mirror_{rig.name}"
-    threshold = args.threshold if args.threshold is not None else (0.01 if args.ideal and rig.procedure.method == "diaphragm"
-                                                                   else 0.005 if args.ideal else None)
-    print(f"rigsim {rigsim.__version__} — cube-mirror campaign on rendered frames (seed {rig.seed_document}), rig '{rig.name}'")
-    print(f"rig file: {args.rig}   seed: {args.seed}   axis order (outer→inner): {axis_order}   "
-          f"errors: {'none (ideal rig, noise-free detector)' if args.ideal else 'the rig file’s true errors + detector and encoder noise'}")
-    t_all = time.perf_counter()
-    total = rc.expected_frames(rig) + args.repeat_frames
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # geometry problems surface as SearchError / flags
-        with tqdm(total=total, desc="campaign", unit="frame", disable=True if args.quiet else None, file=sys.stderr,
-                  dynamic_ncols=True) as bar:
-            camp = rc.run_rendered_campaign(rig, real, seed=args.seed, axis_order=axis_order, noise=noise,
-                                            noiseless=args.ideal, threshold=threshold, sweep_spp=args.sweep_spp,
-                                            sweep_step_deg=args.sweep_step, repeat_frames=args.repeat_frames,
-                                            progress=bar)
-    wall = dict(camp.times)
-    res = camp.result
-    cal = camp.calibration
-    print(f"\nStep 1/B  sun-sensor sweep ±{rig.procedure.sweep_range_deg:g}° every "
-          f"{args.sweep_step or rig.procedure.sweep_step_deg:g}°: {camp.sweep.n_rendered} frames rendered, "
-          f"{cal.n_points} used, fit RMS {cal.rms_px:.4f} px; centroid − exact {camp.measured_noise['sun_centroid_rms_px']:.4f} px rms")
-    from rigsim.procedures.cube_mirror.concentricity import table1_text
-
-    if camp.step_a is not None:
-        sa = camp.step_a
-        print(f"\nStep A  autocollimator on the plane mirror: {len(sa.measured_arcsec)} frames, last reading "
-              f"({sa.measured_arcsec[-1][0]:+.3f}″, {sa.measured_arcsec[-1][1]:+.3f}″)")
-    print(f"\n{'Steps 2-3' if rig.procedure.method == 'diaphragm' else 'Step C'}  null search log "
-          f"({'Table 1 form: θ in degrees, hole/spot offset in aiming-camera px' if camp.null_unit == 'px' else 'readings in arcsec'}):")
-    print(table1_text(camp.searches))
-
-    _print_truth_vs_recovered(res, ("R(sun←rot)  sweep fit", "R(cube←rot) search + TRIAD", "R(cube←sun) composed"))
-    budget = None
-    if not args.no_budget:
-        mn = camp.measured_noise
-        t0 = time.perf_counter()
-        with tqdm(total=rc.budget_trials_count(rig, args.trials), desc="error budget", unit="campaign",
-                  disable=True if args.quiet else None, file=sys.stderr, dynamic_ncols=True) as bar:
-            budget = rc.rendered_error_budget(rig, args.trials, args.seed + 1, null_sigma=mn["null_measurement_rms"],
-                                              centroid_sigma_px=mn["sun_centroid_rms_px"], axis_order=axis_order,
-                                              progress=bar)
-        wall["error budget (Monte Carlo)"] = time.perf_counter() - t0
-        print(f"\nError budget by Monte Carlo ({args.trials} campaigns per row, image noise as measured above): "
-              "σ of the R(cube←sun) error per cube axis")
-        tab = [[r.source, *(f"{s:.2f}" for s in r.sigma_arcsec), "-" if r.paper_arcsec is None else f"{r.paper_arcsec:.2f}"]
-               for r in budget.rows]
-        print(_table(["source", "σx″", "σy″", "σz″", "document σ″"], tab))
-        rss, tog = budget.rss_of_sources(), budget.together().sigma_arcsec
-        print(f"RSS of the single-source rows: {rss[0]:.2f} / {rss[1]:.2f} / {rss[2]:.2f}″; together: "
-              f"{tog[0]:.2f} / {tog[1]:.2f} / {tog[2]:.2f}″ (ratio {tog[0] / rss[0]:.2f} / {tog[1] / rss[1]:.2f} / {tog[2] / rss[2]:.2f})")
-        if rig.procedure.method == "diaphragm":
-            print("paper: RSS of σ1..σ4 = 3.69″ (eq 14), claim < 4″ (1σ); docs/campaign.md compares.")
-    wall["total"] = time.perf_counter() - t_all
-    try:
-        import os
-
-        rig_path = os.path.relpath(resolve_rig_path(args.rig))
-    except Exception:
-        rig_path = args.rig
-    files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall,
-                         command="rigsim " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rigsim") else None)
-    print("\nWall time by stage (s): " + ", ".join(f"{k} {v:.1f}" for k, v in wall.items()))
-    print(f"report: {files['report']}  (plots: " + ", ".join(p.name for k, p in files.items() if k not in ("report", "json")) + ")")
-    if args.json_out:
-        Path(args.json_out).write_text(files["json"].read_text())
-        print(f"wrote {args.json_out}")
-    return 0
-
-
-def _run_cube_mirror_analytic(args) -> int:
-    from rigsim.procedures.cube_mirror import campaign as cm
-    from rigsim.rig import load_rig
-
-    rig = load_rig(args.rig)
-    if args.trials < 2:
-        raise CliError(f"--trials = {args.trials}: allowed range is 2 to 100000")
-    axis_order = args.axis_order or cm.default_axis_order(rig)
-    if sorted(axis_order) != sorted(a.label for a in rig.turntable.axes):
-        raise CliError(f"--axis-order = {axis_order!r}: must be a permutation of {[a.label for a in rig.turntable.axes]}")
-    rng = np.random.default_rng(args.seed)
-    real = realization_from_rig(rig, ideal=args.ideal)
-    noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
-    res = cm.run_campaign(rig, real, noise, rng, axis_order)
-
-    print(f"rigsim {rigsim.__version__} — cube-mirror campaign, analytic (seed {rig.seed_document}), rig '{rig.name}'")
-    print(f"rig file: {args.rig}   seed: {args.seed}   axis order (outer→inner): {axis_order}   "
-          f"errors: {'none (ideal rig)' if args.ideal else 'the rig file’s true errors + random noise'}")
-    cal = res.calibration
-    print(f"\nStep 1/B  sun-sensor sweep ±{rig.procedure.sweep_range_deg:g}° every {rig.procedure.sweep_step_deg:g}°: "
-          f"{cal.n_points} poses on the detector, fit RMS {cal.rms_px:.4f} px")
-    ss = rig.sun_sensor
-    truth = {"fx": ss.fx_px, "fy": ss.fy_px, "cx": ss.principal_point_px[0], "cy": ss.principal_point_px[1], **ss.distortion.model_dump()}
-    rows = []
-    for name, val, sig in zip(cal.param_names, cal.params, np.sqrt(np.diag(cal.covariance))):
-        if name in truth:
-            rows.append([name, f"{truth[name]:.6g}", f"{val:.6g}", f"{val - truth[name]:+.3g}", f"{sig:.2g}", f"{(val - truth[name]) / sig:+.2f}" if sig > 0 else "-"])
-    print(_table(["param", "truth", "recovered", "error", "σ (pred.)", "error/σ"], rows))
-    poses = ", ".join(f"θ{2 * i + 1}={p['X']:.4f}° θ{2 * i + 2}={p['Y']:.4f}°" for i, p in enumerate(res.null_poses_deg))
-    print(f"\nSteps 2-3/C  nulls on faces {rig.procedure.faces[0]} and {rig.procedure.faces[1]} (readings): {poses}")
-
-    _print_truth_vs_recovered(res, ("R(sun←rot)  step 1/B", "R(cube←rot) TRIAD", "R(cube←sun) composed"))
-    np.set_printoptions(precision=7, suppress=True)
-    print(f"\nrecovered R(cube←sun):\n{res.R_cube_from_sun_est}")
-
-    out = {"rig": rig.name, "seed": args.seed, "axis_order": axis_order, "ideal": args.ideal,
-           "error_arcsec": res.error_arcsec.tolist(), "null_poses_deg": res.null_poses_deg,
-           "R_cube_from_sun_est": res.R_cube_from_sun_est.tolist(), "R_cube_from_sun_true": res.R_cube_from_sun_true.tolist()}
-    if not args.no_budget:
-        n_src = len(cm.budget_sources(rig)) + (2 if rig.procedure.method == "diaphragm" else 1)
-        with _progress(n_src * args.trials, "error budget (Monte Carlo)", not args.quiet) as bar:
-            rows_b = cm.error_budget(rig, args.trials, args.seed + 1, axis_order, progress=bar.update)
-        print(f"\nError budget by Monte Carlo ({args.trials} campaigns per row): σ of the R(cube←sun) error per cube axis")
-        tab = []
-        for r in rows_b:
-            tab.append([r.source, *(f"{s:.2f}" for s in r.sigma_arcsec), f"{r.rss_arcsec:.2f}", "-" if r.paper_arcsec is None else f"{r.paper_arcsec:.2f}"])
-        print(_table(["source", "σx″", "σy″", "σz″", "RSS″", "document σ″"], tab))
-        if rig.procedure.method == "diaphragm":
-            print("paper: RSS of σ1..σ4 = 3.69″ (eq 14), claim < 4″ (1σ). The paper's σ is one number per source; "
-                  "rigsim reports the resulting σ about each cube axis (docs/error_budget.md).")
-        out["budget"] = [{"source": r.source, "sigma_arcsec": r.sigma_arcsec.tolist(), "paper_arcsec": r.paper_arcsec} for r in rows_b]
-    if args.json_out:
-        Path(args.json_out).write_text(json.dumps(out, indent=2))
-        print(f"\nwrote {args.json_out}")
-    return 0
 
 
 # ------------------------------------------------------------------------------ rig / doctor
@@ -274,7 +38,7 @@ def cmd_rig_check(args) -> int:
     extra = ""
     if hasattr(rig, "turntable") and hasattr(rig, "procedure"):
         extra = f", {rig.turntable.kind} turntable, method {rig.procedure.method}"
-    print(f"{args.rig}: OK — '{rig.name}' (seed {rig.seed_document}{extra})")
+    print(f"{args.rig}: OK — '{rig.name}' (seed {rig.seed_document}, family {family_of(rig).name}{extra})")
     return 0
 
 
@@ -284,7 +48,7 @@ def cmd_rig_list(args) -> int:
 
     for p in default_rigs():
         r = load_any_rig(p)
-        print(f"{p.stem:40s} seed {r.seed_document}  {r.description}")
+        print(f"{p.stem:40s} seed {r.seed_document}  {family_of(r).name:12s} {r.description}")
     return 0
 
 
@@ -313,77 +77,6 @@ def cmd_doctor(args) -> int:
 
 # ------------------------------------------------------------------------------ render / export
 
-def _parse_pose(text: str | None, rig) -> dict[str, float]:
-    """'X=10,Y=-5' → {'X': 10.0, 'Y': -5.0} (degrees), checked against the rig's axes and ranges."""
-    if not text:
-        return {}
-    labels = {a.label: a for a in rig.turntable.axes}
-    pose = {}
-    for part in text.split(","):
-        if "=" not in part:
-            raise CliError(f"--pose = {text!r}: expected LABEL=DEGREES[,LABEL=DEGREES], e.g. X=10,Y=-5")
-        k, v = (x.strip() for x in part.split("=", 1))
-        if k not in labels:
-            raise CliError(f"--pose axis {k!r}: this turntable has axes {sorted(labels)}")
-        try:
-            val = float(v)
-        except ValueError:
-            raise CliError(f"--pose {k} = {v!r}: not a number of degrees") from None
-        lo, hi = labels[k].range_deg
-        if not lo <= val <= hi:
-            raise CliError(f"--pose {k} = {val}: allowed range is {lo} to {hi} degrees")
-        pose[k] = val
-    return pose
-
-
-def cmd_scene_export(args) -> int:
-    from rigsim.render.cube_mirror.export import export_rig
-    from rigsim.rig import load_rig
-
-    rig = load_rig(args.rig)
-    pose = _parse_pose(args.pose, rig)
-    for p in export_rig(rig, Path(args.xml), pose, spp=args.spp):
-        print(f"wrote {p}")
-    print(f"render one with: mitsuba -o out.exr {Path(args.xml) / 'sun_sensor.xml'}")
-    return 0
-
-
-def cmd_render_sun_sensor(args) -> int:
-    import cv2
-
-    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
-    from rigsim.rig import load_rig
-    from rigsim.truth.cube_mirror.realization import realization_from_rig
-
-    rig = load_rig(args.rig)
-    pose = _parse_pose(args.pose, rig)
-    if args.spp < 1 or args.spp & (args.spp - 1) or (args.spp.bit_length() - 1) % 2:
-        raise CliError(f"--spp = {args.spp}: must be a power of 4 (the low-discrepancy sampler), e.g. 256, 1024, 4096")
-    scene = SunSensorScene(rig, realization_from_rig(rig, ideal=args.ideal), spp=args.spp)
-    fr = scene.render({k: np.radians(v) for k, v in pose.items()}, seed=args.seed, noiseless=args.noiseless)
-    out = Path(args.out)
-    png, js = fr.write(out / args.name)
-    print(f"wrote {png} (16-bit DN) and {js} (truth and render settings) in {fr.seconds:.2f} s")
-    flags = {k: v for k, v in fr.sidecar["flags"].items() if v and isinstance(v, (bool, int)) and k != "spot_extent_px"}
-    t = fr.sidecar["truth"]["spot"]
-    if t.get("valid"):
-        print(f"true spot: centre {np.round(t['center_uv'], 4).tolist()} px, pixel-binned centroid "
-              f"{np.round(t['pixel_centroid_uv'], 4).tolist()} px")
-    if flags:
-        print(f"flags: {flags}")
-    if args.preview:
-        win = fr.photons_window
-        u0, v0 = win.origin_uv
-        dn = fr.dn.astype(float)
-        h = win.image.shape[0] // 2
-        crop = dn[max(v0 + h - 12, 0):v0 + h + 12, max(u0 + h - 12, 0):u0 + h + 12]
-        lo, hi = np.percentile(crop, 5), crop.max()
-        img = (np.clip((crop - lo) / max(hi - lo, 1), 0, 1) ** 0.4 * 255).astype(np.uint8)  # gamma shows the noise floor
-        img = cv2.resize(img, None, fx=16, fy=16, interpolation=cv2.INTER_NEAREST)
-        cv2.imwrite(str(args.preview), img)
-        print(f"wrote {args.preview} (8-bit preview: 24×24 px around the spot, 16× zoom, gamma 0.4)")
-    return 0
-
 
 # ------------------------------------------------------------------------------ parser
 
@@ -401,72 +94,6 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--json", action="store_true", help="machine-readable output")
     d.set_defaults(func=cmd_doctor)
 
-    t = sub.add_parser("triad", help="R(pm<-rot) by TRIAD from the four null angles (seed 000 Table 1)",
-                       description="Dual-vector attitude of the mirror cube in the turntable frame from θ1..θ4 (degrees).")
-    t.add_argument("angles_deg", nargs=4, type=float, metavar="θ", help="θ1 θ2 θ3 θ4 in degrees (θ1, θ3 about X'; θ2, θ4 about Y')")
-    t.add_argument("--axis-order", default="XY", help="nesting reading: XY (eq 7, default) or YX (step text); docs/readings.md")
-    t.add_argument("--faces", nargs=2, default=["+Z", "+Y"], choices=["+X", "-X", "+Y", "-Y", "+Z", "-Z"], help="cube faces nulled first and second (default +Z +Y, eq 6)")
-    t.add_argument("--json", action="store_true")
-    t.set_defaults(func=cmd_triad)
-
-    r = sub.add_parser("run", help="run a documented procedure end to end")
-    rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")
-    cmr = rs.add_parser("cube-mirror", help="seeds 000/001: sun sensor ↔ mirror cube calibration campaign",
-                        description="Run the cube-mirror campaign on a rig and compare with truth; then the Monte-Carlo error budget.",
-                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    cmr.add_argument("--rig", default=DEFAULT_RIG, help="rig file path or default rig name")
-    cmr.add_argument("--analytic", action="store_true", help="analytic campaign (exact geometry + modelled noise, no rendering; seconds)")
-    cmr.add_argument("--ideal", action="store_true", help="no rig errors, no encoder or detector noise: checks the simulator itself")
-    cmr.add_argument("--seed", type=int, default=2009, help="random seed (the same seed gives the same numbers)")
-    cmr.add_argument("--trials", type=int, default=None, help="Monte-Carlo campaigns per error-budget row (default 200 rendered, 300 analytic)")
-    cmr.add_argument("--out", default=None, metavar="DIR", help="rendered: report directory (default renders/cube_mirror_<rig name>)")
-    cmr.add_argument("--threshold", type=float, default=None, help="rendered: null-search threshold, px (seed 000) or arcsec (001); default the rig's")
-    cmr.add_argument("--sweep-spp", type=int, default=256, help="rendered: samples per pixel of the sun-sensor sweep frames")
-    cmr.add_argument("--sweep-step", type=float, default=None, metavar="DEG", help="rendered: sweep step (default the rig's, 5°)")
-    cmr.add_argument("--repeat-frames", type=int, default=4, help="rendered: extra frames at the first null to measure the null-measurement noise")
-    cmr.add_argument("--axis-order", default=None, help="estimator's axis nesting reading, outermost first (default: the rig's)")
-    cmr.add_argument("--no-budget", action="store_true", help="skip the Monte-Carlo error budget")
-    cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
-    cmr.add_argument("--quiet", action="store_true", help="no progress bar")
-    cmr.set_defaults(func=cmd_run_cube_mirror)
-
-    # procedures that live in their own modules register their `rigsim run NAME` subcommand
-    # through `add_cli(subparsers)` (keeps this file free of per-procedure code)
-    import importlib
-
-    for mod in PLUGIN_MODULES:
-        try:
-            m = importlib.import_module(mod)
-        except ModuleNotFoundError as e:
-            if not (e.name and mod.startswith(e.name)):
-                raise
-            continue
-        m.add_cli(rs, top=sub)
-
-    rd = sub.add_parser("render", help="render frames of a rig (Mitsuba + detector model)")
-    rds = rd.add_subparsers(dest="frame_type", metavar="FRAME")
-    rss = rds.add_parser("sun-sensor", help="the sun simulator seen by the sun sensor at a turntable pose",
-                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    rss.add_argument("--rig", default=DEFAULT_RIG, help="rig file path or default rig name")
-    rss.add_argument("--pose", default=None, help="true turntable angles in degrees, e.g. X=10,Y=-5")
-    rss.add_argument("--seed", type=int, default=0, help="frame seed (same seed, same frame)")
-    rss.add_argument("--spp", type=int, default=1024, help="samples per pixel (power of 4)")
-    rss.add_argument("--noiseless", action="store_true", help="detector without random noise")
-    rss.add_argument("--ideal", action="store_true", help="rig without its true errors")
-    rss.add_argument("--out", default="renders/frames", help="output folder")
-    rss.add_argument("--name", default="sun_sensor", help="file stem of the frame")
-    rss.add_argument("--preview", default=None, metavar="PNG", help="also write an 8-bit zoomed preview")
-    rss.set_defaults(func=cmd_render_sun_sensor)
-
-    sc = sub.add_parser("scene", help="Mitsuba scenes of a rig")
-    scs = sc.add_subparsers(dest="scene_command", metavar="ACTION")
-    sce = scs.add_parser("export", help="write the rig's scenes as Mitsuba XML (rendered by the plain mitsuba command)")
-    sce.add_argument("rig", help="rig file path or default rig name")
-    sce.add_argument("--xml", required=True, metavar="DIR", help="output folder (XML + meshes/)")
-    sce.add_argument("--pose", default=None, help="turntable angles in degrees, e.g. X=180,Y=0")
-    sce.add_argument("--spp", type=int, default=64, help="samples per pixel written into the XML")
-    sce.set_defaults(func=cmd_scene_export)
-
     g = sub.add_parser("rig", help="rig files: list the defaults, validate a file")
     gs = g.add_subparsers(dest="rig_command", metavar="ACTION")
     gc = gs.add_parser("check", help="validate a rig file")
@@ -474,6 +101,17 @@ def build_parser() -> argparse.ArgumentParser:
     gc.set_defaults(func=cmd_rig_check)
     gl = gs.add_parser("list", help="list the default rigs in scenes/")
     gl.set_defaults(func=cmd_rig_list)
+
+    r = sub.add_parser("run", help="run a documented procedure end to end")
+    rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")
+    rd = sub.add_parser("render", help="render frames of a rig (Mitsuba + detector model)")
+    rds = rd.add_subparsers(dest="frame_type", metavar="FRAME")
+    groups = {"top": sub, "run": rs, "render": rds}
+    # every rig family adds its commands (rigsim.families); datasets and the 3D view serve all of them
+    for fam in FAMILIES:
+        fam.add_cli(groups)
+    dataset_cli.add_cli(groups)
+    view_cli.add_cli(groups)
     return p
 
 

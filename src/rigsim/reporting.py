@@ -70,3 +70,15 @@ def markdown_to_html(md_path, html_path=None, *, title: str | None = None) -> Pa
     tmp.write_text(page)
     tmp.replace(html_path)
     return html_path
+
+
+def _fmt_row(cells, widths):
+    return "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+
+def text_table(header, rows) -> str:
+    """A plain-text table (first column left-aligned, the others right-aligned) for terminals."""
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    out = [_fmt_row(header, widths), _fmt_row(["-" * w for w in widths], widths)]
+    out += [_fmt_row(r, widths) for r in rows]
+    return "\n".join(out)

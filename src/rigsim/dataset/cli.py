@@ -71,9 +71,9 @@ def _info(args) -> int:
     return 0
 
 
-def add_cli(run_subparsers, top=None) -> None:
-    if top is None:
-        return
+def add_cli(groups: dict) -> None:
+    """Add the command to the parser groups {"top", "run", "render"} of ``rigsim``."""
+    top = groups["top"]
     d = top.add_parser("dataset", help="generate, verify and score synthetic datasets (docs/datasets.md)",
                        description="Synthetic datasets at scale.", epilog=EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -20,7 +20,6 @@ from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
-from scipy.spatial.transform import Rotation
 
 from rigsim.detector.config import DetectorConfig
 
@@ -54,6 +53,8 @@ class Orientation(_Model):
         return v
 
     def matrix(self) -> np.ndarray:
+        from scipy.spatial.transform import Rotation  # here: keeps `rigsim --help` fast
+
         return Rotation.from_euler(self.euler_seq, self.euler_deg, degrees=True).as_matrix()
 
 

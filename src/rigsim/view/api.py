@@ -1,79 +1,49 @@
-"""Public entry points of rigsim.view and the per-family builder registry (the extension point).
+"""Public entry points of rigsim.view: build, picture, export or show the 3D scene of any rig.
 
-A rig family plugs in with :func:`register_view_builder` (rig class path → builder path, both
-``"module:attr"`` strings, imported lazily). A builder is called as
-``builder(rig, pose=..., face=..., **options) -> RigScene``; families without a turntable
-reject ``pose``/``face`` with a :class:`~rigsim.view.scene.ViewError`.
+Each rig family has a scene builder in this package (``view/cube_mirror.py``, ``view/boresight.py``,
+``view/star.py``) called as ``builder(rig, pose=..., face=..., **options) -> RigScene``; families
+without a turntable reject ``pose``/``face`` with a :class:`~rigsim.errors.ViewError`.
 """
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 
 from rigsim.errors import ViewError
+from rigsim.rig.boresight import BoresightRig
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.star import StarRig
 from rigsim.view.scene import RigScene
 
-__all__ = ["register_view_builder", "builder_for", "load_view_rig", "build_scene", "rig_picture", "export_scene",
-           "show_scene", "VIEW_BUILDERS", "parse_size"]
-
-VIEW_BUILDERS: dict[str, str] = {}
-"""rig class ("module:Class") → scene builder ("module:function")."""
-
-# Fallback loaders, by seed_document, for when rigsim.rig.load.load_any_rig cannot load a family
-# that has a view builder (e.g. its RIG_FAMILIES entry points at a parser that moved).
-FALLBACK_LOADERS: dict[str, str] = {"003": "rigsim.rig.load:load_boresight_rig"}
-
-
-def register_view_builder(rig_class: str, builder: str) -> None:
-    VIEW_BUILDERS[rig_class] = builder
-
-
-register_view_builder("rigsim.rig.cube_mirror:CubeMirrorRig", "rigsim.view.cube_mirror:build_cube_rig_scene")
-register_view_builder("rigsim.rig.star:StarRig", "rigsim.view.star:build_star_scene")
-register_view_builder("rigsim.rig.boresight:BoresightRig", "rigsim.view.boresight:build_boresight_scene")
-
-
-def _resolve(path: str):
-    mod, attr = path.split(":")
-    return getattr(importlib.import_module(mod), attr)
+__all__ = ["builder_for", "load_view_rig", "build_scene", "rig_picture", "export_scene", "show_scene",
+           "parse_size"]
 
 
 def builder_for(rig):
-    for cls_path, b in VIEW_BUILDERS.items():
-        try:
-            cls = _resolve(cls_path)
-        except (ImportError, AttributeError):
-            continue
-        if isinstance(rig, cls):
-            return _resolve(b)
+    """The scene builder of ``rig``'s family (imported on first use: pyvista is slow to import)."""
+    if isinstance(rig, CubeMirrorRig):
+        from rigsim.view.cube_mirror import build_cube_rig_scene
+
+        return build_cube_rig_scene
+    if isinstance(rig, BoresightRig):
+        from rigsim.view.boresight import build_boresight_scene
+
+        return build_boresight_scene
+    if isinstance(rig, StarRig):
+        from rigsim.view.star import build_star_scene
+
+        return build_star_scene
     raise ViewError(f"no 3D view for a rig of type {type(rig).__name__} "
-                    f"(rigsim.view knows {sorted(c.split(':')[1] for c in VIEW_BUILDERS)})")
+                    "(rigsim.view knows CubeMirrorRig, BoresightRig and StarRig)")
 
 
 def load_view_rig(rig_or_path):
     """A rig object as is, or load a path / default rig name (any family)."""
     if not isinstance(rig_or_path, (str, Path)):
         return rig_or_path
-    import tomllib
+    from rigsim.rig.load import load_any_rig
 
-    from rigsim.errors import RigError
-    from rigsim.rig.load import load_any_rig, resolve_rig_path
-
-    try:
-        return load_any_rig(rig_or_path)
-    except RigError as exc:
-        if "has no loader" not in str(exc):
-            raise
-        path = resolve_rig_path(rig_or_path)
-        sd = str(tomllib.loads(path.read_text("utf-8")).get("seed_document", ""))
-        if sd not in FALLBACK_LOADERS:
-            raise
-        try:
-            loader = _resolve(FALLBACK_LOADERS[sd])
-        except (ImportError, AttributeError):
-            raise exc from None
-        return loader(path)
+    return load_any_rig(rig_or_path)
 
 
 def build_scene(rig_or_path, *, pose=None, face=None, **options) -> RigScene:

@@ -42,9 +42,9 @@ def parse_pose_arg(text: str | None):
     return pose
 
 
-def add_cli(run_subparsers, top=None) -> None:
-    if top is None:
-        return
+def add_cli(groups: dict) -> None:
+    """Add the command to the parser groups {"top", "run", "render"} of ``rigsim``."""
+    top = groups["top"]
     p = top.add_parser("view", help="3D view of a rig: turntable, sensor, cube, screen/autocollimator, traced beams",
                        description="Show a rig in 3D (pyvista), built from the same rig file as the renderer; beam "
                                    "paths from the analytic trace at the chosen pose. Without --screenshot/--export/"

@@ -15,8 +15,9 @@ from rigsim.errors import CliError
 __all__ = ["add_cli", "cmd_run_boresight"]
 
 
-def add_cli(run_subparsers, top=None):
-    p = run_subparsers.add_parser(
+def add_cli(groups: dict) -> None:
+    """Add the command to the parser groups {"top", "run", "render"} of ``rigsim``."""
+    p = groups["run"].add_parser(
         "boresight", help="seed 003: dual line-array camera + central prism (DVAD vs simplified, orbit scenario)",
         description="Reproduce seed 003's analyses (Figs 4-8, rotation order) on the exact model, render the "
                     "thermal-vacuum orbit scenario (CMOS ROIs through Mitsuba + detector model), recover the relative "

@@ -14,8 +14,9 @@ __all__ = ["add_cli", "cmd_run_star_calibration"]
 RENDERERS = ("analytic", "mitsuba")
 
 
-def add_cli(run_subparsers, top=None) -> None:
-    p = run_subparsers.add_parser(
+def add_cli(groups: dict) -> None:
+    """Add the command to the parser groups {"top", "run", "render"} of ``rigsim``."""
+    p = groups["run"].add_parser(
         "star-calibration", help="seed 004: star-sensor on-orbit calibration, AD vs ADS EKF, batch LSQ, study",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
         description="Render a star-field sequence of the star-sensor rig, extract and identify the stars, "
