@@ -65,3 +65,28 @@ def test_monte_carlo_matches_predicted_covariance():
 def test_too_few_points_is_a_clear_error():
     with pytest.raises(ValueError, match="at least 8 points"):
         calibrate_sun_sensor({"X": np.zeros(3), "Y": np.zeros(3)}, np.zeros((3, 2)), TurntableModel.nominal(["X", "Y"]), 1024, 1024, 270.0)
+
+
+def test_analytic_jacobian_matches_central_differences():
+    """The fit's Jacobian is analytic (camera model + SO(3) left Jacobian), not finite differences."""
+    from scipy.spatial.transform import Rotation
+
+    from rigsim.estimation.sun_calibration import INTRINSIC_NAMES, SweepModel
+
+    rng = np.random.default_rng(1)
+    m = rng.normal(size=(50, 3))
+    m[:, 2] = np.abs(m[:, 2]) + 2
+    m /= np.linalg.norm(m, axis=1, keepdims=True)
+    sm = SweepModel(m, rng.normal(500, 50, (50, 2)), INTRINSIC_NAMES)
+    x = np.array([272.7, 272.8, 515.3, 508.7, -0.021, 0.0012, 2e-4, -1.5e-4, 1e-5, 0.01, -0.02, 0.03])
+    R_ref = Rotation.from_rotvec([0.1, 0.2, -0.3]).as_matrix()
+    J = sm.jacobian(x, R_ref)
+    Jn = np.zeros_like(J)
+    for k in range(len(x)):
+        h = 1e-6 * max(1.0, abs(x[k]))
+        xp, xm = x.copy(), x.copy()
+        xp[k] += h
+        xm[k] -= h
+        Jn[:, k] = (sm.residual(xp, R_ref) - sm.residual(xm, R_ref)) / (2 * h)
+    rel = np.max(np.abs(J - Jn), axis=0) / np.abs(Jn).max(axis=0)
+    assert np.all(rel < 1e-7), rel

@@ -6,9 +6,8 @@ import warnings
 import numpy as np
 import pytest
 
-from rigsim.procedures.cube_mirror.concentricity import (
-    OffsetMeasurer, concentricity_search, null_bias_offset_px, offset_model,
-)
+from rigsim.estimation.null_search import offset_model
+from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search, null_bias_offset_px
 from rigsim.imaging.screen import hole_spot_offset
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import numerical_jacobian

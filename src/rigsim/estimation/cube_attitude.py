@@ -15,7 +15,7 @@ import numpy as np
 
 from rigsim.estimation.triad import triad
 from rigsim.optics.cube import FACE_NORMALS
-from rigsim.rig.turntable import TurntableModel
+from rigsim.rig.turntable import TurntableModel, as_reading
 
 AXIS_ORDERS_2AXIS = {
     "XY": "seed 000 eq 7 as printed and its frame definition: X' is the outer axis and carries Y' (default)",
@@ -39,9 +39,12 @@ def cube_from_rot_triad(
     axis_order: str,
     d_rot=(0.0, 0.0, 1.0),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """TRIAD R(cube←rot) from two null poses. Returns (R, r1, r2)."""
+    """TRIAD R(cube←rot) from the turntable readings at two nulls. Returns (R, r1, r2).
+
+    ``poses_rad``: two :class:`~rigsim.rig.turntable.TurntableReading` (or mappings {label: rad});
+    a :class:`~rigsim.rig.turntable.TruePose` is refused."""
     model = TurntableModel.nominal(list(axis_order))
-    r1 = normal_in_mount(model, poses_rad[0], d_rot)
-    r2 = normal_in_mount(model, poses_rad[1], d_rot)
+    r1 = normal_in_mount(model, as_reading(poses_rad[0]), d_rot)
+    r2 = normal_in_mount(model, as_reading(poses_rad[1]), d_rot)
     n1, n2 = FACE_NORMALS[faces[0]], FACE_NORMALS[faces[1]]
     return triad(n1, n2, r1, r2), r1, r2

@@ -41,8 +41,8 @@ import numpy as np
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.line_camera import CameraGeometry, euler_xyz, rotation_xyz
 
-__all__ = ["BoresightEstimate", "DVADSolver", "READINGS", "METHODS", "simplified", "dvad", "estimate", "relative_rotation",
-           "small_angles_arcsec", "triad_columns"]
+__all__ = ["BoresightEstimate", "DVADSolver", "READINGS", "METHODS", "simplified", "dvad", "estimate",
+           "triad_columns"]
 
 READINGS = ("consistent", "as_printed")
 METHODS = ("dvad", "simplified")

@@ -1,31 +1,34 @@
 """The null search of a cube face: measure, move the turntable, repeat (seed 000 Table 1, seed 001 step C).
 
 The loop is the same for the diaphragm screen (measured: hole/spot centre offset in aiming-camera
-pixels) and the autocollimator (measured: its two readings in arcsec):
+pixels) and the autocollimator (measured: its two readings in arcsec). It sees what the operator
+sees: the turntable's *readings* and the measurements, plus the operator's nominal model of the
+rig; never the true pose. At each step:
 
-1. at turntable *reading* r_k (what the operator commands and the display shows), the table sits
-   at the true angles ``reading_to_true(r_k)`` (encoder bias and the encoder's error at this
-   position; rigsim.truth.cube_mirror.realization);
-2. ``measure(true_pose)`` returns the measured 2-vector (and the exact one, for the log);
-3. if both components are below ``threshold`` the face is nulled and r_k is recorded (θ1, θ2);
-4. otherwise the feedback rule moves the free axes by Δr = −J⁻¹·m_k, where J = ∂model/∂r is the
-   Jacobian of the operator's *nominal* prediction of the measurement (ideal turntable, nominal
-   beam, face normal estimated from the current pose; no truth), rounded to
-   ``command_resolution_rad`` (Table 1 moves in 0.001° steps).
-
-Relative moves are exact (a turntable's fine positioning is far better than its absolute
-accuracy); the absolute error sits in the reading, constant over the few arcseconds a search
-covers, as in the analytic campaign.
+1. ``measure(reading)`` returns the measured 2-vector at the turntable's current state;
+2. if both components are below ``threshold`` the face is nulled and the reading is recorded
+   (θ1, θ2);
+3. otherwise the feedback rule moves the free axes by Δr = −J⁻¹·m, where J = ∂model/∂r is the
+   Jacobian of the operator's nominal prediction of the measurement (:func:`offset_model`,
+   :func:`reading_model`), rounded to ``command_resolution_rad`` (Table 1 moves in 0.001° steps).
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.optics.autocollimator import a_frame_basis, exact_reading_rad
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.turntable import NOMINAL_D, TurntableModel, TurntableReading, as_reading
+
+__all__ = ["SearchStep", "SearchResult", "null_search", "numerical_jacobian", "reflected_offset_mm",
+           "offset_model", "reading_model"]
 
 
 @dataclass
@@ -33,7 +36,6 @@ class SearchStep:
     iteration: int
     reading_deg: dict[str, float]
     measured: np.ndarray  # (2,) in SearchResult.unit
-    true: np.ndarray | None  # (2,) the exact value of the same quantity (truth; for the log only)
     seconds: float = 0.0
     flags: dict = field(default_factory=dict)
 
@@ -46,8 +48,7 @@ class SearchResult:
     threshold: float
     steps: list[SearchStep]
     converged: bool
-    final_reading_rad: dict[str, float]
-    final_true_pose_rad: dict[str, float]
+    final_reading_rad: TurntableReading
     message: str = ""
 
     @property
@@ -58,29 +59,8 @@ class SearchResult:
     def final_measured(self) -> np.ndarray:
         return self.steps[-1].measured
 
-    @property
-    def final_true(self) -> np.ndarray | None:
-        return self.steps[-1].true
 
-    def table_rows(self) -> list[list]:
-        """One row per frame: readings of the free axes (deg), measured x, y, exact x, y."""
-        rows = []
-        for s in self.steps:
-            t = s.true if s.true is not None else (math.nan, math.nan)
-            rows.append([s.iteration] + [s.reading_deg[a] for a in self.free_axes]
-                        + [float(s.measured[0]), float(s.measured[1]), float(t[0]), float(t[1])])
-        return rows
-
-    def as_dict(self) -> dict:
-        return {"face": self.face, "unit": self.unit, "free_axes": self.free_axes, "threshold": self.threshold,
-                "converged": self.converged, "message": self.message,
-                "final_reading_deg": {k: math.degrees(v) for k, v in self.final_reading_rad.items()},
-                "steps": [{"iteration": s.iteration, "reading_deg": s.reading_deg, "measured": s.measured.tolist(),
-                           "true": None if s.true is None else np.asarray(s.true).tolist(), "seconds": s.seconds,
-                           "flags": s.flags} for s in self.steps]}
-
-
-def numerical_jacobian(model: Callable[[dict], np.ndarray], reading_rad: dict, free: list[str],
+def numerical_jacobian(model: Callable[[Mapping], np.ndarray], reading_rad: Mapping, free: list[str],
                        h_rad: float = 1e-6) -> np.ndarray:
     """∂model/∂reading (model units per rad) by central differences over the free axes."""
     J = np.empty((2, len(free)))
@@ -98,11 +78,10 @@ def _quantise(x: float, step: float, origin: float = 0.0) -> float:
 
 
 def null_search(
-    measure: Callable[[dict], tuple[np.ndarray, np.ndarray | None, dict]],
-    model: Callable[[dict], np.ndarray],
-    start_reading_rad: dict[str, float],
+    measure: Callable[[TurntableReading], tuple[np.ndarray, dict]],
+    model: Callable[[Mapping], np.ndarray],
+    start_reading_rad: Mapping[str, float],
     free: list[str],
-    reading_to_true: Callable[[dict], dict],
     *,
     face: str,
     unit: str,
@@ -111,25 +90,23 @@ def null_search(
     max_iterations: int = 15,
     progress: Callable[[int], None] | None = None,
 ) -> SearchResult:
-    """Run the feedback loop (module docstring). ``measure(true_pose_rad)`` → (measured (2,),
-    exact (2,) or None, flags); it raises :class:`SearchError` when nothing can be measured.
-    ``model(reading_rad)`` is the operator's nominal prediction (same units as ``measure``)."""
+    """Run the feedback loop (module docstring). ``measure(reading)`` → (measured (2,), flags); it
+    raises :class:`~rigsim.errors.SearchError` when nothing can be measured. ``model(reading)`` is
+    the operator's nominal prediction (same units as ``measure``)."""
     if not (threshold > 0):
         raise ValueError(f"threshold = {threshold!r}: must be > 0")
     q = float(command_resolution_rad)
-    r = dict(start_reading_rad)
-    origin = dict(start_reading_rad)
+    r = dict(as_reading(start_reading_rad))
+    origin = dict(r)
     steps: list[SearchStep] = []
     converged = False
     message = ""
     visited = set()
     for it in range(int(max_iterations)):
         t0 = time.perf_counter()
-        true_pose = reading_to_true(r)
-        m, exact, flags = measure(true_pose)
+        m, flags = measure(TurntableReading(r))
         m = np.asarray(m, float)
-        steps.append(SearchStep(it, {k: math.degrees(v) for k, v in r.items()}, m,
-                                None if exact is None else np.asarray(exact, float), time.perf_counter() - t0,
+        steps.append(SearchStep(it, {k: math.degrees(v) for k, v in r.items()}, m, time.perf_counter() - t0,
                                 dict(flags)))
         if progress:
             progress(1)
@@ -158,15 +135,49 @@ def null_search(
         message = f"not below {threshold:g} {unit} after {max_iterations} frames"
     if not converged and not message:
         message = f"not below {threshold:g} {unit} after {len(steps)} frames"
-    return SearchResult(face, unit, list(free), float(threshold), steps, converged, dict(r),
-                        reading_to_true(r), message)
+    return SearchResult(face, unit, list(free), float(threshold), steps, converged, TurntableReading(r), message)
 
 
-def encoder_reading_to_true(bias_rad: dict[str, float], error_rad: dict[str, float], free: list[str]):
-    """Map readings to true angles for the axes in ``free``: true = reading − bias − error; the
-    other axes are set to their value and read back exactly (as in the analytic campaign)."""
+# ------------------------------------------------------------------ the operators' nominal models
 
-    def f(reading: dict) -> dict:
-        return {k: (v - bias_rad.get(k, 0.0) - error_rad.get(k, 0.0)) if k in free else v for k, v in reading.items()}
+def reflected_offset_mm(n_rot: np.ndarray, d_rot: np.ndarray, lever_mm: float) -> np.ndarray:
+    """Where the beam (−d) reflected by a face of normal n lands on a screen ⟂ d at ``lever_mm``
+    from the face, relative to the hole (screen axes X′, Y′), for a lab frame with d ≈ +Z′."""
+    n = n_rot / np.linalg.norm(n_rot)
+    r = 2.0 * float(d_rot @ n) * n - d_rot
+    return lever_mm * r[:2] / r[2]
 
-    return f
+
+def offset_model(rig: CubeMirrorRig, start_reading_rad: Mapping, axis_order: str | None = None
+                 ) -> Callable[[Mapping], np.ndarray]:
+    """Seed 000: the operator's nominal prediction of the hole/spot offset (aiming-camera px) vs the
+    turntable reading (rad): ideal turntable (nesting ``axis_order``), nominal beam along +Z′, the
+    face's normal estimated as R_nom(start)ᵀ·d (the face is assumed nulled at the start)."""
+    nom = TurntableModel.nominal_for(rig.turntable, axis_order)
+    n_mount = nom.R_rot_from_mount(as_reading(start_reading_rad)).T @ NOMINAL_D
+    L = rig.diaphragm_screen.distance_to_cube_mm
+    px = rig.aiming_camera.object_pixel_mm
+
+    def model(reading_rad: Mapping) -> np.ndarray:
+        return reflected_offset_mm(nom.R_rot_from_mount(reading_rad) @ n_mount, NOMINAL_D, L) / px
+
+    return model
+
+
+def reading_model(rig: CubeMirrorRig, face: str, start_reading_rad: Mapping[str, float],
+                  axis_order: str | None = None) -> Callable[[Mapping], np.ndarray]:
+    """Seed 001: the operator's nominal prediction of the autocollimator reading (arcsec) vs the
+    turntable reading (rad): ideal turntable (nesting ``axis_order``), axis along +Z′ with the A
+    frame built from it as the layout does, and the face's normal in the mount estimated as
+    R_nom(start)ᵀ·d (the face is assumed nulled at the start). Zero at the start."""
+    if face not in rig.procedure.faces:
+        raise ValueError(f"face {face!r} is not one of the procedure's faces {rig.procedure.faces}")
+    tt = TurntableModel.nominal_for(rig.turntable, axis_order)
+    R = a_frame_basis(NOMINAL_D)
+    n_est = tt.R_rot_from_mount(as_reading(start_reading_rad)).T @ NOMINAL_D
+
+    def model(reading_rad: Mapping) -> np.ndarray:
+        return exact_reading_rad(R, tt.R_rot_from_mount(reading_rad) @ n_est) * ARCSEC_PER_RAD
+
+    model.face = face  # type: ignore[attr-defined]
+    return model

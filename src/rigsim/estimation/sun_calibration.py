@@ -21,8 +21,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from rigsim.optics.camera import PinholeBrown
-from rigsim.rig.turntable import TurntableModel
+from rigsim.optics.camera import PinholeBrown, project
+from rigsim.rig.turntable import TurntableModel, as_reading
 
 INTRINSIC_NAMES = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"]
 
@@ -49,6 +49,49 @@ class SunCalibration:
         return self.covariance[-3:, -3:]
 
 
+def _skew(v: np.ndarray) -> np.ndarray:
+    """[v]× for vectors (..., 3) → (..., 3, 3)."""
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def _so3_left_jacobian(d: np.ndarray) -> np.ndarray:
+    """J_l(δ) with exp([δ + ε]×) ≈ exp([J_l ε]×)·exp([δ]×): I + (1−cos θ)/θ²·[δ]× + (θ−sin θ)/θ³·[δ]×²."""
+    th = float(np.linalg.norm(d))
+    K = _skew(np.asarray(d, float))
+    if th < 1e-6:  # series: the terms above lose precision near 0
+        return np.eye(3) + 0.5 * K + K @ K / 6.0
+    return np.eye(3) + (1.0 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * (K @ K)
+
+
+class SweepModel:
+    """The calibration's residuals and their analytic Jacobian: unknowns x = (the intrinsics named in
+    ``names``, δ) with R(sun←mount) = exp([δ]×)·R_ref; residuals = projected − measured centroids
+    (2N,). ∂uv/∂intrinsics comes from the camera model; ∂uv/∂δ = ∂uv/∂s · (−[s]× J_l(δ))."""
+
+    def __init__(self, m_dirs: np.ndarray, uv: np.ndarray, names):
+        self.m_dirs, self.uv, self.names = np.asarray(m_dirs, float), np.asarray(uv, float), list(names)
+        self.cols = [INTRINSIC_NAMES.index(k) for k in self.names]
+
+    def params(self, x) -> np.ndarray:
+        q = np.zeros(len(INTRINSIC_NAMES))
+        q[self.cols] = x[: len(self.names)]
+        return q
+
+    def residual(self, x, R_ref) -> np.ndarray:
+        R = Rotation.from_rotvec(x[-3:]).as_matrix() @ R_ref
+        return (project(self.m_dirs @ R.T, self.params(x)) - self.uv).ravel()
+
+    def jacobian(self, x, R_ref) -> np.ndarray:
+        R = Rotation.from_rotvec(x[-3:]).as_matrix() @ R_ref
+        s = self.m_dirs @ R.T
+        _, du_ds, du_dq = project(s, self.params(x), get_gradients=True)
+        ds_dd = -_skew(s) @ _so3_left_jacobian(x[-3:])
+        J = np.concatenate([du_dq[:, :, self.cols], du_ds @ ds_dd], axis=2)
+        return J.reshape(-1, len(self.names) + 3)
+
+
 def sun_directions_in_mount(model: TurntableModel, poses: Mapping[str, np.ndarray], d_rot=(0.0, 0.0, 1.0)) -> np.ndarray:
     """(N, 3) sun directions in the mount frame for poses {label: angles (N,)}."""
     R = model.R_rot_from_mount(poses)  # (N, 3, 3)
@@ -70,11 +113,12 @@ def calibrate_sun_sensor(
 ) -> SunCalibration:
     """Fit intrinsics and R(sun←rot) to observed sun-image centroids.
 
-    ``poses_rad``: the turntable *readings* per observation; ``uv``: (N, 2) centroids.
+    ``poses_rad``: the turntable *readings* per observation (a :class:`~rigsim.rig.turntable.TurntableReading`
+    of arrays, or a mapping {label: rad array}; a true pose is refused); ``uv``: (N, 2) centroids.
     ``f_guess_px``: design focal length in pixels (a starting value only).
     """
     uv = np.asarray(uv, float)
-    m_dirs = sun_directions_in_mount(model, poses_rad, d_rot)
+    m_dirs = sun_directions_in_mount(model, as_reading(poses_rad), d_rot)
     n = len(uv)
     if n < 8:
         raise ValueError(f"calibration needs at least 8 points on the detector, got {n}")
@@ -92,18 +136,18 @@ def calibrate_sun_sensor(
     R0 = Rotation.align_vectors(s_obs, m_dirs)[0].as_matrix()
     x_int = np.array([p0.get(k, 0.0) for k in names])
 
-    def residual(x, R_ref):
-        R = Rotation.from_rotvec(x[-3:]).as_matrix() @ R_ref
-        s = m_dirs @ R.T
-        return (camera(x).project(s) - uv).ravel()
+    sm = SweepModel(m_dirs, uv, names)
+    residual, jacobian = sm.residual, sm.jacobian
 
     x = np.concatenate([x_int, np.zeros(3)])
     R_ref = R0
     for _ in range(2):  # second pass re-linearises δ around the estimate (δ ≈ 0 at the end)
-        sol = least_squares(residual, x, args=(R_ref,), method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, x_scale="jac")
+        sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-14, ftol=1e-14,
+                            gtol=1e-14, x_scale="jac")
         R_ref = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
         x = np.concatenate([sol.x[:-3], np.zeros(3)])
-    sol = least_squares(residual, x, args=(R_ref,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, x_scale="jac")
+    sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                        x_scale="jac")
     R_fin = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
     res = sol.fun
     dof = max(res.size - sol.x.size, 1)

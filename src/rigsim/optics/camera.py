@@ -316,11 +316,6 @@ class PinholeBrown:
         """From ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]`` (trailing terms optional)."""
         return cls(**{n: float(v) for n, v in zip(PARAM_NAMES, p)}, width=width, height=height)
 
-    @classmethod
-    def from_sun_sensor(cls, s) -> "PinholeBrown":
-        d = s.distortion
-        return cls(s.fx_px, s.fy_px, *s.principal_point_px, d.k1, d.k2, d.p1, d.p2, d.k3, *s.resolution_px)
-
     def params(self) -> np.ndarray:
         """``[fx, fy, cx, cy, k1, k2, p1, p2, k3]`` (``PARAM_NAMES`` order)."""
         return np.array([self.fx, self.fy, self.cx, self.cy, self.k1, self.k2, self.p1, self.p2, self.k3])

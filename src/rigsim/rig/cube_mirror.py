@@ -22,6 +22,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from rigsim.detector.config import DetectorConfig
+from rigsim.optics.camera import PinholeBrown
 
 FaceName = Literal["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
 AxisLabel = Literal["X", "Y", "Z"]
@@ -218,6 +219,12 @@ class SunSensor(_Model):
     def camera_matrix(self) -> np.ndarray:
         u0, v0 = self.principal_point_px
         return np.array([[self.fx_px, 0.0, u0], [0.0, self.fy_px, v0], [0.0, 0.0, 1.0]])
+
+    def camera(self) -> PinholeBrown:
+        """The sensor's pinhole + Brown model (OpenCV convention) with these intrinsics."""
+        d = self.distortion
+        return PinholeBrown(self.fx_px, self.fy_px, *self.principal_point_px, d.k1, d.k2, d.p1, d.p2, d.k3,
+                            *self.resolution_px)
 
 
 class CubeProcedure(_Model):

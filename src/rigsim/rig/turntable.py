@@ -14,7 +14,7 @@ the documents disagree on it (docs/readings.md, option ``axis_order``).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +24,9 @@ from scipy.spatial.transform import Rotation
 from rigsim.errors import GeometryError  # noqa: F401  (re-exported)
 from rigsim.frames import RAD_PER_ARCSEC, rot_axis
 from rigsim.rig.cube_mirror import Turntable
+
+NOMINAL_D = np.array([0.0, 0.0, 1.0])
+"""The nominal reference direction in the rot frame: +Z′, towards the sun simulator / the autocollimator."""
 
 _E = {"X": np.array([1.0, 0.0, 0.0]), "Y": np.array([0.0, 1.0, 0.0]), "Z": np.array([0.0, 0.0, 1.0])}
 
@@ -132,3 +135,68 @@ class TurntableModel:
 
 def pose_deg_to_rad(pose_deg: Mapping[str, float]) -> dict[str, float]:
     return {k: float(np.radians(v)) for k, v in pose_deg.items()}
+
+
+# ------------------------------------------------------------------------------ readings vs true poses
+class _Angles(Mapping):
+    """Turntable angles in radians by axis label (``"X"``, ``"Y"``, ``"Z"``): floats, or equal-length
+    arrays for a sweep. Immutable; ``dict(a)`` gives a plain copy."""
+
+    __slots__ = ("_rad",)
+
+    def __init__(self, rad: Mapping[str, float | np.ndarray] | None = None, **more):
+        d = dict(rad or {})
+        d.update(more)
+        object.__setattr__(self, "_rad", d)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"{type(self).__name__} is immutable")
+
+    def __getitem__(self, label: str):
+        return self._rad[label]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._rad)
+
+    def __len__(self) -> int:
+        return len(self._rad)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self._rad!r})"
+
+    def __reduce__(self):
+        return (type(self), (self._rad,))
+
+    @classmethod
+    def from_deg(cls, deg: Mapping[str, float | np.ndarray]):
+        return cls({k: np.radians(v) if np.ndim(v) else float(np.radians(v)) for k, v in deg.items()})
+
+    def deg(self) -> dict:
+        return {k: np.degrees(v) if np.ndim(v) else float(np.degrees(v)) for k, v in self._rad.items()}
+
+    def replace(self, **rad):
+        """A copy with some axes changed (radians)."""
+        return type(self)({**self._rad, **rad})
+
+
+class TurntableReading(_Angles):
+    """What the turntable's encoders display: true angle + encoder bias + encoder noise. The only
+    turntable angles an estimator sees."""
+
+
+class TruePose(_Angles):
+    """The turntable's true angles: known to the simulator (truth), never to an estimator."""
+
+
+def as_reading(angles) -> TurntableReading:
+    """``angles`` as a :class:`TurntableReading`; a plain mapping (a user's own log) is taken as one.
+
+    Raises TypeError for a :class:`TruePose`: estimators see readings, never true poses."""
+    if isinstance(angles, TurntableReading):
+        return angles
+    if isinstance(angles, TruePose):
+        raise TypeError("a TruePose was passed where a TurntableReading is expected: estimators see the "
+                        "turntable's readings (true angle + encoder error), never its true pose")
+    if isinstance(angles, Mapping):
+        return TurntableReading(angles)
+    raise TypeError(f"turntable angles must be a TurntableReading or a mapping {{label: rad}}, got {type(angles).__name__}")

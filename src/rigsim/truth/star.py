@@ -38,7 +38,8 @@ from rigsim.optics.sky import (
     star_photons,
 )
 
-__all__ = ['AttitudeSequence', 'pointing', 'inertial', 'slew', 'random_pointings', 'from_rig', 'boresight_radec', 'perturb', 'StarField', 'StarSky']
+__all__ = ["AttitudeSequence", "pointing", "inertial", "slew", "random_pointings", "from_rig", "perturb",
+           "StarField", "StarSky"]
 
 
 @dataclass(frozen=True)

@@ -31,12 +31,11 @@ class SunSensorGenerator:
         return [a.label for a in self.rig.turntable.axes]
 
     def _on_detector(self, pose_deg: dict) -> bool:
-        from rigsim.optics.camera import PinholeBrown
         from rigsim.truth.cube_mirror.realization import realization_from_rig
 
         if not hasattr(self, "_plan_real"):
             self._plan_real = realization_from_rig(self.rig, ideal=True)
-            self._plan_cam = PinholeBrown.from_sun_sensor(self.rig.sun_sensor)
+            self._plan_cam = self.rig.sun_sensor.camera()
         real = self._plan_real
         pose = {k: math.radians(v) for k, v in pose_deg.items()}
         s = real.R_sun_from_mount @ (real.turntable.R_rot_from_mount(pose).T @ real.d_sun_rot)

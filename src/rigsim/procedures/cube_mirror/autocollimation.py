@@ -43,11 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rigsim.errors import SearchError
-from rigsim.estimation.null_search import (
-    SearchResult,
-    encoder_reading_to_true,
-    null_search,
-)
+from rigsim.estimation.null_search import reading_model
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.imaging.spot import ROI_PX, SpotMeasurement, measure_spot
 from rigsim.optics.autocollimator import (
@@ -56,25 +52,11 @@ from rigsim.optics.autocollimator import (
     normal_from_reading,
 )
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
-from rigsim.truth.cube_mirror.realization import NOMINAL_D, Realization, tilt
+from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
+from rigsim.rig.turntable import NOMINAL_D, TurntableReading, pose_deg_to_rad
+from rigsim.truth.cube_mirror.realization import Realization, tilt
 
-__all__ = [
-    "DEFAULT_SPP",
-    "ROI_PX",
-    "THRESHOLD_SIGMA",
-    "SearchError",
-    "SpotMeasurement",
-    "StepAResult",
-    "FaceReadingMeasurer",
-    "a_frame_basis",
-    "exact_reading_rad",
-    "normal_from_reading",
-    "measure_spot",
-    "reading_model",
-    "step_a_align",
-    "autocollimator_face_search",
-]
+__all__ = ["DEFAULT_SPP", "StepAResult", "FaceReadingMeasurer", "step_a_align", "autocollimator_face_search"]
 
 DEFAULT_SPP = 1024
 """Stratified samples per pixel of the rendered frames (the renderer's default; 0.005 px rms
@@ -271,26 +253,6 @@ def _frame_info(frame, sm: SpotMeasurement, wl) -> dict:
 
 
 # ------------------------------------------------------------------------------ step C
-def reading_model(rig: CubeMirrorRig, face: str, start_reading_rad: Mapping[str, float],
-                  axis_order: str | None = None) -> Callable[[dict], np.ndarray]:
-    """The operator's nominal prediction of the autocollimator reading (arcsec) as a function of
-    the turntable reading (rad): ideal turntable (``TurntableModel.nominal_for``, nesting
-    ``axis_order``), axis NOMINAL_D, the A frame built from it as the layout does, and the
-    face's normal in the mount estimated as R_nom(start)ᵀ·d (the face is assumed nulled at the
-    start). Zero at the start; used only for the Jacobian of :func:`null_search`."""
-    if face not in rig.procedure.faces:
-        raise ValueError(f"face {face!r} is not one of the procedure's faces {rig.procedure.faces}")
-    tt = TurntableModel.nominal_for(rig.turntable, axis_order)
-    R = a_frame_basis(NOMINAL_D)
-    n_est = tt.R_rot_from_mount(dict(start_reading_rad)).T @ NOMINAL_D
-
-    def model(reading_rad: dict) -> np.ndarray:
-        return exact_reading_rad(R, tt.R_rot_from_mount(reading_rad) @ n_est) * ARCSEC_PER_RAD
-
-    model.face = face  # type: ignore[attr-defined]
-    return model
-
-
 class FaceReadingMeasurer:
     """``measure(true_pose_rad) -> (measured_arcsec (2,), exact_arcsec (2,), info dict)`` for
     cube face ``face`` seen by an autocollimator whose true axis is ``axis_rot`` (step A's).
@@ -378,7 +340,7 @@ def autocollimator_face_search(rig: CubeMirrorRig, real: Realization, face_index
                                encoder_error_rad: Mapping[str, float] | None, *, rendered: bool = True,
                                seed: int = 0, reading_sigma_arcsec: float = 0.0, spp: int | None = None,
                                noiseless: bool = False, axis_order: str | None = None,
-                               progress: Callable[[int], None] | None = None) -> SearchResult:
+                               progress: Callable[[int], None] | None = None) -> TracedSearch:
     """Seed 001 step C for face ``rig.procedure.faces[face_index]``: null it on the
     autocollimator whose true axis is ``axis_rot`` by fine-tuning the middle (X′) and outer (Y′)
     axes (:func:`null_search`). Starts at ``procedure.search_start[face_index]`` (readings);
@@ -394,11 +356,11 @@ def autocollimator_face_search(rig: CubeMirrorRig, real: Realization, face_index
     free = [lab for lab in ("X", "Y") if lab in labels]
     if len(free) != 2:
         raise ValueError(f"rig {rig.name!r}: step C adjusts the X′ and Y′ axes, the turntable has {sorted(labels)}")
-    start = pose_deg_to_rad(proc.search_start[face_index])
-    base = encoder_reading_to_true(real.encoder_bias_rad, dict(encoder_error_rad or {}), free)
+    start = TurntableReading(pose_deg_to_rad(proc.search_start[face_index]))
+    base = real.reading_to_true(dict(encoder_error_rad or {}), free)
     last: dict = {}
 
-    def reading_to_true(r: dict) -> dict:
+    def reading_to_true(r):
         last.clear()
         last.update(r)
         return base(r)
@@ -407,10 +369,10 @@ def autocollimator_face_search(rig: CubeMirrorRig, real: Realization, face_index
                                   reading_sigma_arcsec=reading_sigma_arcsec, seed=seed, spp=spp, noiseless=noiseless)
     model = reading_model(rig, face, start, axis_order)
     try:
-        res = null_search(measure, model, start, free, reading_to_true, face=face, unit="arcsec",
-                          threshold=rig.autocollimator.null_threshold_arcsec,
-                          command_resolution_rad=math.radians(proc.command_resolution_deg),
-                          max_iterations=proc.max_search_iterations, progress=progress)
+        res = traced_search(measure, model, start, free, reading_to_true, face=face, unit="arcsec",
+                            threshold=rig.autocollimator.null_threshold_arcsec,
+                            command_resolution_rad=math.radians(proc.command_resolution_deg),
+                            max_iterations=proc.max_search_iterations, progress=progress)
     except SearchError as e:
         raise SearchError(f"{e} [turntable reading {_fmt_pose(last)}]") from e
     return res

@@ -8,8 +8,9 @@ Steps (seed 000 / seed 001):
 4. R(cube←sun) = R(cube←rot) · R(sun←rot)ᵀ                          (001 eq 9; 000 eq 11 reading)
 5. compare with the rig's truth, per cube axis, in arcseconds.
 
-The truth side (:class:`Realization`) holds every true error; the estimation side sees only
-turntable readings, centroids and nominal geometry.
+The simulated rig (:class:`Realization`) produces the observations; :func:`estimate` turns
+observations and the nominal rig into the recovered rotations (no truth); :func:`compare` puts
+them beside the truth.
 """
 
 from __future__ import annotations
@@ -26,11 +27,9 @@ from rigsim.estimation.sun_calibration import (
     sweep_poses,
 )
 from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
-from rigsim.optics.camera import PinholeBrown
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
+from rigsim.rig.turntable import NOMINAL_D, TruePose, TurntableModel, TurntableReading, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import (
-    NOMINAL_D,
     Noise,
     Realization,
     draw_realization,
@@ -40,6 +39,59 @@ from rigsim.truth.cube_mirror.realization import (
 
 PAPER_RSS_ARCSEC = 3.69
 PAPER_SIGMAS_ARCSEC = {"σ1 aiming null (1 px)": 2.34, "σ2 turntable perpendicularity": 2.0, "σ3 aiming-camera mounting": 2.0, "σ4 angle readout": 0.4}
+
+
+@dataclass
+class CubeMirrorEstimate:
+    """What the procedure recovers from its observations and the nominal rig (no truth)."""
+
+    axis_order: str
+    calibration: SunCalibration | None  # step 1 / B; None: not run (see :func:`compare`)
+    null_readings: list[TurntableReading]  # θ1, θ2 / θ3, θ4 as read at the two nulls
+    R_cube_from_rot: np.ndarray
+
+    @property
+    def R_sun_from_rot(self) -> np.ndarray | None:
+        return None if self.calibration is None else self.calibration.R_sun_from_rot
+
+    @property
+    def R_cube_from_sun(self) -> np.ndarray | None:
+        """Seed 001 eq 9: R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ."""
+        R_sun = self.R_sun_from_rot
+        return None if R_sun is None else self.R_cube_from_rot @ R_sun.T
+
+
+def fit_sun_sensor(rig: CubeMirrorRig, readings, uv, axis_order: str, d_rot=NOMINAL_D) -> SunCalibration:
+    """Step 1 / B: intrinsics and R(sun←rot) by least squares from the sweep's turntable readings and
+    sun-image centroids, with the nominal turntable (nesting ``axis_order``) and the design focal
+    length as the start."""
+    ss = rig.sun_sensor
+    return calibrate_sun_sensor(readings, uv, TurntableModel.nominal(list(axis_order)), *ss.resolution_px,
+                                f_guess_px=ss.fx_px, d_rot=d_rot)
+
+
+def estimate(rig: CubeMirrorRig, null_readings, axis_order: str, *, sweep_readings=None, sweep_uv=None,
+             calibration: SunCalibration | None = None, d_rot=NOMINAL_D) -> CubeMirrorEstimate:
+    """Steps 1/B, 4/C3 and 5/D from the observations and the nominal rig: the sweep (its readings and
+    sun-image centroids, or an existing ``calibration``) and the readings at the two nulls (TRIAD
+    with the nominal turntable of nesting ``axis_order``)."""
+    cal = calibration
+    if sweep_readings is not None:
+        cal = fit_sun_sensor(rig, sweep_readings, sweep_uv, axis_order, d_rot)
+    R_cr, _, _ = cube_from_rot_triad(null_readings, rig.procedure.faces, axis_order, d_rot)
+    return CubeMirrorEstimate(axis_order, cal, list(null_readings), R_cr)
+
+
+def compare(rig: CubeMirrorRig, est: CubeMirrorEstimate, real: Realization) -> "CampaignResult":
+    """The estimate beside the rig instance's truth. Without a step-1 calibration (the budget's rows
+    that leave the sweep untouched) R(sun←rot) is taken as exact: the row then measures the other
+    sources alone."""
+    R_sun = est.R_sun_from_rot if est.calibration is not None else real.R_sun_from_mount
+    return CampaignResult(rig.name, est.axis_order, est.calibration, [r.deg() for r in est.null_readings],
+                          R_sun, real.R_sun_from_mount, est.R_cube_from_rot, real.R_cube_from_mount,
+                          est.R_cube_from_rot @ R_sun.T, real.R_cube_from_sun)
+
+
 @dataclass
 class CampaignResult:
     rig_name: str
@@ -71,20 +123,21 @@ def default_axis_order(rig: CubeMirrorRig) -> str:
     return "".join(a.label for a in rig.turntable.axes)
 
 
-def simulate_sweep(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator):
+def simulate_sweep(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator
+                   ) -> tuple[TurntableReading, np.ndarray]:
     """Step 1 / B: turntable readings and centroids of every sweep pose that lands on the detector."""
     proc = rig.procedure
     fixed = {a.label: 0.0 for a in rig.turntable.axes if a.label not in proc.sweep_axes}
-    poses = sweep_poses(proc.sweep_axes, proc.sweep_range_deg, proc.sweep_step_deg, fixed)
+    poses = TruePose(sweep_poses(proc.sweep_axes, proc.sweep_range_deg, proc.sweep_step_deg, fixed))
     s_mount = np.einsum("nji,j->ni", real.turntable.R_rot_from_mount(poses), real.d_sun_rot)
-    cam = PinholeBrown.from_sun_sensor(rig.sun_sensor)
+    cam = rig.sun_sensor.camera()
     uv = cam.project(s_mount @ real.R_sun_from_mount.T)
     keep = cam.on_detector(uv, margin_px=3.0)
     uv = uv[keep] + rng.normal(0.0, noise.centroid_sigma_px, (keep.sum(), 2)) if noise.centroid_sigma_px else uv[keep]
     readings = {}
     for k, v in poses.items():
         readings[k] = v[keep] + real.encoder_bias_rad.get(k, 0.0) + rng.normal(0.0, noise.encoder_sigma_rad.get(k, 0.0), keep.sum())
-    return readings, uv
+    return TurntableReading(readings), uv
 
 
 def reference_direction(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator) -> np.ndarray:
@@ -98,7 +151,8 @@ def reference_direction(rig: CubeMirrorRig, real: Realization, noise: Noise, rng
     return tilt(m, rng.normal(0.0, noise.null_sigma_rad, 2))
 
 
-def simulate_nulls(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator, d_ref: np.ndarray):
+def simulate_nulls(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator, d_ref: np.ndarray
+                   ) -> list[TurntableReading]:
     """Steps 2–3 / C: exact true poses at which each face is nulled (within the null error), as read."""
     out = []
     free = [lab for lab in ("X", "Y") if lab in {a.label for a in rig.turntable.axes}]
@@ -112,7 +166,7 @@ def simulate_nulls(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.
         # axes that are not adjusted are set to their nominal value and read back exactly as set
         for k in fixed:
             reading[k] = fixed[k]
-        out.append(reading)
+        out.append(TurntableReading(reading))
     return out
 
 
@@ -124,28 +178,15 @@ def run_campaign(
     axis_order: str | None = None,
     fit_calibration: bool = True,
 ) -> CampaignResult:
+    """Simulate the observations of one campaign on the rig instance ``real``, estimate, compare."""
     axis_order = axis_order or default_axis_order(rig)
-    nominal = TurntableModel.nominal(list(axis_order))
-    # Step 1 / B
-    if fit_calibration:
-        readings, uv = simulate_sweep(rig, real, noise, rng)
-        ss = rig.sun_sensor
-        cal = calibrate_sun_sensor(readings, uv, nominal, *ss.resolution_px, f_guess_px=ss.fx_px, d_rot=NOMINAL_D)
-        R_sun_est = cal.R_sun_from_rot
-    else:  # noise-free step 1 with an ideal turntable: the fit returns the truth exactly
-        cal, R_sun_est = None, real.R_sun_from_mount
-    # Steps 2–3 / A, C
-    d_ref = reference_direction(rig, real, noise, rng)
+    sweep_readings = sweep_uv = None
+    if fit_calibration:  # step 1 / B; without it the budget row isolates the other sources
+        sweep_readings, sweep_uv = simulate_sweep(rig, real, noise, rng)
+    d_ref = reference_direction(rig, real, noise, rng)  # steps 2–3 / A, C
     readings_null = simulate_nulls(rig, real, noise, rng, d_ref)
-    # Step 4 / C3 — TRIAD with nominal geometry
-    R_cr, _, _ = cube_from_rot_triad(readings_null, rig.procedure.faces, axis_order, NOMINAL_D)
-    # Step 5 / D — seed 001 eq 9
-    R_cs = R_cr @ R_sun_est.T
-    return CampaignResult(
-        rig.name, axis_order, cal,
-        [{k: float(np.degrees(v)) for k, v in p.items()} for p in readings_null],
-        R_sun_est, real.R_sun_from_mount, R_cr, real.R_cube_from_mount, R_cs, real.R_cube_from_sun,
-    )
+    est = estimate(rig, readings_null, axis_order, sweep_readings=sweep_readings, sweep_uv=sweep_uv)
+    return compare(rig, est, real)
 
 
 # ---------------------------------------------------------------- error budget (Monte Carlo)

@@ -1,12 +1,10 @@
 """Seed 000 steps 2–3 on rendered frames: the hole/spot concentricity search (Table 1).
 
-* :func:`hole_spot_offset` — the image side: fit the hole centre on the hole frame (spot blocked),
-  then the spot centre on the spot frame minus the hole frame, both on the screen plane through
-  the aiming camera's nominal homography; their difference in screen pixels (mm / object pixel),
-  x = lab X′, y = lab Y′, as Table 1 prints it. No truth is used.
-* :func:`offset_model` — the operator's nominal prediction of the offset vs the turntable reading
-  (ideal turntable, nominal beam, face normal estimated from the start pose): its Jacobian drives
-  the feedback rule of :func:`rigsim.estimation.null_search.null_search`.
+* :func:`rigsim.imaging.screen.hole_spot_offset` — the image side: the hole centre on the hole
+  frame (spot blocked), the spot centre on the spot frame minus the hole frame, both on the screen
+  plane through the aiming camera's homography; their difference in object pixels (Table 1's x, y).
+* :func:`rigsim.estimation.null_search.offset_model` — the operator's nominal prediction of the
+  offset vs the turntable reading, whose Jacobian drives the feedback rule.
 * :class:`OffsetMeasurer` — measure(true pose) on rendered frames, or the Monte-Carlo surrogate
   (exact offset + measured noise) used by the error budget.
 * :func:`concentricity_search` — one face, start to null.
@@ -19,45 +17,18 @@ that bias produces, so the measured offset is reduced by it.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
 from rigsim.errors import SearchError
-from rigsim.estimation.null_search import (
-    SearchResult,
-    encoder_reading_to_true,
-    null_search,
-)
+from rigsim.estimation.null_search import offset_model, reflected_offset_mm
 from rigsim.imaging.screen import hole_spot_offset
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TurntableModel, pose_deg_to_rad
-from rigsim.truth.cube_mirror.realization import NOMINAL_D, Realization, tilt
+from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
+from rigsim.rig.turntable import TurntableReading, pose_deg_to_rad
+from rigsim.truth.cube_mirror.realization import Realization, tilt
 
 FREE_AXES = ("X", "Y")
-
-
-# ------------------------------------------------------------------ operator's model
-
-def reflected_offset_mm(n_rot: np.ndarray, d_rot: np.ndarray, lever_mm: float) -> np.ndarray:
-    """Where the beam (−d) reflected by a face of normal n lands on a screen ⟂ d at ``lever_mm``
-    from the face, relative to the hole (screen axes X′, Y′), for a lab frame with d ≈ +Z′."""
-    n = n_rot / np.linalg.norm(n_rot)
-    r = 2.0 * float(d_rot @ n) * n - d_rot
-    return lever_mm * r[:2] / r[2]
-
-
-def offset_model(rig: CubeMirrorRig, start_reading_rad: dict, axis_order: str | None = None) -> Callable[[dict], np.ndarray]:
-    """The operator's nominal prediction of the offset (px) vs turntable reading (rad)."""
-    nom = TurntableModel.nominal_for(rig.turntable, axis_order)
-    n_mount = nom.R_rot_from_mount(start_reading_rad).T @ NOMINAL_D
-    L = rig.diaphragm_screen.distance_to_cube_mm
-    px = rig.aiming_camera.object_pixel_mm
-
-    def model(reading_rad: dict) -> np.ndarray:
-        return reflected_offset_mm(nom.R_rot_from_mount(reading_rad) @ n_mount, NOMINAL_D, L) / px
-
-    return model
 
 
 def null_bias_offset_px(rig: CubeMirrorRig, real: Realization, face_index: int) -> np.ndarray:
@@ -158,7 +129,7 @@ class OffsetMeasurer:
 def concentricity_search(rig: CubeMirrorRig, real: Realization, face_index: int, measure: OffsetMeasurer,
                          encoder_error_rad: dict[str, float], *, axis_order: str | None = None,
                          threshold_px: float | None = None, start_offset_rad: dict | None = None,
-                         progress=None) -> SearchResult:
+                         progress=None) -> TracedSearch:
     """Null one face (Table 1): start at ``procedure.search_start[face_index]`` (plus
     ``start_offset_rad``, the Monte-Carlo's scatter of the coarse alignment) and move X′, Y′."""
     proc = rig.procedure
@@ -169,14 +140,15 @@ def concentricity_search(rig: CubeMirrorRig, real: Realization, face_index: int,
         start.setdefault(a.label, 0.0)
     free = [a for a in FREE_AXES if a in start]
     thr = rig.aiming_camera.concentric_threshold_px if threshold_px is None else float(threshold_px)
-    return null_search(measure, offset_model(rig, start, axis_order), start, free,
-                       encoder_reading_to_true(real.encoder_bias_rad, encoder_error_rad, free),
-                       face=proc.faces[face_index], unit="px", threshold=thr,
-                       command_resolution_rad=math.radians(proc.command_resolution_deg),
-                       max_iterations=proc.max_search_iterations, progress=progress)
+    start = TurntableReading(start)
+    return traced_search(measure, offset_model(rig, start, axis_order), start, free,
+                         real.reading_to_true(encoder_error_rad, free),
+                         face=proc.faces[face_index], unit="px", threshold=thr,
+                         command_resolution_rad=math.radians(proc.command_resolution_deg),
+                         max_iterations=proc.max_search_iterations, progress=progress)
 
 
-def table1_text(results: list[SearchResult]) -> str:
+def table1_text(results: list[TracedSearch]) -> str:
     """The iteration log in the form of the paper's Table 1 (θ in degrees, offsets in px), with
     the exact offsets (truth) beside the measured ones."""
     lines = []

@@ -29,21 +29,21 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from rigsim.errors import SearchError
-from rigsim.estimation.cube_attitude import cube_from_rot_triad
-from rigsim.estimation.null_search import SearchResult
-from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor
+from rigsim.estimation.sun_calibration import SunCalibration
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.procedures.cube_mirror.campaign import (
     PAPER_RSS_ARCSEC,
     BudgetRow,
     CampaignResult,
+    compare,
     default_axis_order,
+    estimate,
+    fit_sun_sensor,
     simulate_sweep,
 )
+from rigsim.procedures.cube_mirror.nulls import TracedSearch
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TurntableModel
 from rigsim.truth.cube_mirror.realization import (
-    NOMINAL_D,
     Noise,
     Realization,
     draw_realization,
@@ -66,13 +66,14 @@ class RenderedCampaign:
     rig_name: str
     method: str
     seed: int
-    sweep: object  # RenderedSweep
+    sweep: object  # SweepObservation
     calibration: SunCalibration
-    searches: list[SearchResult]
+    searches: list[TracedSearch]
     step_a: object | None
     result: CampaignResult
     times: dict[str, float]
     measured_noise: dict = field(default_factory=dict)
+    sweep_truth: object = None  # SweepTruth
 
     @property
     def error_arcsec(self) -> np.ndarray:
@@ -86,15 +87,6 @@ class RenderedCampaign:
 def _encoder_errors(rig: CubeMirrorRig, noise: Noise, rng: np.random.Generator) -> dict[str, float]:
     return {a.label: float(rng.normal(0.0, noise.encoder_sigma_rad.get(a.label, 0.0)))
             for a in rig.turntable.axes if a.label in ("X", "Y")}
-
-
-def compose(rig: CubeMirrorRig, real: Realization, order: str, cal, R_sun_est: np.ndarray, null_readings: list[dict]) -> CampaignResult:
-    """Steps 4–5 / C3, D: TRIAD on the recorded null readings, R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ,
-    and the truth beside each estimate."""
-    R_cr, _, _ = cube_from_rot_triad(null_readings, rig.procedure.faces, order, NOMINAL_D)
-    return CampaignResult(rig.name, order, cal, [{k: math.degrees(v) for k, v in p.items()} for p in null_readings],
-                          R_sun_est, real.R_sun_from_mount, R_cr, real.R_cube_from_mount, R_cr @ R_sun_est.T,
-                          real.R_cube_from_sun)
 
 
 def _null_noise(resid: list, unit: str) -> dict:
@@ -135,20 +127,18 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     # ---- step 1 / B: the sun-sensor sweep
     pb.set_description("sun-sensor sweep")
     t0 = time.perf_counter()
-    sweep = render_sweep(rig, real, noise, int(rng.integers(2**31)), spp=sweep_spp, noiseless=noiseless,
-                         step_deg=sweep_step_deg, progress=pb.update)
+    sweep, sweep_truth = render_sweep(rig, real, noise, int(rng.integers(2**31)), spp=sweep_spp, noiseless=noiseless,
+                                      step_deg=sweep_step_deg, progress=pb.update)
     times["sweep render + centroid"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    ss = rig.sun_sensor
-    cal = calibrate_sun_sensor(sweep.readings, sweep.uv, TurntableModel.nominal(list(order)), *ss.resolution_px,
-                               f_guess_px=ss.fx_px, d_rot=NOMINAL_D)
+    cal = fit_sun_sensor(rig, sweep.readings, sweep.uv, order)
     times["sweep least squares"] = time.perf_counter() - t0
-    res_px = sweep.uv - sweep.uv_centre  # everything: rendering, detector, centroider
+    res_px = sweep.uv - sweep_truth.uv_centre  # everything: rendering, detector, centroider
     measured["sun_centroid_rms_px"] = float(np.sqrt(np.mean(res_px**2)))
     measured["sun_centroid_rms_px_xy"] = np.sqrt(np.mean(res_px**2, axis=0)).tolist()
 
     # ---- steps 2–3 / A, C: the null searches
-    searches: list[SearchResult] = []
+    searches: list[TracedSearch] = []
     step_a = None
     search_seed = int(rng.integers(2**31))
     if rig.procedure.method == "diaphragm":
@@ -223,11 +213,11 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
 
     # ---- step 4 / C3, D: TRIAD and composition
     t0 = time.perf_counter()
-    readings = [s.final_reading_rad for s in searches]
-    result = compose(rig, real, order, cal, cal.R_sun_from_rot, readings)
+    est = estimate(rig, [s.final_reading_rad for s in searches], order, calibration=cal)
+    result = compare(rig, est, real)
     times["TRIAD + compose"] = time.perf_counter() - t0
     return RenderedCampaign(rig.name, rig.procedure.method, int(seed), sweep, cal, searches, step_a, result, times,
-                            measured)
+                            measured, sweep_truth)
 
 
 # ------------------------------------------------------------------ Monte-Carlo budget (surrogate)
@@ -254,14 +244,9 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
     search ends on the null: isolates the other sources).
     """
     order = axis_order or default_axis_order(rig)
-    if fit_calibration:
-        readings, uv = simulate_sweep(rig, real, noise, rng)
-        ss = rig.sun_sensor
-        cal = calibrate_sun_sensor(readings, uv, TurntableModel.nominal(list(order)), *ss.resolution_px,
-                                   f_guess_px=ss.fx_px, d_rot=NOMINAL_D)
-        R_sun_est = cal.R_sun_from_rot
-    else:
-        cal, R_sun_est = None, real.R_sun_from_mount
+    sweep_readings = sweep_uv = None
+    if fit_calibration:  # without it the budget row isolates the other sources (compare: step 1 exact)
+        sweep_readings, sweep_uv = simulate_sweep(rig, real, noise, rng)
     r = rig if null_mode == "search" else _exact_null_rig(rig)
     sig = null_sigma if null_mode == "search" else 0.0
     null_readings = []
@@ -294,7 +279,8 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
             if not res.converged:
                 raise SearchError(f"face {res.face}: surrogate search did not converge ({res.message})")
             null_readings.append(res.final_reading_rad)
-    return compose(rig, real, order, cal, R_sun_est, null_readings)
+    est = estimate(rig, null_readings, order, sweep_readings=sweep_readings, sweep_uv=sweep_uv)
+    return compare(rig, est, real)
 
 
 @dataclass

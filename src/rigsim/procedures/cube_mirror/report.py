@@ -42,7 +42,7 @@ def plot_calibration_residuals(campaign, path: Path) -> Path:
     plt = _plt()
     sw, cal = campaign.sweep, campaign.calibration
     uv, res = cal.uv, cal.residuals_px
-    err = sw.uv - sw.uv_centre
+    err = sw.uv - campaign.sweep_truth.uv_centre  # the comparison with truth
     fig, axs = plt.subplots(1, 2, figsize=(12, 5.4))
     ax = axs[0]
     W, H = campaign_rig_size(campaign)

@@ -20,19 +20,28 @@ from rigsim.estimation.sun_calibration import (
 )
 from rigsim.imaging import Flag, centroid_tcom
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TurntableModel
+from rigsim.rig.turntable import TruePose, TurntableModel, TurntableReading
 from rigsim.truth.cube_mirror.realization import NOMINAL_D, Noise, Realization
 
 
 @dataclass
-class RenderedSweep:
-    readings: dict[str, np.ndarray]
+class SweepObservation:
+    """What the rig records: the turntable's readings and the measured centroid of every kept frame."""
+
+    readings: TurntableReading  # arrays (N,) per axis
     uv: np.ndarray  # measured centroids (N, 2)
-    uv_truth: np.ndarray  # exact pixel-binned centroid of each spot (N, 2)
-    uv_centre: np.ndarray  # exact projection of the sun's centre (what the calibration model predicts) (N, 2)
     n_rendered: int
     n_rejected: int  # frames whose spot was flagged (edge, saturated, …) and left out
     seconds: float
+
+
+@dataclass
+class SweepTruth:
+    """The same frames' truth (for the comparison step only)."""
+
+    poses: TruePose  # true turntable angles (N,) per axis
+    uv_pixel_centroid: np.ndarray  # exact pixel-binned centroid of each spot (N, 2)
+    uv_centre: np.ndarray  # exact projection of the sun's centre (what the calibration model predicts) (N, 2)
 
 
 def render_sweep(
@@ -46,8 +55,8 @@ def render_sweep(
     noiseless: bool = False,
     step_deg: float | None = None,
     centroider: str = "scurve",
-) -> RenderedSweep:
-    """Render, centroid and record the sweep (module docstring). ``noiseless``: detector noise off
+) -> tuple[SweepObservation, SweepTruth]:
+    """Render, centroid and record the sweep (module docstring): (observation, truth). ``noiseless``: detector noise off
     (rendering noise and quantisation stay). ``step_deg`` overrides the procedure's sweep step.
     ``centroider``: ``"scurve"`` (default: first moment with the disk's pixel-phase correction,
     :mod:`rigsim.imaging.scurve`) or ``"tcom"`` (thresholded first moment, biased by up to 0.02 px
@@ -108,14 +117,15 @@ def render_sweep(
         if progress:
             progress(1)
     keep = np.array(keep, dtype=int)
-    readings = {
+    readings = TurntableReading({
         k: v[keep] + real.encoder_bias_rad.get(k, 0.0) + rng.normal(0.0, noise.encoder_sigma_rad.get(k, 0.0), keep.size)
         for k, v in poses.items()
-    }
-    return RenderedSweep(readings, np.array(uv), np.array(uv_true), np.array(uv_centre), rendered, rejected, time.perf_counter() - t0)
+    })
+    obs = SweepObservation(readings, np.array(uv), rendered, rejected, time.perf_counter() - t0)
+    return obs, SweepTruth(TruePose({k: v[keep] for k, v in poses.items()}), np.array(uv_true), np.array(uv_centre))
 
 
-def calibrate_from_sweep(rig: CubeMirrorRig, sweep: RenderedSweep, axis_order: str | None = None) -> SunCalibration:
+def calibrate_from_sweep(rig: CubeMirrorRig, sweep: SweepObservation, axis_order: str | None = None) -> SunCalibration:
     order = list(axis_order) if axis_order else [a.label for a in rig.turntable.axes]
     ss = rig.sun_sensor
     return calibrate_sun_sensor(sweep.readings, sweep.uv, TurntableModel.nominal(order), *ss.resolution_px,

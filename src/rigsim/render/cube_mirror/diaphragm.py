@@ -77,29 +77,10 @@ from rigsim.truth.cube_mirror.placement import (
 )
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 
-__all__ = [
-    "GeometryWarning",
-    "AimingCameraModel",
-    "DiaphragmGeometry",
-    "DiaphragmTruth",
-    "DiaphragmFrames",
-    "DiaphragmRenderer",
-    "diaphragm_geometry",
-    "build_diaphragm_scene_dict",
-    "screen_with_hole_mesh",
-    "true_cube_mesh",
-    "rasterise_screen_disk",
-    "screen_centroid",
-    "screen_circle_fit",
-    "BEAM_MODES",
-    "RETURN_MODES",
-    "SaturationWarning",
-    "preview_png",
-    "export_diaphragm",
-    "DEMO_TILT_ARCSEC",
-    "spot_radiance",
-    "cube_to_scene_matrix",
-]
+__all__ = ["GeometryWarning", "DiaphragmGeometry", "DiaphragmTruth", "DiaphragmFrames", "DiaphragmRenderer",
+           "diaphragm_geometry", "build_diaphragm_scene_dict", "screen_with_hole_mesh", "true_cube_mesh",
+           "SaturationWarning", "preview_png", "export_diaphragm", "DEMO_TILT_ARCSEC", "spot_radiance",
+           "cube_to_scene_matrix"]
 
 BEAM_BEHIND_HOLE_MM = 0.01
 

@@ -56,7 +56,8 @@ from rigsim.render.plugins import PINHOLE_PLUGIN, register_sensors
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 
-__all__ = ['SUN_FULL_ANGLE_RAD', 'SIMULATOR_32ARCMIN_RAD', 'GeometryWarning', 'SpotWindow', 'SunSpotRenderer', 'disk_directions', 'spot_outline', 'spot_truth', 'spot_geometry_flags', 'window_centroid']
+__all__ = ["SUN_FULL_ANGLE_RAD", "GeometryWarning", "SpotWindow", "SunSpotRenderer", "spot_truth",
+           "spot_geometry_flags", "window_centroid"]
 
 
 def _check_spp(spp, sampler: str) -> None:
@@ -300,7 +301,7 @@ class SunSensorScene:
                  spot_photons: float | None = None):
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
-        self.analytic_camera = PinholeBrown.from_sun_sensor(rig.sun_sensor)
+        self.analytic_camera = rig.sun_sensor.camera()
         self.camera = self.analytic_camera
         self.full_angle_rad = math.radians(rig.sun_simulator.collimation_full_angle_arcmin / 60.0)
         self.spot_photons = float(spot_photons) if spot_photons is not None else default_spot_photons(rig)

@@ -5,6 +5,7 @@ Estimators never import this module. Renderers and the analytic campaigns do.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -13,9 +14,8 @@ from scipy.spatial.transform import Rotation
 from rigsim.frames import RAD_PER_ARCSEC
 from rigsim.optics.cube import face_normal_cube
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import AxisKinematics, TurntableModel
+from rigsim.rig.turntable import NOMINAL_D, AxisKinematics, TruePose, TurntableModel
 
-NOMINAL_D = np.array([0.0, 0.0, 1.0])
 
 
 def _perp_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -56,6 +56,18 @@ class Realization:
     @property
     def R_cube_from_sun(self) -> np.ndarray:
         return self.R_cube_from_mount @ self.R_sun_from_mount.T
+
+    def reading_to_true(self, error_rad: Mapping[str, float], free) -> Callable[[Mapping], TruePose]:
+        """The turntable's true pose when it reads ``reading``: for the axes in ``free``,
+        true = reading − encoder bias − ``error_rad`` (the encoder's error near this position); the
+        other axes are set to their value and read back exactly."""
+        bias, err, free = self.encoder_bias_rad, dict(error_rad or {}), set(free)
+
+        def f(reading: Mapping) -> TruePose:
+            return TruePose({k: (v - bias.get(k, 0.0) - err.get(k, 0.0)) if k in free else v
+                             for k, v in reading.items()})
+
+        return f
 
 
 def realization_from_rig(rig: CubeMirrorRig, ideal: bool = False) -> Realization:
