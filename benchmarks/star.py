@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from rigsim.detector import apply_detector
-from rigsim.truth import star as att
+from rigsim.optics import attitude as att
 from rigsim.render.star import render_stars
 from rigsim.estimation.star_calibration import run_ekf
 from rigsim.imaging.stars import extract_stars

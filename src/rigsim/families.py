@@ -13,11 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rigsim.dataset.generators import (
-    BoresightRoiGenerator,
-    StarFieldGenerator,
-    SunSensorGenerator,
-)
+from rigsim.dataset.generators import BoresightRoiGenerator, StarFieldGenerator, SunSensorGenerator
 from rigsim.procedures.boresight import cli as boresight_cli
 from rigsim.procedures.cube_mirror import cli as cube_mirror_cli
 from rigsim.procedures.star import cli as star_cli

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rigsim.truth import star as att
+from rigsim.optics import attitude as att
 from rigsim.estimation.star_calibration import (
     FrameObs, MODELS, THETA_NAMES, batch_lsq, frame_system, pair_sets, run_ekf,
 )
@@ -65,10 +65,10 @@ def test_ekf_and_batch_recover_truth(rig, sky):
     th = _truth(rig)
     fr = _frames(rig, sky, 0.0, np.random.default_rng(0))
     prior = th.copy()
-    prior[1:3] = rig.prior_principal_point()
+    prior[1:3] = rig.nominal_rig().sensor.principal_point_px
     r = run_ekf(fr, prior, model="ad")  # noise-free: converges to the truth (σ floor 1e-4 px)
     assert np.abs(r.x - th[1:3]).max() < 1e-3
-    start = np.array([th[0] + 3.0, *rig.prior_principal_point(), 0.0, 0.0])
+    start = np.array([th[0] + 3.0, *rig.nominal_rig().sensor.principal_point_px, 0.0, 0.0])
     b = batch_lsq(fr, start)
     # noise-free: the batch solution is the truth to the solver tolerance (1e-4 px, 1e-6 in k)
     assert np.all(np.abs(b.theta - th) < [1e-4, 1e-4, 1e-4, 1e-6, 1e-5]), b.theta - th
@@ -94,7 +94,7 @@ def test_batch_covariance_matches_monte_carlo(rig, sky):
     m = []
     for _ in range(60):
         fr = simulate_frames(sky, seq, noise, rng, 20)
-        b = batch_lsq(fr, np.array([th[0] + 3, *rig.prior_principal_point(), 0, 0]))
+        b = batch_lsq(fr, np.array([th[0] + 3, *rig.nominal_rig().sensor.principal_point_px, 0, 0]))
         e = b.theta - th
         m.append(e @ np.linalg.solve(b.cov, e))
     assert abs(np.mean(m) - 5.0) < 3 * np.sqrt(10 / 60)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import centroid_gauss, extract_rois
-from rigsim.truth import star as att
+from rigsim.optics import attitude as att
 from rigsim.render.star import render_stars
 
 

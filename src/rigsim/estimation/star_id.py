@@ -32,6 +32,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from rigsim.optics.sky import SkyCatalogue, field_cone_cos
+
 __all__ = ["IdentResult", "identify"]
 
 
@@ -56,14 +58,17 @@ def _empty(R, reason, n_voted=0) -> IdentResult:
     return IdentResult(False, z, z, z, np.zeros((0, 3)), np.asarray(R, float), float("nan"), n_voted, reason)
 
 
-def identify(obs_uv: np.ndarray, sky, R_prior: np.ndarray, camera, *, search_radius_px: float = 60.0,
+def identify(obs_uv: np.ndarray, sky: SkyCatalogue, R_prior: np.ndarray, camera, *, search_radius_px: float = 60.0,
              match_tolerance_px: float = 2.0, vote_tolerance_px: float = 5.0, min_matches: int = 4,
              obs_weight: np.ndarray | None = None, rounds: int = 3) -> IdentResult:
     """Match observed centroids to catalogue stars near the prior attitude.
 
-    ``sky`` is a :class:`rigsim.truth.star.StarSky` (only its catalogue vectors and cone are used);
-    ``camera`` the nominal :class:`rigsim.optics.camera.PinholeBrown`.
+    ``sky``: the catalogue at the observation epoch (:class:`rigsim.optics.sky.SkyCatalogue`);
+    ``R_prior``: the a-priori attitude (e.g. the commanded one); ``camera``: the *nominal*
+    :class:`rigsim.optics.camera.PinholeBrown`, which also sets the field cone searched.
     """
+    if not isinstance(sky, SkyCatalogue):
+        raise TypeError(f"sky must be a rigsim.optics.sky.SkyCatalogue (catalogue only), got {type(sky).__name__}")
     obs_uv = np.asarray(obs_uv, dtype=float)
     R_prior = np.asarray(R_prior, dtype=float)
     good = np.all(np.isfinite(obs_uv), axis=1)
@@ -72,7 +77,7 @@ def identify(obs_uv: np.ndarray, sky, R_prior: np.ndarray, camera, *, search_rad
     if uv_obs.shape[0] < min_matches:
         return _empty(R_prior, f"only {uv_obs.shape[0]} stars observed (need {min_matches})")
     widen = np.arctan(search_radius_px / camera.fx)
-    cos_lim = np.cos(np.arccos(sky.cone_cos) + widen)
+    cos_lim = np.cos(np.arccos(field_cone_cos(camera)) + widen)
     cidx = np.flatnonzero(sky.vectors @ R_prior[2] >= cos_lim)
     if cidx.size < min_matches:
         return _empty(R_prior, f"only {cidx.size} catalogue stars near the prior attitude")
@@ -121,7 +126,7 @@ def identify(obs_uv: np.ndarray, sky, R_prior: np.ndarray, camera, *, search_rad
         res = np.linalg.norm(camera.project(V[mc] @ R.T) - uv_obs[mo], axis=1)
     if mo.size < min_matches:
         return _empty(R, f"{mo.size} stars matched within {match_tolerance_px} px (need {min_matches})", n_voted)
-    return IdentResult(True, obs_idx_all[mo], cidx[mc], sky.catalogue.hip[cidx[mc]], V[mc], R,
+    return IdentResult(True, obs_idx_all[mo], cidx[mc], sky.hip[cidx[mc]], V[mc], R,
                        float(np.sqrt(np.mean(res**2))) if res.size else float("nan"), n_voted)
 
 

@@ -7,14 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rigsim.imaging import (
-    Background,
-    Flag,
-    centroid_tcom,
-    detect,
-    estimate_background,
-    extract_rois,
-)
+from rigsim.imaging import Background, Flag, centroid_tcom, detect, estimate_background, extract_rois
 from rigsim.optics.autocollimator import a_frame_basis  # noqa: F401  (re-exported)
 
 ROI_PX = 49

@@ -33,10 +33,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 __all__ = ["StarCatalogue", "load_hipparcos", "propagate", "radec_to_unit", "unit_to_radec",
-           "photon_rate", "star_photons", "CATALOGUE_EPOCH_YEAR", "MAS_TO_RAD"]
+           "photon_rate", "star_photons", "CATALOGUE_EPOCH_YEAR", "MAS_TO_RAD", "SkyCatalogue", "field_cone_cos"]
 
 CATALOGUE_EPOCH_YEAR = 1991.25
 MAS_TO_RAD = math.pi / (180.0 * 3600.0 * 1000.0)
@@ -147,19 +146,41 @@ def load_hipparcos(path: str | None = None) -> StarCatalogue:
                          col("pmdec"), col("hp"), col("bv"))
 
 
-def pointing(ra_deg: float, dec_deg: float, roll_deg: float = 0.0) -> np.ndarray:
-    """R_cam_from_icrs with the boresight at (ra, dec), north up (−v) at roll 0."""
-    ra, dec = np.radians(ra_deg), np.radians(dec_deg)
-    z = radec_to_unit(ra, dec)
-    east = np.array([-np.sin(ra), np.cos(ra), 0.0])
-    north = np.array([-np.sin(dec) * np.cos(ra), -np.sin(dec) * np.sin(ra), np.cos(dec)])
-    R0 = np.stack([-east, -north, z])  # rows: camera x, y, z in ICRS
-    Rroll = Rotation.from_rotvec([0.0, 0.0, np.radians(roll_deg)]).as_matrix()
-    return Rroll.T @ R0
+
+@dataclass(frozen=True)
+class SkyCatalogue:
+    """The catalogue as a star sensor uses it: the stars brighter than a magnitude limit, with their
+    ICRS unit vectors at the observation epoch. Holds no camera and no attitude."""
+
+    catalogue: StarCatalogue
+    epoch_year: float
+    vectors: np.ndarray  # (N, 3)
+
+    @classmethod
+    def load(cls, magnitude_limit: float, epoch_year: float, catalogue: StarCatalogue | None = None) -> "SkyCatalogue":
+        cat = (catalogue if catalogue is not None else load_hipparcos()).brighter_than(magnitude_limit)
+        return cls(cat, float(epoch_year), cat.unit_vectors(epoch_year))
+
+    @property
+    def hip(self) -> np.ndarray:
+        return self.catalogue.hip
+
+    @property
+    def hp_mag(self) -> np.ndarray:
+        return self.catalogue.hp_mag
+
+    def __len__(self) -> int:
+        return len(self.catalogue)
+
+    def in_cone(self, boresight_icrs: np.ndarray, cos_limit: float) -> np.ndarray:
+        """Indices of the stars within the cone of half-angle acos(``cos_limit``) about a boresight."""
+        return np.flatnonzero(self.vectors @ np.asarray(boresight_icrs, float) >= cos_limit)
 
 
-def boresight_radec(R_cam_from_icrs) -> tuple[float, float]:
-    z = np.asarray(R_cam_from_icrs)[..., 2, :]
-    ra = np.degrees(np.mod(np.arctan2(z[..., 1], z[..., 0]), 2 * np.pi))
-    dec = np.degrees(np.arcsin(np.clip(z[..., 2], -1, 1)))
-    return ra, dec
+def field_cone_cos(camera, margin_rad: float = math.radians(1.0)) -> float:
+    """cos of the half-angle of the cone (about the optical axis) that holds every direction the
+    camera images onto its detector, widened by ``margin_rad``."""
+    W, H = camera.width, camera.height
+    corners = np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]])
+    d = camera.unproject(corners)
+    return float(np.cos(np.max(np.arccos(np.clip(d[:, 2], -1, 1))) + margin_rad))

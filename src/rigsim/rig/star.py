@@ -20,7 +20,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown, brown_undistort, radial_r2_max
 
-__all__ = ["PSF", "StarSensor", "Sky", "Sequence", "Identification", "Calibration", "Study", "StarRig"]
+__all__ = ["PSF", "StarSensor", "Nominal", "Sky", "Sequence", "Identification", "Calibration", "Study", "StarRig",
+           "NominalSensor", "NominalStarRig", "psf_sigma_px"]
 
 
 
@@ -45,6 +46,16 @@ class PSF(_Model):
     defocus_um: float = Field(100.0, ge=0.0, le=5000.0, description="detector distance from best focus")
     wavelength_nm: float = Field(600.0, gt=200.0, le=2000.0, description="effective wavelength of the band")
     sigma_px: float | None = Field(None, gt=0.1, le=10.0, description="override: Gaussian σ in pixels")
+
+
+def psf_sigma_px(psf: PSF, f_number: float, pixel_pitch_um: float) -> float:
+    """σ (px) of the Gaussian PSF: the defocus blur disk's (radius/2) and the Airy core's (0.42 λN),
+    in quadrature; ``psf.sigma_px`` overrides."""
+    if psf.sigma_px is not None:
+        return float(psf.sigma_px)
+    s_def = psf.defocus_um / f_number / 2.0 / 2.0
+    s_diff = 0.42 * psf.wavelength_nm * 1e-3 * f_number
+    return math.hypot(s_def, s_diff) / pixel_pitch_um
 
 
 class StarSensor(_Model):
@@ -96,12 +107,7 @@ class StarSensor(_Model):
 
     @property
     def psf_sigma_px(self) -> float:
-        if self.psf.sigma_px is not None:
-            return float(self.psf.sigma_px)
-        blur_radius_um = self.psf.defocus_um / self.f_number / 2.0
-        s_def = blur_radius_um / 2.0
-        s_diff = 0.42 * self.psf.wavelength_nm * 1e-3 * self.f_number
-        return math.hypot(s_def, s_diff) / self.pixel_pitch_um
+        return psf_sigma_px(self.psf, self.f_number, self.pixel_pitch_um)
 
     @property
     def fov_deg(self) -> tuple[float, float]:
@@ -155,13 +161,25 @@ class Identification(_Model):
     min_matches: int = Field(4, ge=3, le=1000)
 
 
+class Nominal(_Model):
+    """What the user believes about the sensor before calibration (design and ground calibration)
+    and how sure they are: the only intrinsics the estimators see. Without this table the nominal
+    sensor is the design: the ``[sensor]`` focal length, the principal point at the detector centre
+    and no distortion."""
+
+    focal_length_mm: float = Field(gt=1.0, le=5000.0, description="assumed focal length")
+    focal_length_sigma_px: float = Field(10.0, gt=0.0, le=1000.0, description="its 1σ (the joint EKF's prior)")
+    principal_point_px: Pair = Field(description="assumed principal point")
+    principal_point_sigma_px: float = Field(10.0, gt=0.0, le=1000.0, description="its 1σ (the EKFs' prior)")
+    k1: float = Field(0.0, ge=-2.0, le=2.0, description="assumed radial distortion (OpenCV normalised)")
+    k2: float = Field(0.0, ge=-20.0, le=20.0)
+    p1: float = Field(0.0, ge=-0.1, le=0.1, description="assumed tangential distortion")
+    p2: float = Field(0.0, ge=-0.1, le=0.1)
+
+
 class Calibration(_Model):
     """Estimators: AD / ADS EKF over the sequence and batch least squares."""
 
-    principal_point_prior_px: Pair | None = Field(None, description="a-priori principal point (default: detector centre)")
-    principal_point_prior_sigma_px: float = Field(10.0, gt=0.0, le=1000.0)
-    focal_length_prior_sigma_px: float = Field(10.0, gt=0.0, le=1000.0)
-    f_bias_px: float = Field(3.0, ge=-200.0, le=200.0, description="error of the assumed focal length in the 'biased' case")
     max_stars_per_frame: int = Field(20, ge=3, le=200)
     weighting: Literal["propagated", "diagonal"] = "propagated"
     ads_variant: Literal["exact", "improved"] = "exact"
@@ -178,20 +196,81 @@ class Study(_Model):
     seed: int = Field(4, ge=0)
 
 
+class NominalSensor(_Model):
+    """The star sensor as the estimators know it: the detector and optics design (resolution, pitch,
+    PSF, detector settings) and the ``[nominal]`` intrinsics. :meth:`StarRig.nominal_rig` builds it."""
+
+    resolution_px: tuple[int, int]
+    pixel_pitch_um: float
+    focal_length_mm: float
+    principal_point_px: tuple[float, float]
+    k1: float
+    k2: float
+    p1: float
+    p2: float
+    focal_length_sigma_px: float
+    principal_point_sigma_px: float
+    psf_sigma_px: float
+    detector: DetectorConfig
+
+    @property
+    def f_px(self) -> float:
+        return self.focal_length_mm * 1000.0 / self.pixel_pitch_um
+
+    @property
+    def theta(self) -> tuple[float, float, float, float, float]:
+        """(f, u0, v0, k1, k2) in the order of :data:`rigsim.estimation.star_calibration.THETA_NAMES`."""
+        return (self.f_px, *self.principal_point_px, self.k1, self.k2)
+
+    def camera(self, *, f_px: float | None = None, principal_point_px=None, k1=None, k2=None) -> PinholeBrown:
+        """The nominal camera (or a variant with some intrinsics replaced)."""
+        f = self.f_px if f_px is None else float(f_px)
+        u0, v0 = self.principal_point_px if principal_point_px is None else principal_point_px
+        return PinholeBrown(f, f, float(u0), float(v0), self.k1 if k1 is None else float(k1),
+                            self.k2 if k2 is None else float(k2), self.p1, self.p2, 0.0, *self.resolution_px)
+
+
+class NominalStarRig(_Model):
+    """What the star-calibration pipeline may see: the nominal sensor and the procedure's settings
+    (sky, commanded sequence, identification, calibration). No truth."""
+
+    name: str
+    sensor: NominalSensor
+    sky: Sky
+    sequence: Sequence
+    identification: Identification
+    calibration: Calibration
+
+
 class StarRig(_Model):
     name: str = Field(min_length=1)
     seed_document: Literal["004"] = "004"
     description: str = ""
     sensor: StarSensor = Field(default_factory=StarSensor)
+    nominal: Nominal | None = None
     sky: Sky = Field(default_factory=Sky)
     sequence: Sequence = Field(default_factory=Sequence)
     identification: Identification = Field(default_factory=Identification)
     calibration: Calibration = Field(default_factory=Calibration)
     study: Study = Field(default_factory=Study)
 
-    def prior_principal_point(self) -> tuple[float, float]:
-        p = self.calibration.principal_point_prior_px
-        if p is not None:
-            return float(p[0]), float(p[1])
+    @property
+    def nominal_intrinsics(self) -> Nominal:
+        """The ``[nominal]`` table, or the design when the file has none (see :class:`Nominal`)."""
+        if self.nominal is not None:
+            return self.nominal
         W, H = self.sensor.resolution_px
-        return (W - 1) / 2.0, (H - 1) / 2.0
+        return Nominal(focal_length_mm=self.sensor.focal_length_mm, principal_point_px=[(W - 1) / 2.0, (H - 1) / 2.0])
+
+    def nominal_rig(self) -> NominalStarRig:
+        """The rig as the estimators may see it (:class:`NominalStarRig`)."""
+        s, n = self.sensor, self.nominal_intrinsics
+        sensor = NominalSensor(resolution_px=tuple(s.resolution_px), pixel_pitch_um=s.pixel_pitch_um,
+                               focal_length_mm=n.focal_length_mm, principal_point_px=tuple(n.principal_point_px),
+                               k1=n.k1, k2=n.k2, p1=n.p1, p2=n.p2, focal_length_sigma_px=n.focal_length_sigma_px,
+                               principal_point_sigma_px=n.principal_point_sigma_px,
+                               psf_sigma_px=psf_sigma_px(s.psf, n.focal_length_mm / s.aperture_diameter_mm,
+                                                         s.pixel_pitch_um),
+                               detector=s.detector)
+        return NominalStarRig(name=self.name, sensor=sensor, sky=self.sky, sequence=self.sequence,
+                              identification=self.identification, calibration=self.calibration)

@@ -1,26 +1,12 @@
-"""Attitude sequences of a star sensor: inertial pointing, slews, random pointings.
-
-An attitude is ``R_cam_from_icrs`` (v_cam = R @ v_icrs); the camera frame is rigsim's (x right
-= +u, y down = +v, z boresight). ``pointing(ra, dec, roll)`` puts the boresight on (ra, dec) with
-celestial north pointing up the image (−v) at roll 0, so east is to the left (−u), as on a sky
-seen from inside; a positive roll turns the camera about its +z axis (the stars turn the other way
-in the image).
-
-Motion is a constant body angular velocity per frame, ``omega_cam_rad_s``: an attitude at time
-offset τ from the frame's mid-exposure is ``exp(ω τ)ᵀ · R`` (``attitude_at``), which the renderer
-uses for motion smear.
-
-Which stars a star sensor sees in one frame, where, and how bright: the truth of a frame.
+"""The truth of the star sensor's frames: the true attitude sequence (the commanded one with its
+pointing error and jitter) and, per frame, which stars the true camera images, where, how bright.
 
 ``StarSky(rig)`` holds the catalogue (Hp ≤ ``sky.magnitude_limit``, proper motion propagated to
 ``sky.epoch_year``) and the true camera. ``StarSky.field(R_cam_from_icrs, ...)`` returns a
 :class:`StarField`: the stars whose image centre lies on the detector, their true directions in
-the camera frame, their true image positions (distorted projection with the *true* intrinsics —
-the mean over the exposure's sub-steps when motion smear is on) and their expected photons.
-
-Radiometry: photons = Φ0·10^(−0.4 Hp) · A_pupil · τ · t_exp · cos θ, θ the field angle (the
-entrance pupil seen obliquely; a point source has no cos⁴ law). Sky background per pixel:
-Φ0·10^(−0.4 μ) · Ω_px[arcsec²] · A · τ · t (μ = ``sky.background_mag_per_arcsec2``).
+the camera frame, their true image positions (distorted projection with the *true* intrinsics,
+averaged over the exposure's sub-steps when motion smear is on) and their expected photons.
+Radiometry: docs/star_calibration.md.
 """
 
 from __future__ import annotations
@@ -31,95 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rigsim.optics.sky import (
-    StarCatalogue,
-    load_hipparcos,
-    pointing,
-    star_photons,
-)
+from rigsim.optics.attitude import AttitudeSequence, perturb
+from rigsim.optics.sky import SkyCatalogue, StarCatalogue, field_cone_cos, star_photons
 
-__all__ = ["AttitudeSequence", "pointing", "inertial", "slew", "random_pointings", "from_rig", "perturb",
-           "StarField", "StarSky"]
+__all__ = ["StarField", "StarSky", "true_sequence"]
 
-
-@dataclass(frozen=True)
-class AttitudeSequence:
-    """``R_cam_from_icrs`` (N, 3, 3) at mid-exposure, times (N,) in s, body rates (N, 3) rad/s."""
-
-    kind: str
-    times_s: np.ndarray
-    R_cam_from_icrs: np.ndarray
-    omega_cam_rad_s: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.times_s.shape[0])
-
-    def attitude_at(self, k: int, tau_s: float | np.ndarray) -> np.ndarray:
-        """Attitude(s) of frame k at offset(s) τ from its mid-exposure; shape (..., 3, 3)."""
-        tau = np.asarray(tau_s, dtype=float)
-        rv = -tau[..., None] * self.omega_cam_rad_s[k]
-        D = Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(*tau.shape, 3, 3)
-        return D @ self.R_cam_from_icrs[k]
-
-    def subset(self, idx) -> "AttitudeSequence":
-        return AttitudeSequence(self.kind, self.times_s[idx], self.R_cam_from_icrs[idx], self.omega_cam_rad_s[idx])
-
-
-def perturb(R: np.ndarray, sigma_rad: float, rng: np.random.Generator) -> np.ndarray:
-    """Apply independent small random rotations (σ per camera axis) to attitudes (N, 3, 3)."""
-    R = np.asarray(R, dtype=float)
-    if sigma_rad <= 0:
-        return R.copy()
-    rv = rng.normal(0.0, sigma_rad, size=R.shape[:-2] + (3,))
-    D = Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(R.shape)
-    return D @ R
-
-
-def inertial(ra_deg: float, dec_deg: float, roll_deg: float, n_frames: int, interval_s: float = 1.0,
-             jitter_rad: float = 0.0, rng: np.random.Generator | None = None) -> AttitudeSequence:
-    """Fixed pointing, optional per-frame jitter."""
-    R = np.repeat(pointing(ra_deg, dec_deg, roll_deg)[None], n_frames, axis=0)
-    if jitter_rad > 0:
-        R = perturb(R, jitter_rad, rng if rng is not None else np.random.default_rng(0))
-    return AttitudeSequence("inertial", np.arange(n_frames) * float(interval_s), R, np.zeros((n_frames, 3)))
-
-
-def slew(ra_deg: float, dec_deg: float, roll_deg: float, n_frames: int, interval_s: float,
-         rate_deg_s: float, direction_deg: float, roll_rate_deg_s: float = 0.0,
-         jitter_rad: float = 0.0, rng: np.random.Generator | None = None) -> AttitudeSequence:
-    """Constant-rate slew: the boresight moves at ``rate_deg_s`` towards the sky point first seen in
-    image direction ``direction_deg`` (from +u towards +v), while the camera rolls at
-    ``roll_rate_deg_s`` about its boresight. Constant body rate ω = rate·(z × d) + roll_rate·z."""
-    phi = np.radians(direction_deg)
-    d = np.array([np.cos(phi), np.sin(phi), 0.0])
-    omega = np.radians(rate_deg_s) * np.cross([0.0, 0.0, 1.0], d) + np.radians(roll_rate_deg_s) * np.array([0.0, 0.0, 1.0])
-    t = np.arange(n_frames) * float(interval_s)
-    R0 = pointing(ra_deg, dec_deg, roll_deg)
-    D = Rotation.from_rotvec(t[:, None] * omega[None, :]).as_matrix()
-    R = np.einsum("nji,jk->nik", D, R0)  # exp(ω t)ᵀ R0
-    if jitter_rad > 0:
-        R = perturb(R, jitter_rad, rng if rng is not None else np.random.default_rng(0))
-    return AttitudeSequence("slew", t, R, np.repeat(omega[None], n_frames, axis=0))
-
-
-def random_pointings(n_frames: int, rng: np.random.Generator, interval_s: float = 1.0) -> AttitudeSequence:
-    """Independent uniformly random attitudes (for sampling the sky)."""
-    R = Rotation.random(n_frames, random_state=rng).as_matrix()
-    return AttitudeSequence("random", np.arange(n_frames) * float(interval_s), R, np.zeros((n_frames, 3)))
-
-
-def from_rig(seq, rng: np.random.Generator | None = None) -> AttitudeSequence:
-    """The sequence described by a :class:`rigsim.rig.star.Sequence`."""
-    rng = rng if rng is not None else np.random.default_rng(0)
-    jit = np.radians(seq.jitter_arcsec / 3600.0)
-    if seq.kind == "inertial":
-        return inertial(seq.start_ra_deg, seq.start_dec_deg, seq.start_roll_deg, seq.n_frames,
-                        seq.frame_interval_s, jit, rng)
-    if seq.kind == "slew":
-        return slew(seq.start_ra_deg, seq.start_dec_deg, seq.start_roll_deg, seq.n_frames,
-                    seq.frame_interval_s, seq.slew_rate_deg_per_s, seq.slew_direction_deg,
-                    seq.roll_rate_deg_per_s, jit, rng)
-    return random_pointings(seq.n_frames, rng, seq.frame_interval_s)
 
 # ------------------------------------------------------------------------------------------ (from field.py)
 @dataclass(frozen=True)
@@ -144,19 +46,16 @@ class StarField:
 class StarSky:
     """Catalogue + true camera + radiometry of a :class:`rigsim.rig.star.StarRig`."""
 
-    def __init__(self, rig, catalogue: StarCatalogue | None = None):
+    def __init__(self, rig, catalogue: StarCatalogue | None = None, *, sky: SkyCatalogue | None = None):
         self.rig = rig
         s = rig.sensor
-        cat = (catalogue if catalogue is not None else load_hipparcos()).brighter_than(rig.sky.magnitude_limit)
-        self.catalogue = cat
-        self.vectors = cat.unit_vectors(rig.sky.epoch_year)
+        self.sky = sky if sky is not None else SkyCatalogue.load(rig.sky.magnitude_limit, rig.sky.epoch_year, catalogue)
+        self.catalogue = self.sky.catalogue
+        self.vectors = self.sky.vectors
         self.camera = s.camera()
         W, H = s.resolution_px
         # cone that holds every direction imaged on the detector (+ margin for smear / PSF)
-        u0, v0 = s.principal_point_px
-        corners = np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]])
-        d = self.camera.unproject(corners)
-        self.cone_cos = float(np.cos(np.max(np.arccos(np.clip(d[:, 2], -1, 1))) + math.radians(1.0)))
+        self.cone_cos = field_cone_cos(self.camera)
         self.shape_hw = (H, W)
         det = s.detector
         self._phot = dict(zero_point_photons_per_s_cm2=rig.sky.zero_point_photons_per_s_cm2,
@@ -207,3 +106,16 @@ class StarSky:
                          dirs_icrs=v_icrs[sel], dirs_cam=d_cam[sel], uv=uv[sel], uv_substeps=uv_sub[sel],
                          R_cam_from_icrs=R, background_photons_per_px=self.background_photons_per_px,
                          shape_hw=self.shape_hw)
+
+
+def true_sequence(rig, commanded: AttitudeSequence, rng: np.random.Generator) -> AttitudeSequence:
+    """The attitudes the sensor really had during a commanded sequence: each frame's commanded
+    attitude turned by the attitude knowledge error (``identification.attitude_error_deg`` about a
+    random axis, drawn per frame: what the a-priori attitude misses) and the jitter
+    (``sequence.jitter_arcsec`` per axis, 1σ). Body rates are the commanded ones."""
+    n = len(commanded)
+    ax = rng.normal(size=(n, 3))
+    ax /= np.linalg.norm(ax, axis=1, keepdims=True)
+    err = Rotation.from_rotvec(np.radians(rig.identification.attitude_error_deg) * ax).as_matrix()
+    R = perturb(err @ commanded.R_cam_from_icrs, np.radians(rig.sequence.jitter_arcsec / 3600.0), rng)
+    return AttitudeSequence(commanded.kind, commanded.times_s.copy(), R, commanded.omega_cam_rad_s.copy())

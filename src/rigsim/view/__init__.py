@@ -6,13 +6,7 @@ is the command (docs/view.md).
 """
 
 from rigsim.errors import ViewError
-from rigsim.view.api import (
-           build_scene,
-           export_scene,
-           load_view_rig,
-           rig_picture,
-           show_scene,
-)
+from rigsim.view.api import build_scene, export_scene, load_view_rig, rig_picture, show_scene
 from rigsim.view.scene import Beam, Item, Label, RigScene, ViewSpec
 
 __all__ = ["build_scene", "rig_picture", "export_scene", "show_scene", "load_view_rig", "RigScene", "Item", "Label",

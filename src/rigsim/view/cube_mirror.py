@@ -33,15 +33,10 @@ from rigsim.errors import GeometryError, ViewError
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.cube import DOCUMENT_FACE_NAMES, FACE_NORMALS, reflect
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.truth.cube_mirror.placement import (
-    cube_pose,
-    face_in_rot,
-    plane_hit,
-    trace_return_spot,
-)
+from rigsim.truth.cube_mirror.placement import cube_pose, face_in_rot, plane_hit, trace_return_spot
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 from rigsim.view import primitives as P
-from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec
+from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec
 
 __all__ = ["build_cube_rig_scene", "resolve_pose_deg", "resolve_face", "POSE_KEYWORDS"]
 
@@ -379,10 +374,7 @@ def autocollimator_central_ray(rig: CubeMirrorRig, real: Realization, face: str,
     the traced stop-plane and detector-plane points with a straight line).
     """
     from rigsim.optics.autocollimator import AutocollimatorOptics
-    from rigsim.truth.cube_mirror.autocollimator import (
-        autocollimator_layout,
-        mirror_target,
-    )
+    from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout, mirror_target
 
     lay = layout if layout is not None else autocollimator_layout(rig, real, "face", face)
     opt = optics if optics is not None else AutocollimatorOptics(rig.autocollimator)

@@ -22,7 +22,7 @@ import numpy as np
 
 from rigsim.errors import ViewError
 from rigsim.view import primitives as P
-from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec, _pose_text
+from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec, _pose_text
 
 __all__ = ["build_star_scene", "RAY_LENGTH_MM", "first_attitude"]
 
@@ -31,10 +31,10 @@ RAY_LENGTH_MM = 400.0
 
 def first_attitude(rig, seed: int = 0) -> np.ndarray:
     """R_cam_from_icrs of the first frame ``rigsim run star-calibration --seed SEED`` renders."""
-    from rigsim.truth import star as att
+    from rigsim.optics import attitude as att
 
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 4004]))
-    return att.from_rig(rig.sequence, rng).R_cam_from_icrs[0]
+    return att.from_rig(rig.sequence, rng, jitter=False).R_cam_from_icrs[0]  # the commanded attitude
 
 
 def image_point_mm(sensor, uv) -> np.ndarray:
@@ -58,7 +58,7 @@ def build_star_scene(rig, *, pose=None, face=None, n_bright: int = 6, seed: int 
         raise ViewError(f"--face = {face!r}: the star-sensor rig (seed 004) has no mirror cube")
     if not 0 <= int(n_bright) <= 50:
         raise ViewError(f"n_bright = {n_bright}: allowed range is 0 to 50")
-    from rigsim.optics.sky import boresight_radec
+    from rigsim.optics.attitude import boresight_radec
     from rigsim.truth.star import StarSky
 
     s = rig.sensor

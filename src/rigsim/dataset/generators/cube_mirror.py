@@ -85,10 +85,7 @@ class SunSensorGenerator:
     # -- rendering (worker side) ---------------------------------------------------------------
     def _real(self, draws: dict):
         from rigsim.frames import RAD_PER_ARCSEC
-        from rigsim.truth.cube_mirror.realization import (
-            perpendicularity_perturbed,
-            realization_from_rig,
-        )
+        from rigsim.truth.cube_mirror.realization import perpendicularity_perturbed, realization_from_rig
 
         real = realization_from_rig(self.rig, ideal=True)
         real.turntable = perpendicularity_perturbed(

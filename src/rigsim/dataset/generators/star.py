@@ -65,14 +65,14 @@ class StarFieldGenerator:
 
         if "quat_cam_from_icrs_xyzw" in att:
             return Rotation.from_quat(att["quat_cam_from_icrs_xyzw"]).as_matrix()
-        from rigsim.optics.sky import pointing
+        from rigsim.optics.attitude import pointing
 
         return pointing(att["ra_deg"], att["dec_deg"], att["roll_deg"])
 
     def render(self, index: int, params: dict):
         from scipy.spatial.transform import Rotation
 
-        from rigsim.optics.sky import boresight_radec
+        from rigsim.optics.attitude import boresight_radec
         from rigsim.render.star import render_frame
 
         if self._sky is None:

@@ -20,13 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from rigsim.estimation.dvad import estimate
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.optics.line_camera import (
-    CameraGeometry,
-    relative_rotation,
-    rotation_xyz,
-    small_angles_arcsec,
-    spots_uv,
-)
+from rigsim.optics.line_camera import CameraGeometry, relative_rotation, rotation_xyz, small_angles_arcsec, spots_uv
 from rigsim.rig.boresight import BoresightRig
 from rigsim.truth.boresight import OrbitTruth, orbit_truth
 

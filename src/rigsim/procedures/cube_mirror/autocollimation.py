@@ -46,13 +46,9 @@ from rigsim.errors import SearchError
 from rigsim.estimation.null_search import reading_model
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.imaging.spot import ROI_PX, SpotMeasurement, measure_spot
-from rigsim.optics.autocollimator import (
-    a_frame_basis,  # noqa: F401  (re-exported)
-    exact_reading_rad,
-    normal_from_reading,
-)
-from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.optics.autocollimator import a_frame_basis, exact_reading_rad, normal_from_reading
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
+from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TurntableReading, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import Realization, tilt
 
@@ -182,12 +178,8 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
             ex = exact_reading_rad(R, pm)
             fi: dict = {"seed": _derived_seed(base_seed, k)}
             if rendered:
-                from rigsim.render.cube_mirror.autocollimator import (
-                    AutocollimatorRenderer,
-                )
-                from rigsim.truth.cube_mirror.autocollimator import (
-                    autocollimator_layout,
-                )
+                from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
+                from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout
 
                 tb = time.perf_counter()
                 layout = autocollimator_layout(rig, real, "plane_mirror", axis_rot=d,

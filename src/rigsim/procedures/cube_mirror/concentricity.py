@@ -23,8 +23,8 @@ import numpy as np
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import offset_model, reflected_offset_mm
 from rigsim.imaging.screen import hole_spot_offset
-from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
+from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableReading, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import Realization, tilt
 

@@ -32,23 +32,12 @@ from rigsim.errors import SearchError
 from rigsim.estimation.sun_calibration import SunCalibration
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.procedures.cube_mirror.campaign import (
-    PAPER_RSS_ARCSEC,
-    BudgetRow,
-    CampaignResult,
-    compare,
-    default_axis_order,
-    estimate,
-    fit_sun_sensor,
-    simulate_sweep,
+    BudgetRow, CampaignResult, PAPER_RSS_ARCSEC, compare, simulate_sweep,
 )
+from rigsim.procedures.cube_mirror.pipeline import default_axis_order, estimate, fit_sun_sensor
 from rigsim.procedures.cube_mirror.nulls import TracedSearch
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.truth.cube_mirror.realization import (
-    Noise,
-    Realization,
-    draw_realization,
-    noise_from_rig,
-)
+from rigsim.truth.cube_mirror.realization import Noise, Realization, draw_realization, noise_from_rig
 
 
 class _NullProgress:
@@ -142,10 +131,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     step_a = None
     search_seed = int(rng.integers(2**31))
     if rig.procedure.method == "diaphragm":
-        from rigsim.procedures.cube_mirror.concentricity import (
-            OffsetMeasurer,
-            concentricity_search,
-        )
+        from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search
         from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
 
         resid = []
@@ -174,9 +160,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
         measured.update(_null_noise(resid, "px"))
     else:
         from rigsim.procedures.cube_mirror.autocollimation import (
-            FaceReadingMeasurer,
-            autocollimator_face_search,
-            step_a_align,
+            FaceReadingMeasurer, autocollimator_face_search, step_a_align,
         )
 
         pb.set_description("step A: autocollimator on the plane mirror")
@@ -251,10 +235,7 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
     sig = null_sigma if null_mode == "search" else 0.0
     null_readings = []
     if rig.procedure.method == "diaphragm":
-        from rigsim.procedures.cube_mirror.concentricity import (
-            OffsetMeasurer,
-            concentricity_search,
-        )
+        from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search
 
         q = math.radians(r.procedure.command_resolution_deg)
         for fi in range(2):
@@ -266,10 +247,7 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
                 raise SearchError(f"face {res.face}: surrogate search did not converge ({res.message})")
             null_readings.append(res.final_reading_rad)
     else:
-        from rigsim.procedures.cube_mirror.autocollimation import (
-            autocollimator_face_search,
-            step_a_align,
-        )
+        from rigsim.procedures.cube_mirror.autocollimation import autocollimator_face_search, step_a_align
 
         sa = step_a_align(r, real, rng, rendered=False, reading_sigma_arcsec=sig)
         for fi in range(2):

@@ -13,15 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rigsim.estimation.sun_calibration import (
-    SunCalibration,
-    calibrate_sun_sensor,
-    sweep_poses,
-)
+from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor, sweep_poses
 from rigsim.imaging import Flag, centroid_tcom
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TruePose, TurntableModel, TurntableReading
-from rigsim.truth.cube_mirror.realization import NOMINAL_D, Noise, Realization
+from rigsim.rig.turntable import NOMINAL_D, TruePose, TurntableModel, TurntableReading
+from rigsim.truth.cube_mirror.realization import Noise, Realization
 
 
 @dataclass

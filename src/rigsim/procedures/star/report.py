@@ -14,7 +14,8 @@ from rigsim.procedures.star.study import CASES, CLAIM
 __all__ = ["write_report", "summary_lines"]
 
 MODEL_LABEL = {"ad": "AD", "ads": "ADS (exact, eq 10)", "ads_improved": "improved ADS (eq 12)"}
-CASE_LABEL = {"f_known": "f known", "f_biased": "f biased", "f_joint": "f estimated jointly"}
+CASE_LABEL = {"f_known": "f known", "f_biased": "f biased", "f_joint": "f estimated jointly",
+              "f_nominal": "f fixed at nominal"}
 
 
 def _fmt(x, nd=3):
@@ -57,15 +58,16 @@ def _plot_frame(path, res):
 def _plot_residuals(path, res):
     import matplotlib.pyplot as plt
 
-    s = res.rig.sensor
-    c = res.rig.calibration
-    W, H = s.resolution_px
-    nominal = np.array([s.f_px + c.f_bias_px, *res.rig.prior_principal_point(), 0.0, 0.0])
-    panels = [("before calibration: nominal intrinsics\n(f + %.0f px, principal point at the centre, k1 = k2 = 0)" % c.f_bias_px, nominal),
+    n = res.rig.nominal_rig().sensor
+    W, H = n.resolution_px
+    nominal = res.nominal_theta
+    d = nominal - res.truth_theta
+    panels = [("before calibration: the nominal intrinsics\n(f %+.1f px, principal point %+.1f / %+.1f px, k1 %+.3f, k2 %+.3f from the truth)"
+               % tuple(d), nominal),
               ("after batch least squares of (f, u0, v0, k1, k2)", res.batch.theta)]
     fig, axes = plt.subplots(1, 2, figsize=(13, 6.4))
     for ax, (title, th) in zip(axes, panels):
-        uv, r = per_star_residuals(res.frames_obs, th, (s.p1, s.p2), W, H)
+        uv, r = per_star_residuals(res.frames_obs, th, (n.p1, n.p2), W, H)
         rms = np.sqrt(np.mean(r**2, axis=0))
         mag = 10.0 ** np.floor(np.log10(60.0 / max(3.0 * float(np.sqrt(np.mean(r**2))), 1e-6)))
         ax.quiver(uv[:, 0], uv[:, 1], r[:, 0], r[:, 1], angles="xy", scale_units="xy", scale=1.0 / mag,
@@ -90,9 +92,10 @@ def _plot_residuals(path, res):
 def _plot_ekf(path, res):
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 3, figsize=(14, 7.5), sharex=True)
+    cases = sorted({c for c, _ in res.ekf}, key=list(CASE_LABEL).index)
+    fig, axes = plt.subplots(2, len(cases), figsize=(4.7 * len(cases), 7.5), sharex=True, squeeze=False)
     colors = {"ad": "tab:blue", "ads": "tab:orange"}
-    for j, case in enumerate(CASES):
+    for j, case in enumerate(cases):
         for i, (name, col) in enumerate((("u0", 1), ("v0", 2))):
             ax = axes[i, j]
             for model in ("ad", "ads"):
@@ -116,7 +119,8 @@ def _plot_ekf(path, res):
                 ax.set_xlabel("frames processed")
             ax.xaxis.set_major_locator(plt.MaxNLocator(integer=True))
     axes[0, 0].legend(fontsize=8, loc="upper right")
-    fig.suptitle("EKF convergence over the image sequence (band: ±1σ predicted by the filter); prior = detector centre", fontsize=11)
+    fig.suptitle("EKF convergence over the image sequence (band: ±1σ predicted by the filter); prior = the nominal "
+                 "principal point", fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -191,7 +195,7 @@ def summary_lines(res, study=None) -> list[str]:
     L.append("batch LSQ (f, u0, v0, k1, k2) − truth: f {:+.3f}±{:.3f} px, u0 {:+.3f}±{:.3f} px, v0 {:+.3f}±{:.3f} px, "
              "k1 {:+.5f}±{:.5f}, k2 {:+.4f}±{:.4f} (χ²/dof {:.2f})".format(
                  e[0], b.sigma[0], e[1], b.sigma[1], e[2], b.sigma[2], e[3], b.sigma[3], e[4], b.sigma[4], b.chi2_reduced))
-    for case in CASES:
+    for case in sorted({c for c, _ in res.ekf}, key=list(CASE_LABEL).index):
         parts = []
         for model in MODELS:
             r = res.ekf[(case, model)]
@@ -262,8 +266,10 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
         md += [f"Command: `{command}`", ""]
     md += [f"Rig: `{rig_path or rig.name}` — {rig.description}. Seed {res.seed}, renderer **{res.renderer}**.",
            f"True intrinsics: f = {t[0]:.3f} px, (u0, v0) = ({t[1]:.2f}, {t[2]:.2f}) px, k1 = {t[3]}, k2 = {t[4]}; "
-           f"PSF σ = {s.psf_sigma_px:.3f} px; FOV {s.fov_deg[0]:.1f}°. Estimators start from the detector centre "
-           f"({rig.prior_principal_point()[0]}, {rig.prior_principal_point()[1]}) and, when f is not known, f + {rig.calibration.f_bias_px} px.",
+           f"PSF σ = {s.psf_sigma_px:.3f} px; FOV {s.fov_deg[0]:.1f}°. The estimators see only the nominal intrinsics "
+           f"(`[nominal]`): f = {res.nominal_theta[0]:.3f} px ({res.nominal_theta[0] - t[0]:+.2f} px from the truth), "
+           f"(u0, v0) = ({res.nominal_theta[1]:.2f}, {res.nominal_theta[2]:.2f}) px, k1 = {res.nominal_theta[3]}, "
+           f"k2 = {res.nominal_theta[4]}; identification starts from the commanded attitude.",
            "Every equation is a reconstruction documented in docs/star_calibration.md.", ""]
     try:  # the rig in 3D (rigsim.view, off screen); the report goes on without it if OpenGL is unavailable
         from rigsim.view import rig_picture
@@ -281,7 +287,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
            "![](residuals_field.png)", ""]
     md += ["## EKF convergence (this run's 20 frames)", "", "![](ekf_convergence.png)", "",
            "| case | model | u0 − truth [px] | v0 − truth [px] | EKF σ u0 / v0 [px] | f − truth [px] |", "|---|---|---:|---:|---:|---:|"]
-    for case in CASES:
+    for case in sorted({c for c, _ in res.ekf}, key=list(CASE_LABEL).index):
         for model in MODELS:
             r = res.ekf[(case, model)]
             d = r.theta - t

@@ -64,17 +64,9 @@ from rigsim.errors import GeometryWarning, SaturationWarning
 from rigsim.optics.meshes import screen_with_hole_mesh
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.diaphragm import (
-    _EZ,
-    DiaphragmGeometry,
-    DiaphragmTruth,
-    _perp_basis,
-    _unit,
-    diaphragm_geometry,
-    true_cube_mesh,
+    DiaphragmGeometry, DiaphragmTruth, _EZ, _perp_basis, _unit, diaphragm_geometry, true_cube_mesh,
 )
-from rigsim.truth.cube_mirror.placement import (
-    cube_pose,
-)
+from rigsim.truth.cube_mirror.placement import cube_pose
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 
 __all__ = ["GeometryWarning", "DiaphragmGeometry", "DiaphragmTruth", "DiaphragmFrames", "DiaphragmRenderer",

@@ -42,14 +42,7 @@ import numpy as np
 from rigsim.detector import apply_detector
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
-from rigsim.optics.sun_disk import (
-    SUN_FULL_ANGLE_RAD,
-    _basis,
-    _unit,
-    spot_geometry_flags,
-    spot_truth,
-    window_centroid,
-)
+from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, _basis, _unit, spot_geometry_flags, spot_truth, window_centroid
 from rigsim.render.backend import ensure_variant
 from rigsim.render.frame import build_sidecar, write_frame
 from rigsim.render.plugins import PINHOLE_PLUGIN, register_sensors

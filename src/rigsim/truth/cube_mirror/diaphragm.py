@@ -12,13 +12,7 @@ from rigsim.optics.cube import FACE_NORMALS
 from rigsim.optics.sun_disk import disk_directions
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.placement import (
-    DiaphragmLayout,
-    cube_pose,
-    diaphragm_layout,
-    face_in_rot,
-    in_square_face,
-    plane_hit,
-    trace_return_spot,
+    DiaphragmLayout, cube_pose, diaphragm_layout, face_in_rot, in_square_face, plane_hit, trace_return_spot,
 )
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 

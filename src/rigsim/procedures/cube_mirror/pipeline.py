@@ -1,0 +1,60 @@
+"""The cube-mirror pipeline (seeds 000/001) on observations and the nominal rig only (no truth, no
+renderer: an import contract enforces it): the sun-sensor calibration from the sweep's turntable
+readings and centroids (step 1 / B), TRIAD from the readings at the two face nulls (step 4 / C3),
+and R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ (seed 001 eq 9)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rigsim.estimation.cube_attitude import cube_from_rot_triad
+from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.turntable import NOMINAL_D, TurntableModel, TurntableReading
+
+
+@dataclass
+class CubeMirrorEstimate:
+    """What the procedure recovers from its observations and the nominal rig (no truth)."""
+
+    axis_order: str
+    calibration: SunCalibration | None  # step 1 / B; None: not run (see :func:`compare`)
+    null_readings: list[TurntableReading]  # θ1, θ2 / θ3, θ4 as read at the two nulls
+    R_cube_from_rot: np.ndarray
+
+    @property
+    def R_sun_from_rot(self) -> np.ndarray | None:
+        return None if self.calibration is None else self.calibration.R_sun_from_rot
+
+    @property
+    def R_cube_from_sun(self) -> np.ndarray | None:
+        """Seed 001 eq 9: R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ."""
+        R_sun = self.R_sun_from_rot
+        return None if R_sun is None else self.R_cube_from_rot @ R_sun.T
+
+
+def fit_sun_sensor(rig: CubeMirrorRig, readings, uv, axis_order: str, d_rot=NOMINAL_D) -> SunCalibration:
+    """Step 1 / B: intrinsics and R(sun←rot) by least squares from the sweep's turntable readings and
+    sun-image centroids, with the nominal turntable (nesting ``axis_order``) and the design focal
+    length as the start."""
+    ss = rig.sun_sensor
+    return calibrate_sun_sensor(readings, uv, TurntableModel.nominal(list(axis_order)), *ss.resolution_px,
+                                f_guess_px=ss.fx_px, d_rot=d_rot)
+
+
+def estimate(rig: CubeMirrorRig, null_readings, axis_order: str, *, sweep_readings=None, sweep_uv=None,
+             calibration: SunCalibration | None = None, d_rot=NOMINAL_D) -> CubeMirrorEstimate:
+    """Steps 1/B, 4/C3 and 5/D from the observations and the nominal rig: the sweep (its readings and
+    sun-image centroids, or an existing ``calibration``) and the readings at the two nulls (TRIAD
+    with the nominal turntable of nesting ``axis_order``)."""
+    cal = calibration
+    if sweep_readings is not None:
+        cal = fit_sun_sensor(rig, sweep_readings, sweep_uv, axis_order, d_rot)
+    R_cr, _, _ = cube_from_rot_triad(null_readings, rig.procedure.faces, axis_order, d_rot)
+    return CubeMirrorEstimate(axis_order, cal, list(null_readings), R_cr)
+
+
+def default_axis_order(rig: CubeMirrorRig) -> str:
+    return "".join(a.label for a in rig.turntable.axes)
