@@ -35,7 +35,7 @@ def sun_sensor_rig(spp: int, n: int):
             continue
         s = sc.sun_dir_cam(pose)
         truth = sc.renderer.truth(s, n=400_000)["pixel_centroid_uv"]
-        errs.append(np.linalg.norm(fr.photons_window.centroid() - np.array(truth)))
+        errs.append(np.linalg.norm(fr.extra["window"].centroid() - np.array(truth)))
     return np.median(secs), float(np.sqrt(np.mean(np.square(errs)))), len(errs)
 
 

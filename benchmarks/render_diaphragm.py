@@ -162,7 +162,7 @@ def float32_geometry():
     for tilt in TILTS:
         pose = pose_of(g, tilt)
         r.set_pose(pose)
-        v32 = np.array(r._spot_params["cube.vertex_positions"], dtype=np.float64).reshape(-1, 3)
+        v32 = np.array(r._spot_scene.params["cube.vertex_positions"], dtype=np.float64).reshape(-1, 3)
         M = D.cube_to_scene_matrix(g, pose)
         v64 = r._cube_local @ M[:3, :3].T + M[:3, 3]
         tri = np.arange(len(v64)).reshape(-1, 3)

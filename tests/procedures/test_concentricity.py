@@ -149,3 +149,17 @@ def test_rendered_search_converges_on_the_default_rig(conc_renderer):
     assert np.all(np.abs(last.measured - (last.true - m.bias_px)) < 0.1)
     # the first frame is ~33 px off, as Table 1's first row is tens of px off
     assert 10 < np.max(np.abs(res.steps[0].true)) < 60
+
+
+def test_the_operator_homography_is_the_nominal_one():
+    """The measurer maps the image onto the screen with the homography of the nominal aiming-camera
+    spec; the rendered scene's camera (placed at the true hole) has the same one to 1e-12."""
+    from rigsim.optics.aiming import nominal_screen_homography
+    from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
+
+    for fi in (0, 1):
+        g = diaphragm_geometry(RIG, REAL, fi)
+        np.testing.assert_allclose(nominal_screen_homography(RIG.aiming_camera), g.H_screen_to_uv, rtol=1e-12,
+                                   atol=1e-12)
+    tilted = RIG.aiming_camera.model_copy(update={"view_angle_deg": 40.0})
+    assert not np.allclose(nominal_screen_homography(tilted), g.H_screen_to_uv, rtol=1e-6)

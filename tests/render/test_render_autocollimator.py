@@ -200,7 +200,7 @@ def test_frame_sidecar_and_reproducibility(face_renderer, tmp_path):
     np.testing.assert_allclose(t["reading_error_arcsec"], err, atol=1e-9)
     assert np.all(np.abs(err) < 2e-3 * np.abs(tt) + 0.01) and np.max(np.abs(err)) > 0.01
     # the frame's spot is where the truth says (noisy detector: ~0.02 px)
-    win = f1.window
+    win = f1.extra["window"]
     u0, v0 = win.origin_uv
     h, w = win.image.shape
     sub = f1.detector.dn[v0:v0 + h, u0:u0 + w].astype(float) - RIG.autocollimator.detector.offset_dn
@@ -228,7 +228,7 @@ def test_beam_missing_the_face_is_flagged(face_renderer):
     with pytest.warns(GeometryWarning, match="misses the mirror"):
         f = r.render_frame(pose, seed=1, noiseless=True)
     fl = f.sidecar["flags"]
-    assert fl["beam_misses_face"] and fl["spot_off_detector"] and not f.window.rendered
+    assert fl["beam_misses_face"] and fl["spot_off_detector"] and not f.extra["window"].rendered
     assert f.photons.sum() == 0.0
     # a large tilt instead: the face is hit but the return beam misses the objective
     pose = _pose(r.layout.reference_pose_rad, 0.0, 0.0)

@@ -66,7 +66,7 @@ def test_numpy_camera_twin_matches_mitsuba_perspective(diffuse):
     import mitsuba as mi
 
     g = diffuse.geometry
-    sensor = diffuse._spot_scene.sensors()[0]
+    sensor = diffuse._spot_scene.scene.sensors()[0]
     rng = np.random.default_rng(5)
     st = rng.uniform([-5.5, -4.0], [5.5, 4.0], size=(64, 2))
     p = g.hole_scene + np.column_stack([st, np.zeros(len(st))])

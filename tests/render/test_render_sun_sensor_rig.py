@@ -27,7 +27,7 @@ POSES_DEG = [(0.0, 0.0), (35.0, -20.0), (-60.0, 0.0), (0.0, 60.0), (45.0, 40.0)]
 def test_rendered_spot_matches_analytic_model(scene, x_deg, y_deg):
     pose = {"X": math.radians(x_deg), "Y": math.radians(y_deg)}
     fr = scene.render(pose, seed=3, noiseless=True)
-    win = fr.photons_window
+    win = fr.extra["window"]
     assert not fr.sidecar["flags"]["spot_off_detector"] and not fr.sidecar["flags"]["saturated"]
     # 1) the sun direction is the analytic campaign's: same projection as cube_mirror's sweep model
     real = scene.real
@@ -54,7 +54,7 @@ def test_frame_is_reproducible_and_written(scene, tmp_path):
     assert np.array_equal(dn, a.dn) and side["seed"] == 11 and side["pose"]["X"] == pytest.approx(10.0)
     assert side["render"]["spp"] == 1024 and side["render"]["variant"]
     # a noisy frame still centroids to the truth within its noise (σ from the detector model)
-    u0, v0 = a.photons_window.origin_uv
+    u0, v0 = a.extra["window"].origin_uv
     roi = a.dn[v0:v0 + 32, u0:u0 + 32].astype(float) - RIG.sun_sensor.detector.offset_dn
     cen = centroid_tcom(roi, origin_uv=(u0, v0))
     truth = np.array(side["truth"]["spot"]["pixel_centroid_uv"])

@@ -11,28 +11,28 @@ from rigsim.estimation.observability import observability
 from rigsim.procedures.star.study import CentroidNoise, random_slew, simulate_frames
 
 
-def _truth(rig):
-    s = rig.sensor
+def _truth(star_rig):
+    s = star_rig.sensor
     return np.array([s.f_px, *s.principal_point_px, s.k1, s.k2])
 
 
-def _frames(rig, sky, sigma, rng, n=None):
-    seq = att.from_rig(rig.sequence)
+def _frames(star_rig, star_sky, sigma, rng, n=None):
+    seq = att.from_rig(star_rig.sequence)
     if n:
         seq = seq.subset(slice(0, n))
     out = []
     for k in range(len(seq)):
-        tr = sky.field(seq.R_cam_from_icrs[k])
-        inside = sky.camera.on_detector(tr.uv, 5.0)
+        tr = star_sky.field(seq.R_cam_from_icrs[k])
+        inside = star_sky.camera.on_detector(tr.uv, 5.0)
         idx = np.flatnonzero(inside)[np.argsort(-tr.photons[inside])][:20]
         uv = tr.uv[idx] + rng.normal(0, sigma, (idx.size, 2))
         out.append(FrameObs(uv, np.full((idx.size, 2), max(sigma, 1e-4)), tr.dirs_icrs[idx], tr.photons[idx]))
     return out
 
 
-def test_jacobians_match_finite_differences(rig, sky):
-    fo = _frames(rig, sky, 0.05, np.random.default_rng(0), 1)[0]
-    th = _truth(rig)
+def test_jacobians_match_finite_differences(star_rig, star_sky):
+    fo = _frames(star_rig, star_sky, 0.05, np.random.default_rng(0), 1)[0]
+    th = _truth(star_rig)
     for model in MODELS:
         s0 = frame_system(fo, th, model)
         for p in range(5):
@@ -48,11 +48,11 @@ def test_jacobians_match_finite_differences(rig, sky):
         assert np.abs(fd - s0.G[:, 5]).max() <= 1e-4 * np.abs(s0.G[:, 5]).max()
 
 
-def test_models_at_truth_noise_free(rig, sky):
+def test_models_at_truth_noise_free(star_rig, star_sky):
     """Exact models vanish at the truth (to the Newton undistortion, 1e-12); eq 12's approximation
     leaves ≈ (r_k² − r_i²)/(2f²), up to ~0.03 for this 20° field: a bias of the model itself."""
-    fo = _frames(rig, sky, 0.0, np.random.default_rng(0), 1)[0]
-    th = _truth(rig)
+    fo = _frames(star_rig, star_sky, 0.0, np.random.default_rng(0), 1)[0]
+    th = _truth(star_rig)
     for model in ("ad", "ads"):
         s = frame_system(fo, th, model)
         assert np.abs(s.z - s.h).max() < 1e-11
@@ -61,19 +61,19 @@ def test_models_at_truth_noise_free(rig, sky):
     assert np.abs(s.z - s.h).max() > 1e-3
 
 
-def test_ekf_and_batch_recover_truth(rig, sky):
-    th = _truth(rig)
-    fr = _frames(rig, sky, 0.0, np.random.default_rng(0))
+def test_ekf_and_batch_recover_truth(star_rig, star_sky):
+    th = _truth(star_rig)
+    fr = _frames(star_rig, star_sky, 0.0, np.random.default_rng(0))
     prior = th.copy()
-    prior[1:3] = rig.nominal_rig().sensor.principal_point_px
+    prior[1:3] = star_rig.nominal_rig().sensor.principal_point_px
     r = run_ekf(fr, prior, model="ad")  # noise-free: converges to the truth (σ floor 1e-4 px)
     assert np.abs(r.x - th[1:3]).max() < 1e-3
-    start = np.array([th[0] + 3.0, *rig.nominal_rig().sensor.principal_point_px, 0.0, 0.0])
+    start = np.array([th[0] + 3.0, *star_rig.nominal_rig().sensor.principal_point_px, 0.0, 0.0])
     b = batch_lsq(fr, start)
     # noise-free: the batch solution is the truth to the solver tolerance (1e-4 px, 1e-6 in k)
     assert np.all(np.abs(b.theta - th) < [1e-4, 1e-4, 1e-4, 1e-6, 1e-5]), b.theta - th
     # noisy: within 4σ of the truth, and the filter's σ matches the batch σ (same information)
-    fr = _frames(rig, sky, 0.05, np.random.default_rng(1))
+    fr = _frames(star_rig, star_sky, 0.05, np.random.default_rng(1))
     r = run_ekf(fr, prior, model="ad")
     b = batch_lsq(fr, prior, estimate=("u0", "v0"))
     assert np.all(np.abs(r.x - th[1:3]) < 4 * r.sigma)
@@ -84,17 +84,17 @@ def test_ekf_and_batch_recover_truth(rig, sky):
 
 
 @pytest.mark.slow
-def test_batch_covariance_matches_monte_carlo(rig, sky):
+def test_batch_covariance_matches_monte_carlo(star_rig, star_sky):
     """mrcal-style check: the batch covariance predicts the scatter of 60 noisy runs (χ² test on the
     5 normalised errors: mean of e·C⁻¹·e over runs within 5 ± 3·sqrt(10/60))."""
-    noise = CentroidNoise.from_rig(rig, background_photons_per_px=sky.background_photons_per_px)
-    th = _truth(rig)
+    noise = CentroidNoise.from_rig(star_rig, background_photons_per_px=star_sky.background_photons_per_px)
+    th = _truth(star_rig)
     rng = np.random.default_rng(7)
-    seq = random_slew(rig, rng)
+    seq = random_slew(star_rig, rng)
     m = []
     for _ in range(60):
-        fr = simulate_frames(sky, seq, noise, rng, 20)
-        b = batch_lsq(fr, np.array([th[0] + 3, *rig.nominal_rig().sensor.principal_point_px, 0, 0]))
+        fr = simulate_frames(star_sky, seq, noise, rng, 20)
+        b = batch_lsq(fr, np.array([th[0] + 3, *star_rig.nominal_rig().sensor.principal_point_px, 0, 0]))
         e = b.theta - th
         m.append(e @ np.linalg.solve(b.cov, e))
     assert abs(np.mean(m) - 5.0) < 3 * np.sqrt(10 / 60)

@@ -8,8 +8,8 @@ from rigsim.procedures.star.pipeline import StarPipeline
 from rigsim.procedures.star.run import generate, run_pipeline
 
 
-def test_pipeline_end_to_end(rig):
-    small = rig.model_copy(update={"sequence": rig.sequence.model_copy(update={"n_frames": 6})})
+def test_pipeline_end_to_end(star_rig):
+    small = star_rig.model_copy(update={"sequence": star_rig.sequence.model_copy(update={"n_frames": 6})})
     r = run_pipeline(small, seed=3)
     ist, cs = r.ident_stats, r.centroid_stats
     assert ist["frames_identified"] == 6 and ist["wrong"] == 0 and ist["identified"] > 0.95 * ist["usable"]
@@ -27,15 +27,15 @@ def test_pipeline_end_to_end(rig):
     assert np.max(np.abs(e.x - r.truth_theta[1:3])) > 10 * np.max(e.sigma)
 
 
-def test_pipeline_runs_with_the_truth_absent(rig, sky, tmp_path):
+def test_pipeline_runs_with_the_truth_absent(star_rig, star_sky, tmp_path):
     """LOST's shape: frames saved as plain arrays (DN image, time, commanded attitude) go through the
     pipeline in a process where rigsim.truth and rigsim.render cannot even be imported."""
     import json
     import subprocess
     import sys
 
-    small = rig.model_copy(update={"sequence": rig.sequence.model_copy(update={"n_frames": 4})})
-    frames = [(obs, truth) for obs, truth, _fr in generate(small, seed=5, sky=sky)]
+    small = star_rig.model_copy(update={"sequence": star_rig.sequence.model_copy(update={"n_frames": 4})})
+    frames = [(obs, truth) for obs, truth, _fr in generate(small, seed=5, sky=star_sky)]
     np.savez(tmp_path / "frames.npz", dn=np.stack([o.dn for o, _ in frames]),
              t=np.array([o.time_s for o, _ in frames]), R=np.stack([o.R_commanded for o, _ in frames]))
     (tmp_path / "nominal.json").write_text(small.nominal_rig().model_dump_json())
@@ -63,9 +63,9 @@ print(json.dumps({{"frames": out.ident_stats["frames_identified"], "theta": out.
     assert np.all(np.abs(np.array(res["theta"]) - truth) < 5 * np.array(res["sigma"]))
 
 
-def test_pipeline_refuses_the_rig_with_its_truth(rig, sky):
+def test_pipeline_refuses_the_rig_with_its_truth(star_rig, star_sky):
     with pytest.raises(TypeError, match="nominal rig"):
-        StarPipeline(rig, sky.sky)
+        StarPipeline(star_rig, star_sky.sky)
 
 
 def test_cli_errors(capsys, tmp_path):

@@ -20,19 +20,19 @@ def _centroids(img, uv, bg, sigma):
     return np.column_stack([c.u, c.v])
 
 
-def test_mitsuba_and_analytic_centroids_agree(rig, sky):
+def test_mitsuba_and_analytic_centroids_agree(star_rig, star_sky):
     from rigsim.render.star import MitsubaStarRenderer
 
-    seq = att.from_rig(rig.sequence)
-    truth = sky.field(seq.R_cam_from_icrs[3], omega_cam_rad_s=seq.omega_cam_rad_s[3], substeps=8, margin_px=-4)
-    s = rig.sensor
+    seq = att.from_rig(star_rig.sequence)
+    truth = star_sky.field(seq.R_cam_from_icrs[3], omega_cam_rad_s=seq.omega_cam_rad_s[3], substeps=8, margin_px=-4)
+    s = star_rig.sensor
     mr = MitsubaStarRenderer(s, spp=256)
     m = mr.render(truth, seed=1)
     a = render_stars(truth.uv_substeps, truth.photons, truth.shape_hw, s.psf_sigma_px,
                      background=truth.background_photons_per_px)
     dd = np.linalg.norm(truth.uv[:, None] - truth.uv[None], axis=2)
     np.fill_diagonal(dd, np.inf)
-    sel = (dd.min(1) > 8) & sky.camera.on_detector(truth.uv, 6.0)
+    sel = (dd.min(1) > 8) & star_sky.camera.on_detector(truth.uv, 6.0)
     assert sel.sum() > 30
     uv = truth.uv[sel]
     ca = _centroids(a, uv, truth.background_photons_per_px, s.psf_sigma_px)

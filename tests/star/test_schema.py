@@ -9,8 +9,8 @@ from rigsim.errors import RigError
 from rigsim.rig.load import load_star_rig, parse_star_rig
 
 
-def test_default_rig(rig):
-    s = rig.sensor
+def test_default_rig(star_rig):
+    s = star_rig.sensor
     assert s.f_px == pytest.approx(43.3e3 / 15.0)
     assert 20.0 < s.fov_deg[0] < 20.3
     # σ = (defocus / N / 2) / 2 ⊕ 0.42 λ N, in pixels: (100/2.165/4 ⊕ 0.55) µm / 15 µm

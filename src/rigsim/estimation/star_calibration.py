@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
-from rigsim.optics.camera import brown_jacobian, brown_undistort
+from rigsim.optics.camera import unproject
 
 __all__ = ["THETA_NAMES", "MODELS", "FrameObs", "FrameSystem", "frame_system", "EKFResult", "run_ekf",
            "BatchResult", "batch_lsq", "normalized_with_jacobians", "pair_sets"]
@@ -69,27 +69,21 @@ class FrameObs:
                         None if self.flux is None else self.flux[order])
 
 
+_THETA_TO_PARAMS = np.zeros((9, 5))
+_THETA_TO_PARAMS[[0, 1, 2, 3, 4, 5], [0, 0, 1, 2, 3, 4]] = 1.0
+"""∂(camera parameters, OpenCV order)/∂θ: f drives fx and fy, (u0, v0) = (cx, cy), k1, k2."""
+
+
 def normalized_with_jacobians(uv, theta, p12=(0.0, 0.0)):
-    """Undistorted normalised coordinates x (N, 2) and ∂x/∂θ (N, 2, 5), ∂x/∂(u, v) (N, 2, 2), valid."""
+    """Undistorted normalised coordinates x (N, 2) and ∂x/∂θ (N, 2, 5), ∂x/∂(u, v) (N, 2, 2), valid.
+
+    The camera model's inverse (:func:`rigsim.optics.camera.unproject` with fx = fy = f, k3 = 0 and
+    the known tangential terms) and its implicit-function Jacobians, mapped onto θ = (f, u0, v0, k1, k2)."""
     f, u0, v0, k1, k2 = (float(t) for t in theta)
     p1, p2 = (float(p) for p in p12)
-    uv = np.asarray(uv, dtype=float)
-    xd = (uv[:, 0] - u0) / f
-    yd = (uv[:, 1] - v0) / f
-    x, y, ok = brown_undistort(xd, yd, k1, k2, p1, p2, 0.0)
-    a, b, c, d = brown_jacobian(x, y, k1, k2, p1, p2, 0.0)
-    det = a * d - b * c
-    Jinv = np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det[:, None, None]  # (N,2,2)
-    r2 = x * x + y * y
-    A = np.zeros((uv.shape[0], 2, 5))
-    A[:, 0, 0], A[:, 1, 0] = -xd / f, -yd / f
-    A[:, 0, 1] = -1.0 / f
-    A[:, 1, 2] = -1.0 / f
-    A[:, 0, 3], A[:, 1, 3] = -x * r2, -y * r2
-    A[:, 0, 4], A[:, 1, 4] = -x * r2 * r2, -y * r2 * r2
-    dx_dtheta = Jinv @ A
-    dx_duv = Jinv / f
-    return np.stack([x, y], -1), dx_dtheta, dx_duv, ok & (det > 0)
+    xy, dxy_duv, dxy_dp = unproject(np.asarray(uv, dtype=float), np.array([f, f, u0, v0, k1, k2, p1, p2, 0.0]),
+                                    get_gradients=True)
+    return xy, dxy_dp @ _THETA_TO_PARAMS, dxy_duv, np.all(np.isfinite(xy), axis=-1)
 
 
 def pair_sets(uv: np.ndarray):

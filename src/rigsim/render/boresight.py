@@ -33,19 +33,18 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.detector import DetectorFrame, apply_detector
 from rigsim.errors import GeometryWarning
 from rigsim.optics.line_camera import CameraGeometry, facet_normals_ota, loop_trace
 from rigsim.render.backend import ensure_variant
-from rigsim.render.frame import build_sidecar, write_frame
 from rigsim.render.plugins import LENS_PLUGIN, MIRROR_PLUGIN, register_plugins
 from rigsim.rig.boresight import BoresightRig
+from rigsim.render.frame import Frame, digitise
+from rigsim.render.scene import Scene
 
-__all__ = ["LoopRenderer", "RoiFrame", "register_plugins", "trace_scene_rays", "GeometryWarning",
+__all__ = ["LoopRenderer", "register_plugins", "trace_scene_rays", "GeometryWarning",
            "LENS_PLUGIN", "MIRROR_PLUGIN"]
 
 LASER_STANDOFF_MM = 5.0     # emitter disk in front of the focal plane (telecentric rays: no effect)
@@ -79,29 +78,6 @@ def trace_scene_rays(src_xy: np.ndarray, src_z: float, C: np.ndarray, f_lens: fl
     h2 = hit[:, :2] + t2[:, None] * r[:, :2]
     q = r[:, :2] / np.abs(r[:, 2:3]) - (h2 - C[:2]) / f_lens             # slope per unit |z| after the lens
     return h2 + (C[2] - z_det) * q
-
-
-@dataclass
-class RoiFrame:
-    """One CMOS ROI: ``dn[j, i]`` is detector pixel (origin_uv[0] + i, origin_uv[1] + j)."""
-
-    dn: np.ndarray
-    origin_uv: tuple[int, int]
-    photons: np.ndarray
-    detector: DetectorFrame | None
-    truth: dict
-    flags: dict
-    sidecar: dict = field(default_factory=dict)
-    seconds: float = 0.0
-
-    def photon_centroid(self) -> np.ndarray:
-        """First moment of the expected-photon image (rigsim pixels)."""
-        s = self.photons.sum()
-        if not s > 0:
-            return np.array([np.nan, np.nan])
-        v, u = np.indices(self.photons.shape)
-        return np.array([(self.photons * u).sum() / s + self.origin_uv[0],
-                         (self.photons * v).sum() / s + self.origin_uv[1]])
 
 
 class LoopRenderer:
@@ -158,14 +134,14 @@ class LoopRenderer:
         if roi_origin is None:
             roi_origin = (int(round(self.ref_uv[0])) - self.window_px // 2, int(round(self.ref_uv[1])) - self.window_px // 2)
         self.roi_origin = (int(roi_origin[0]), int(roi_origin[1]))
-        scene = self._scene_dict()
-        self._scene = mi.load_dict(scene)
-        self._params = mi.traverse(self._scene)
+        # the render loop's elements: per frame the facet's normal and the lens (Δf) follow the
+        # camera state, and the sensor's window moves to the ROI (rigsim.render.scene)
+        self._scene = Scene.from_dict(self._scene_dict(), {"facet": self._facet_update, "lens": self._lens_update,
+                                                           "sensor": self._sensor_update})
         M = np.eye(4)
         M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = self.u_axis, -self.v_axis, [0, 0, -1.0], self.T_s
-        self._params["sensor.to_world"] = mi.Transform4f(M.astype(np.float32))
-        self._params.update()
-        self._state = None
+        self._scene.params["sensor.to_world"] = mi.Transform4f(M.astype(np.float32))
+        self._scene.params.update()
         self.photons_per_unit = None
         self.det_cfg = rig.detector.model_copy(update={"sensor_seed": rig.detector.sensor_seed + 97 * self.cam_index + 13 * j})
 
@@ -222,20 +198,29 @@ class LoopRenderer:
         f_lens = float(_f32(g.F + dF))
         return {"N": N, "lens_z": dz, "f_lens": f_lens, "C": self.C_W + np.array([0.0, 0.0, dz])}
 
-    def _set(self, E_hrc, delta_f_mm, window_origin) -> dict:
+    def _facet_update(self, state) -> dict:
         import mitsuba as mi
 
-        p = self._rendered_params(E_hrc, delta_f_mm)
-        self._params["facet.bsdf.normal"] = mi.Vector3f(*[float(x) for x in p["N"]])
-        self._params["lens.bsdf.focal_length"] = mi.Float(p["f_lens"])
-        self._params["lens.bsdf.centre"] = mi.Vector3f(*[float(x) for x in p["C"]])
+        return {"facet.bsdf.normal": mi.Vector3f(*[float(x) for x in state["params"]["N"]])}
+
+    def _lens_update(self, state) -> dict:
+        import mitsuba as mi
+
+        p = state["params"]
         A = np.diag([LENS_PATCH_HALF_MM, LENS_PATCH_HALF_MM, 1.0, 1.0])
         A[2, 3] = p["lens_z"]
-        self._params["lens.to_world"] = mi.Transform4f(A.astype(np.float32))
-        u0, v0 = window_origin
-        self._params["sensor.window_origin"] = mi.Point2f(float(u0), float(self.geom.height_px - self.window_px - v0))
-        self._params.update()
-        return p
+        return {"lens.bsdf.focal_length": mi.Float(p["f_lens"]),
+                "lens.bsdf.centre": mi.Vector3f(*[float(x) for x in p["C"]]),
+                "lens.to_world": mi.Transform4f(A.astype(np.float32))}
+
+    def _sensor_update(self, state) -> dict:
+        import mitsuba as mi
+
+        u0, v0 = state["window_origin"]
+        return {"sensor.window_origin": mi.Point2f(float(u0), float(self.geom.height_px - self.window_px - v0))}
+
+    def _state(self, E_hrc, delta_f_mm, window_origin) -> dict:
+        return {"params": self._rendered_params(E_hrc, delta_f_mm), "window_origin": window_origin}
 
     # -- truth ---------------------------------------------------------------------------------
     def exact_uv(self, E_hrc=None, delta_f_mm=0.0) -> np.ndarray:
@@ -291,13 +276,9 @@ class LoopRenderer:
     def render_photons(self, E_hrc=None, delta_f_mm=0.0, seed: int = 0, spp: int | None = None,
                        window_origin=None) -> tuple[np.ndarray, tuple[int, int]]:
         """Expected photons per ROI pixel (h, w) and the ROI origin (u0, v0)."""
-        import mitsuba as mi
-
         if window_origin is None:
             window_origin = self._window_for(self.exact_uv(E_hrc, delta_f_mm))
-        self._set(E_hrc, delta_f_mm, window_origin)
-        img = np.array(mi.render(self._scene, seed=int(seed), spp=int(spp or self.spp)), dtype=np.float64)
-        img = img[..., 0] if img.ndim == 3 else img
+        img = self._scene.render(self._state(E_hrc, delta_f_mm, window_origin), seed=int(seed), spp=int(spp or self.spp))
         img = np.ascontiguousarray(img[::-1, :])
         if self.photons_per_unit is None:
             self.photons_per_unit = self._calibrate()
@@ -305,14 +286,11 @@ class LoopRenderer:
 
     def _calibrate(self) -> float:
         """Film units → photons: the whole core lands in the ROI at the reference (checked)."""
-        import mitsuba as mi
-
         origin = self._window_for(self.ref_uv)
         tr = self.truth(None, 0.0, origin)
         if tr["fraction_in_window"] < 1.0:
             raise ValueError("the reference spot does not fit in the ROI: enlarge window_px")
-        self._set(None, 0.0, origin)
-        img = np.array(mi.render(self._scene, seed=12345, spp=max(self.spp, 256)), dtype=np.float64)
+        img = self._scene.render(self._state(None, 0.0, origin), seed=12345, spp=max(self.spp, 256))
         total = float(img.sum())
         if not total > 0:
             raise RuntimeError("the laser loop renders nothing at the reference: scene geometry is broken")
@@ -324,7 +302,7 @@ class LoopRenderer:
         return time.perf_counter() - t0
 
     def render(self, E_hrc=None, delta_f_mm=0.0, seed: int = 0, *, noiseless: bool = False,
-               spp: int | None = None, with_truth: bool = True) -> RoiFrame:
+               spp: int | None = None, with_truth: bool = True) -> Frame:
         """A CMOS ROI frame (uint16 DN, detector model applied) for the camera state (E, Δf)."""
         t0 = time.perf_counter()
         centre = self.exact_uv(E_hrc, delta_f_mm)
@@ -342,17 +320,18 @@ class LoopRenderer:
             photons = np.zeros((W, W))
         else:
             photons, origin = self.render_photons(E_hrc, delta_f_mm, seed, spp, origin)
-        det = apply_detector(photons, self._roi_cfg(origin), seed=int(seed), noiseless=noiseless)
-        flags["saturated"] = bool(det.saturated_pixels > 0)
-        if det.saturated_pixels:
-            warnings.warn(f"{det.saturated_pixels} saturated pixels in the ROI: lower laser.photons_per_frame",
+        fr = digitise(photons, self._roi_cfg(origin), seed=int(seed), noiseless=noiseless, truth=tr,
+                      render=self.settings(spp), geometry_flags=flags,
+                      sidecar_extra={"roi_origin_uv": list(origin), "camera": self.geom.name, "detector": f"M{self.j + 1}",
+                                     "state": {"delta_f_mm": float(delta_f_mm),
+                                               "E_hrc": (np.eye(3) if E_hrc is None else np.asarray(E_hrc)).tolist()}})
+        fr.origin_uv = tuple(int(x) for x in origin)  # the ROI on the CMOS (its own fixed patterns: _roi_cfg)
+        fr.detector_shape = (self.geom.height_px, self.geom.width_px)
+        fr.seconds = time.perf_counter() - t0
+        if fr.detector.saturated_pixels:
+            warnings.warn(f"{fr.detector.saturated_pixels} saturated pixels in the ROI: lower laser.photons_per_frame",
                           GeometryWarning, stacklevel=2)
-        sidecar = build_sidecar(truth=tr, render=self.settings(spp), detector_frame=det, geometry_flags=flags,
-                                seed=int(seed), extra={"roi_origin_uv": list(origin), "camera": self.geom.name,
-                                                       "detector": f"M{self.j + 1}",
-                                                       "state": {"delta_f_mm": float(delta_f_mm),
-                                                                 "E_hrc": (np.eye(3) if E_hrc is None else np.asarray(E_hrc)).tolist()}})
-        return RoiFrame(det.dn, origin, photons, det, tr, flags, sidecar, time.perf_counter() - t0)
+        return fr
 
     def _roi_cfg(self, origin):
         """The detector instance of this ROI: the fixed patterns are drawn for the ROI (keyed by
@@ -360,8 +339,8 @@ class LoopRenderer:
         key = (self.det_cfg.sensor_seed * 1_000_003 + 7919 * int(origin[0]) + int(origin[1])) % (2**63)
         return self.det_cfg.model_copy(update={"sensor_seed": int(key)})
 
-    def write(self, path, frame: RoiFrame):
-        return write_frame(path, frame.dn, frame.sidecar)
+    def write(self, path, frame: Frame):
+        return frame.write(path)
 
     def settings(self, spp=None) -> dict:
         g = self.geom

@@ -1,4 +1,9 @@
-"""Frames on disk: a 16-bit PNG plus a JSON sidecar holding the truth and every setting.
+"""The one frame type every renderer returns, and frames on disk.
+
+:class:`Frame` is a digitised image (the *observation*: what a rig's camera records) with the truth it
+was rendered from; ``obs, truth = frame`` splits them. :func:`digitise` is the detector stage of the
+render loop (:mod:`rigsim.render.scene`): expected photons → :func:`rigsim.detector.apply_detector` →
+Frame. On disk a frame is a 16-bit PNG plus a JSON sidecar holding the truth and every setting.
 
 ``write_frame("out/sun_0007", dn, sidecar)`` writes ``out/sun_0007.png`` (uint16, lossless,
 ``img[v, u]``) and ``out/sun_0007.json``. :func:`build_sidecar` assembles the sidecar from the
@@ -14,16 +19,19 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SIDECAR_FORMAT", "FLAG_KEYS", "build_sidecar", "write_frame", "read_frame",
-           "frame_paths"]
+__all__ = ["SIDECAR_FORMAT", "FLAG_KEYS", "OBSERVABLE_FLAGS", "Frame", "Observation", "digitise", "build_sidecar",
+           "write_frame", "read_frame", "frame_paths"]
 
 SIDECAR_FORMAT = "rigsim.frame/1"
 FLAG_KEYS = ("spot_outside_model", "spot_off_detector", "spot_cut_by_edge", "spot_exceeds_window",
              "saturated")
+OBSERVABLE_FLAGS = ("saturated", "saturated_pixels")
+"""The flags a real camera's software can see in its own frame; the others come from the truth."""
 
 
 def frame_paths(path) -> tuple[Path, Path]:
@@ -132,3 +140,89 @@ def read_frame(path) -> tuple[np.ndarray, dict]:
         raise ValueError(f"{png}: size {img.shape[1]}x{img.shape[0]} does not match the sidecar "
                          f"({meta.get('width')}x{meta.get('height')})")
     return img, side
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a rig's camera records: the DN image (``dn[j, i]`` is detector pixel
+    ``(origin_uv[0] + i, origin_uv[1] + j)``), the detector's shape, and what the camera's software
+    knows about the exposure (render and detector settings, seed, saturation). No truth."""
+
+    dn: np.ndarray
+    origin_uv: tuple[int, int]
+    detector_shape: tuple[int, int] | None
+    meta: dict
+
+
+@dataclass
+class Frame:
+    """What every renderer returns: the digitised image and the truth it was rendered from.
+
+    ``sidecar`` is the one sidecar format (:func:`build_sidecar`); ``truth`` is the renderer's truth
+    (a typed object, e.g. :class:`rigsim.truth.star.StarField`, when it has one; otherwise the
+    sidecar's ``truth`` table). ``photons``: the expected photons per pixel before the detector
+    (same window as ``dn``); ``extra``: renderer-specific products (render windows, …)."""
+
+    dn: np.ndarray
+    sidecar: dict
+    origin_uv: tuple[int, int] = (0, 0)
+    detector_shape: tuple[int, int] | None = None
+    photons: np.ndarray | None = None
+    detector: object | None = None
+    truth_object: object | None = None
+    extra: dict = field(default_factory=dict)
+    seconds: float = 0.0
+    index: int = 0
+    time_s: float = 0.0
+
+    @property
+    def truth(self):
+        return self.truth_object if self.truth_object is not None else self.sidecar.get("truth", {})
+
+    @property
+    def flags(self) -> dict:
+        return self.sidecar.get("flags", {})
+
+    @property
+    def observation(self) -> Observation:
+        meta = {k: v for k, v in self.sidecar.items() if k not in ("truth", "pose", "flags", "extra")}
+        meta["flags"] = {k: v for k, v in self.flags.items() if k in OBSERVABLE_FLAGS}
+        return Observation(self.dn, tuple(self.origin_uv), self.detector_shape, meta)
+
+    def __iter__(self):
+        yield self.observation
+        yield self.truth
+
+    def write(self, path) -> tuple[Path, Path]:
+        return write_frame(path, self.dn, self.sidecar)
+
+    def photon_centroid(self) -> np.ndarray:
+        """First moment of the expected-photon image (detector pixels)."""
+        if self.photons is None:
+            raise ValueError("this frame kept no photon image")
+        s = self.photons.sum()
+        if not s > 0:
+            return np.array([np.nan, np.nan])
+        v, u = np.indices(self.photons.shape)
+        return np.array([(self.photons * u).sum() / s + self.origin_uv[0],
+                         (self.photons * v).sum() / s + self.origin_uv[1]])
+
+
+def digitise(photons: np.ndarray, detector_config, *, seed: int, noiseless: bool = False, origin_uv=(0, 0),
+             detector_shape: tuple[int, int] | None = None, truth: dict | None = None, truth_object=None,
+             render: dict | None = None, geometry_flags: dict | None = None, pose: dict | None = None,
+             sidecar_extra: dict | None = None, extra: dict | None = None, seconds: float = 0.0,
+             index: int = 0, time_s: float = 0.0, frame_seed: int | None = None) -> Frame:
+    """The render loop's detector stage: expected photons per pixel (a whole frame, or a window at
+    ``origin_uv`` of a detector of ``detector_shape`` (rows, cols)) → a :class:`Frame` with its sidecar.
+    ``seed`` drives the detector noise; ``frame_seed`` (default ``seed``) is the seed the sidecar
+    records, the one the whole frame is reproduced from when the detector's is derived from it."""
+    from rigsim.detector import apply_detector
+
+    kw = {"origin_uv": tuple(origin_uv), "detector_shape": detector_shape} if detector_shape is not None else {}
+    det = apply_detector(photons, detector_config, seed=seed, noiseless=noiseless, **kw)
+    sidecar = build_sidecar(truth=truth, render=render, detector_frame=det, geometry_flags=geometry_flags, pose=pose,
+                            seed=seed if frame_seed is None else frame_seed, extra=sidecar_extra)
+    shape = detector_shape if detector_shape is not None else tuple(np.shape(photons))
+    return Frame(det.dn, sidecar, tuple(int(x) for x in origin_uv), tuple(shape), photons, det, truth_object,
+                 dict(extra or {}), float(seconds), int(index), float(time_s))

@@ -1,6 +1,6 @@
 """Star-field frames: truth → expected photons (analytic or Mitsuba) → detector DN.
 
-Rendering only: nothing here extracts, identifies or estimates. A :class:`StarFrame` carries
+Rendering only: nothing here extracts, identifies or estimates. A :class:`~rigsim.render.frame.Frame` carries
 the 16-bit frame and the truth it was rendered from (which the estimators never read).
 
 Fast analytic star-frame renderer: pixel-integrated Gaussian PSFs splatted in numpy.
@@ -44,29 +44,15 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.special import erf
 
-from rigsim.detector import apply_detector
-from rigsim.truth.star import StarField, StarSky
+from rigsim.truth.star import StarSky
+from rigsim.render.scene import Element, PinholeSensor, Scene
+from rigsim.render.frame import Frame, digitise
 
-__all__ = ['StarFrame', 'render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
-
-@dataclass
-class StarFrame:
-    index: int
-    time_s: float
-    dn: np.ndarray                 # uint16 (H, W), img[v, u]
-    truth: StarField
-    seed: int
-    renderer: str
-    detector_meta: dict
-    saturated: np.ndarray
-    photons: np.ndarray | None = None
-    settings: dict = field(default_factory=dict)
-
+__all__ = ['render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
 
 def frame_seed(seed: int, k: int) -> int:
     """Detector-noise seed of frame k of a run with ``seed`` (independent streams per frame)."""
@@ -75,9 +61,9 @@ def frame_seed(seed: int, k: int) -> int:
 
 def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, time_s: float = 0.0,
                  omega_cam_rad_s=None, substeps: int = 1, renderer: str = "analytic",
-                 noiseless: bool = False, keep_photons: bool = False, mitsuba=None) -> StarFrame:
-    """One frame. ``renderer``: 'analytic' (default) or 'mitsuba' (pass a
-    :class:`rigsim.render.star.MitsubaStarRenderer` as ``mitsuba``)."""
+                 noiseless: bool = False, keep_photons: bool = False, mitsuba=None) -> Frame:
+    """One frame (its truth: the :class:`~rigsim.truth.star.StarField`). ``renderer``: 'analytic'
+    (default) or 'mitsuba' (pass a :class:`MitsubaStarRenderer` as ``mitsuba``)."""
     s = sky.rig.sensor
     sigma = s.psf_sigma_px
     margin = -math.ceil(5.0 * sigma)  # stars just off the detector still put their wings on it
@@ -94,10 +80,11 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
         settings = {"renderer": "mitsuba", **mitsuba.settings()}
     else:
         raise ValueError(f"renderer = {renderer!r}: allowed 'analytic' or 'mitsuba'")
-    det = apply_detector(photons, s.detector, seed=seed, noiseless=noiseless)
-    return StarFrame(index=int(index), time_s=float(time_s), dn=det.dn, truth=truth, seed=int(seed),
-                     renderer=renderer, detector_meta=det.meta, saturated=det.saturated,
-                     photons=photons if keep_photons else None, settings=settings)
+    fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth.as_dict(), truth_object=truth,
+                  render=settings, index=int(index), time_s=float(time_s))
+    if not keep_photons:
+        fr.photons = None
+    return fr
 
 
 def render_sequence(sky: StarSky, seq, *, seed: int, renderer: str = "analytic", noiseless: bool = False,
@@ -223,32 +210,27 @@ class MitsubaStarRenderer:
         return M
 
     def _build(self):
+        """Elements: the distorted pinhole's window (moved to each star by ``window_origin``) and the
+        sky patch whose radiance bitmap is the frame's ``texture``."""
         import mitsuba as mi
 
         cam = self.cam
         w = self.window_px if self.mode == "windows" else cam.width
         h = self.window_px if self.mode == "windows" else cam.height
         tex = mi.TensorXf(np.zeros((self.tex_h, self.tex_w, 1), dtype=np.float32))
-        self.scene = mi.load_dict({
-            "type": "scene",
-            "integrator": {"type": "path", "max_depth": 1},
-            "sensor": {
-                "type": "rigsim_pinhole", "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
-                "k1": cam.k1, "k2": cam.k2, "k3": cam.k3, "p1": cam.p1, "p2": cam.p2,
-                "detector_width": cam.width, "detector_height": cam.height,
-                "window_u0": 0, "window_v0": 0, "response": "radiance",
-                "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"},
-                         "pixel_format": "luminance"},
-                "sampler": {"type": "ldsampler", "sample_count": self.spp},
-            },
-            "sky": {
-                "type": "rectangle",
-                "to_world": mi.ScalarTransform4f(self._patch_matrix()),
-                "emitter": {"type": "area", "radiance": {"type": "bitmap", "data": tex, "raw": True,
-                                                         "filter_type": "bilinear", "wrap_mode": "clamp"}},
-            },
-        })
-        self.params = mi.traverse(self.scene)
+
+        def upload(state) -> dict:
+            if "texture" not in state:
+                return {}
+            data = np.ascontiguousarray(state["texture"][::-1, :, None], dtype=np.float32)
+            return {"sky.emitter.radiance.data": mi.TensorXf(data)}
+
+        sky = Element("sky", {"type": "rectangle", "to_world": mi.ScalarTransform4f(self._patch_matrix()),
+                              "emitter": {"type": "area", "radiance": {"type": "bitmap", "data": tex, "raw": True,
+                                                                       "filter_type": "bilinear", "wrap_mode": "clamp"}}},
+                      upload)
+        sensor = PinholeSensor(cam, width=w, height=h, spp=self.spp, sampler="ldsampler", response="radiance")
+        self.scene = Scene({"type": "path", "max_depth": 1}, [sensor, sky])
 
     # ------------------------------------------------------------------ bitmap
     def bake(self, truth) -> np.ndarray:
@@ -287,31 +269,15 @@ class MitsubaStarRenderer:
                            minlength=self.tex_w * self.tex_h).reshape(self.tex_h, self.tex_w)
         return tex
 
-    def _upload(self, tex: np.ndarray) -> None:
-        import mitsuba as mi
-
-        self.params["sky.emitter.radiance.data"] = mi.TensorXf(np.ascontiguousarray(tex[::-1, :, None], dtype=np.float32))
-        self.params.update()
-
-    def _set_window(self, u0: int, v0: int) -> None:
-        import mitsuba as mi
-
-        self.params["sensor.window_origin"] = mi.Point2f(float(u0), float(v0))
-        self.params.update()
-
     # ------------------------------------------------------------------ render
     def render(self, truth, seed: int = 0) -> np.ndarray:
         """Expected photons per pixel (H, W) of one frame (background included)."""
-        import mitsuba as mi
-
         t0 = time.perf_counter()
         cam = self.cam
-        self._upload(self.bake(truth))
+        self.scene.update({"texture": self.bake(truth)})
         frame = np.zeros((cam.height, cam.width))
         if self.mode == "full":
-            self._set_window(0, 0)
-            arr = np.array(mi.render(self.scene, seed=int(seed), spp=self.spp), dtype=np.float64)
-            frame = arr[..., 0] if arr.ndim == 3 else arr
+            frame = self.scene.render({"window_origin": (0, 0)}, seed=int(seed), spp=self.spp)
         else:
             Wp = self.window_px
             half = Wp // 2
@@ -320,9 +286,7 @@ class MitsubaStarRenderer:
                 v0 = int(math.floor(v + 0.5)) - half
                 if u0 + Wp <= 0 or v0 + Wp <= 0 or u0 >= cam.width or v0 >= cam.height:
                     continue
-                self._set_window(u0, v0)
-                arr = np.array(mi.render(self.scene, seed=int(seed) * 100003 + k, spp=self.spp), dtype=np.float64)
-                arr = arr[..., 0] if arr.ndim == 3 else arr
+                arr = self.scene.render({"window_origin": (u0, v0)}, seed=int(seed) * 100003 + k, spp=self.spp)
                 a0, b0 = max(0, u0), max(0, v0)
                 a1, b1 = min(cam.width, u0 + Wp), min(cam.height, v0 + Wp)
                 frame[b0:b1, a0:a1] = arr[b0 - v0:b1 - v0, a0 - u0:a1 - u0]

@@ -42,6 +42,12 @@ class StarField:
     def __len__(self) -> int:
         return int(self.hip.shape[0])
 
+    def as_dict(self) -> dict:
+        """The frame's truth for its sidecar (JSON-able)."""
+        return {"R_cam_from_icrs": self.R_cam_from_icrs.tolist(), "hip": self.hip.tolist(), "mag": self.mag.tolist(),
+                "photons": self.photons.tolist(), "uv": self.uv.tolist(),
+                "background_photons_per_px": self.background_photons_per_px}
+
 
 class StarSky:
     """Catalogue + true camera + radiometry of a :class:`rigsim.rig.star.StarRig`."""

@@ -96,16 +96,15 @@ class StarFieldGenerator:
                          "dir_x": float(tr.dirs_cam[k, 0]), "dir_y": float(tr.dirs_cam[k, 1]),
                          "dir_z": float(tr.dirs_cam[k, 2]),
                          "valid": bool(edge <= u <= W - 1 - edge and edge <= v <= H - 1 - edge
-                                       and not np.any(fr.saturated[max(int(v) - 2, 0):int(v) + 3,
+                                       and not np.any(fr.detector.saturated[max(int(v) - 2, 0):int(v) + 3,
                                                                    max(int(u) - 2, 0):int(u) + 3]))})
         if not rows:  # a frame with no star still has a row (its attitude)
             rows.append({**base, "star": -1, "hip": -1, "mag": float("nan"), "photons": 0.0, "u": float("nan"),
                          "v": float("nan"), "dir_x": float("nan"), "dir_y": float("nan"), "dir_z": float("nan"),
                          "valid": False})
-        sc = {"format": "rigsim.frame/1", "truth": {"rig": self.rig.name, "R_cam_from_icrs": R.tolist(),
-                                                   "stars": len(tr)},
-              "render": fr.settings, "detector": fr.detector_meta, "seed": int(params["seed"]),
-              "dataset": {"params": params}}
+        sc = dict(fr.sidecar)  # the one sidecar format; the per-star truth is in the truth table
+        sc["truth"] = {"rig": self.rig.name, "R_cam_from_icrs": R.tolist(), "stars": len(tr)}
+        sc["dataset"] = {"params": params}
         return fr.dn, sc, rows
 
     def settings(self) -> dict:

@@ -240,7 +240,7 @@ def _frame_info(frame, sm: SpotMeasurement, wl) -> dict:
     return {"uv": None if sm.uv is None else [float(x) for x in sm.uv], "centroid_flags": int(sm.flags),
             "n_detections": int(sm.n_detections), "peak_dn": float(sm.peak_dn),
             "background_dn": float(sm.background_dn), "background_rms_dn": float(sm.background_rms_dn),
-            "render_seconds": float(frame.window.seconds), "truth_flags": _true_flags(frame),
+            "render_seconds": float(frame.extra["window"].seconds), "truth_flags": _true_flags(frame),
             "warnings": [str(w.message) for w in wl]}
 
 

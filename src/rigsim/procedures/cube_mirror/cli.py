@@ -349,7 +349,7 @@ def cmd_render_sun_sensor(args) -> int:
     if flags:
         print(f"flags: {flags}")
     if args.preview:
-        win = fr.photons_window
+        win = fr.extra["window"]
         u0, v0 = win.origin_uv
         dn = fr.dn.astype(float)
         h = win.image.shape[0] // 2

@@ -23,6 +23,7 @@ import numpy as np
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import offset_model, reflected_offset_mm
 from rigsim.imaging.screen import hole_spot_offset
+from rigsim.optics.aiming import nominal_screen_homography
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableReading, pose_deg_to_rad
@@ -65,6 +66,8 @@ class OffsetMeasurer:
         self.noiseless = noiseless
         self.bias_px = null_bias_offset_px(rig, real, face_index)
         self.layout = diaphragm_layout(rig, real, face_index)
+        # the operator's screen → image homography: from the nominal aiming-camera spec only
+        self.H_screen_to_uv = nominal_screen_homography(rig.aiming_camera)
         self.calls = 0
         self._geom = None
         self.keep_frames = keep_frames
@@ -114,7 +117,7 @@ class OffsetMeasurer:
             raise SearchError(
                 f"face {self.face}: cannot measure the hole/spot offset at true pose {pose_txt}: {', '.join(bad)}. "
                 "Start the search closer to the null (procedure.search_start_deg) or widen the aiming camera's field.")
-        m = hole_spot_offset(fr.hole.dn, fr.spot.dn, self.renderer.geometry.H_screen_to_uv,
+        m = hole_spot_offset(fr.hole.dn, fr.spot.dn, self.H_screen_to_uv,
                              object_pixel_mm=self.rig.aiming_camera.object_pixel_mm,
                              offset_dn=self.renderer.detector.offset_dn)
         if not np.all(np.isfinite(m["offset_px"])):

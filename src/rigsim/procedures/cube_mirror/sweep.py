@@ -92,8 +92,8 @@ def render_sweep(
                                  noiseless=noiseless)
         rendered += 1
         f = fr.sidecar["flags"]
-        roi = fr.dn.astype(float) - offset  # the crop window, at fr.dn_origin_uv on the detector
-        cen = centroid_tcom(roi, origin_uv=fr.dn_origin_uv, saturation=rig.sun_sensor.detector.max_dn - offset)
+        roi = fr.dn.astype(float) - offset  # the crop window, at fr.origin_uv on the detector
+        cen = centroid_tcom(roi, origin_uv=fr.origin_uv, saturation=rig.sun_sensor.detector.max_dn - offset)
         bad = Flag.INVALID | Flag.SATURATED | Flag.EDGE
         if f["spot_cut_by_edge"] or f["saturated"] or (cen.flags & bad):
             rejected += 1
@@ -104,7 +104,7 @@ def render_sweep(
                 # above the noise (5σ of the read noise, ≥ 3 DN); a noise-free frame only needs to
                 # clear the quantisation, and every faint rim pixel matters to the S-curve model
                 thr = 0.5 if noiseless else max(3.0, 5.0 * det.read_noise_e * det.gain_dn_per_e)
-                c, _w = centroid_disk_scurve(roi, fr.dn_origin_uv, threshold=thr)
+                c, _w = centroid_disk_scurve(roi, fr.origin_uv, threshold=thr)
                 uv.append([float(c[0]), float(c[1])])
             else:
                 uv.append([cen.u, cen.v])

@@ -27,7 +27,7 @@ from rigsim.truth.star import StarSky, true_sequence
 
 def generate(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mitsuba=None, noiseless: bool = False,
              sky: StarSky | None = None):
-    """Rendered frames of the rig's sequence: yields (StarObservation, StarField truth, StarFrame)."""
+    """Rendered frames of the rig's sequence: yields (StarObservation, StarField truth, the rendered Frame)."""
     sky = sky if sky is not None else StarSky(rig)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 4004]))
     commanded = att.from_rig(rig.sequence, rng, jitter=False)
@@ -96,7 +96,7 @@ class PipelineResult:
     truth_theta: np.ndarray
     nominal_theta: np.ndarray
     times: dict = field(default_factory=dict)
-    sample_frame: object = None           # first StarFrame (dn + truth) for the report
+    sample_frame: object = None           # the first rendered Frame (dn + truth) for the report
     R_est: list = field(default_factory=list)
     noise_scale: float = 1.0
 

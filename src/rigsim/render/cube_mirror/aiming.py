@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -41,25 +40,15 @@ from rigsim.render.cube_mirror.diaphragm import DiaphragmRenderer, _WARN_FLAGS, 
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.diaphragm import DiaphragmTruth, diaphragm_geometry, rasterise_screen_disk
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
+from rigsim.render.cube_mirror.diaphragm import DiaphragmFrames
+from rigsim.render.frame import digitise
 
-__all__ = ["ConcentricityFrames", "ConcentricityRenderer", "divergence_radius_mm"]
+__all__ = ["ConcentricityRenderer", "divergence_radius_mm"]
 
 
 def divergence_radius_mm(rig: CubeMirrorRig, full_angle_rad: float) -> float:
     """Radius of the blur disk on the screen: (hole → face → screen) × tan(α/2)."""
     return 2.0 * rig.diaphragm_screen.distance_to_cube_mm * math.tan(0.5 * full_angle_rad)
-
-
-@dataclass
-class ConcentricityFrames:
-    pose_rad: dict
-    seed: int
-    hole: object  # DetectorFrame (glow only)
-    spot: object  # DetectorFrame (divergent spot + glow)
-    spot_photons: np.ndarray
-    truth: DiaphragmTruth
-    flags: dict
-    seconds: dict
 
 
 class ConcentricityRenderer:
@@ -163,12 +152,10 @@ class ConcentricityRenderer:
         return self.truth_geometry.trace(pose_rad)
 
     def render(self, pose_rad: dict, seed: int = 0, *, hole_seed: int = 0, noiseless: bool = False,
-               warn: bool = True) -> ConcentricityFrames:
+               warn: bool = True) -> DiaphragmFrames:
         """Hole frame (glow; detector noise from ``seed``) and spot frame at ``pose_rad`` (true
         angles). Geometry problems are flags (and warnings when ``warn``); nothing is rendered
         when the spot does not come back to the screen."""
-        from rigsim.detector import apply_detector
-
         if int(seed) != seed or seed < 0:
             raise ValueError(f"seed = {seed!r}: must be an integer >= 0")
         sec = {}
@@ -188,16 +175,19 @@ class ConcentricityRenderer:
             spot = self.spot_photons(pose_rad, seed)
         sec["spot_render"] = time.perf_counter() - t1
         t2 = time.perf_counter()
-        f_hole = apply_detector(hole, self.detector, _derived_seed(seed, 3), noiseless=noiseless)
-        f_spot = apply_detector(spot + hole, self.detector, _derived_seed(seed, 4), noiseless=noiseless)
+        frames = {name: digitise(photons, self.detector, seed=_derived_seed(seed, stream), noiseless=noiseless,
+                                 frame_seed=int(seed), truth={**tr.as_dict(), "frame": name}, truth_object=tr,
+                                 geometry_flags=flags, pose={"true_angles_rad": dict(pose_rad), "face": self.geometry.face},
+                                 sidecar_extra={"hole_seed": int(hole_seed), "detector_seed": _derived_seed(seed, stream)})
+                  for name, photons, stream in (("hole", hole, 3), ("spot", spot + hole, 4))}
         sec["detector"] = time.perf_counter() - t2
-        flags["saturated_pixels"] = {"hole": f_hole.saturated_pixels, "spot": f_spot.saturated_pixels}
-        flags["saturated"] = bool(f_hole.saturated_pixels or f_spot.saturated_pixels)
+        flags["saturated_pixels"] = {k: f.detector.saturated_pixels for k, f in frames.items()}
+        flags["saturated"] = bool(any(flags["saturated_pixels"].values()))
         if flags["saturated"] and warn:
             warnings.warn(f"aiming camera: saturated pixels {flags['saturated_pixels']}", SaturationWarning,
                           stacklevel=2)
         sec["total"] = time.perf_counter() - t0
-        return ConcentricityFrames(dict(pose_rad), int(seed), f_hole, f_spot, spot, tr, flags, sec)
+        return DiaphragmFrames(dict(pose_rad), int(seed), hole, spot, frames["hole"], frames["spot"], tr, flags, sec)
 
     def settings(self) -> dict:
         s = self.pencil.settings()

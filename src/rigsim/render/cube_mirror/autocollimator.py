@@ -46,19 +46,20 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
-from rigsim.detector import DetectorFrame, apply_detector
 from rigsim.errors import GeometryWarning
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.autocollimator import AutocollimatorOptics, MirrorTarget, SpotTruth
 from rigsim.optics.meshes import lens_mesh, stop_mesh
 from rigsim.render.backend import ensure_variant
-from rigsim.render.frame import build_sidecar, write_frame
+from rigsim.render.frame import write_frame
 from rigsim.render.meshes import mesh_ply
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.autocollimator import (
     AutocollimatorLayout, autocollimator_layout, mirror_mesh_A, mirror_target,
 )
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
+from rigsim.render.frame import Frame, digitise
+from rigsim.render.scene import Scene
 
 __all__ = [
     "CAMERA_STANDOFF_MM",
@@ -66,7 +67,6 @@ __all__ = [
     "DEFAULT_SOURCE_PHOTONS",
     "AutocollimatorScene",
     "AutocollimatorWindow",
-    "AutocollimatorFrame",
     "AutocollimatorRenderer",
     "build_autocollimator_scene_dict",
     "autocollimator_scene",
@@ -287,18 +287,6 @@ class AutocollimatorWindow:
         return frame
 
 
-@dataclass
-class AutocollimatorFrame:
-    photons: np.ndarray  # (H, W) expected photons per pixel
-    detector: DetectorFrame
-    sidecar: dict
-    window: AutocollimatorWindow
-
-    @property
-    def dn(self) -> np.ndarray:
-        return self.detector.dn
-
-
 class AutocollimatorRenderer:
     """Render the autocollimator's detector frame per turntable pose.
 
@@ -348,27 +336,29 @@ class AutocollimatorRenderer:
                                   lens_ghosts=lens_ghosts, max_depth=max_depth, mirror_reflectance=mirror_reflectance,
                                   world_origin=world_origin)
         self.scene_info = sc
-        import mitsuba as mi
-
-        self._scene = mi.load_dict(sc.scene_dict)
-        self._params = mi.traverse(self._scene)
+        # the render loop's elements: per frame the mirror's vertices follow the turntable pose and
+        # the camera moves to the window (rigsim.render.scene)
+        self._scene = Scene.from_dict(sc.scene_dict, {"mirror_group": self._mirror_update, "sensor": self._sensor_update})
         self._faces = mirror_mesh_A(rig, self.real, self.layout, self.layout.reference_pose_rad)[1]
         self.max_depth = sc.scene_dict["integrator"]["max_depth"]
         self.warmed_up = False
 
     # -- per-frame state ---------------------------------------------------------------------
-    def _set(self, pose_rad: dict, window_origin) -> None:
+    def _mirror_update(self, state) -> dict:
         import mitsuba as mi
 
-        V, F = mirror_mesh_A(self.rig, self.real, self.layout, pose_rad)
+        V, F = mirror_mesh_A(self.rig, self.real, self.layout, state["pose"])
         if F.shape != self._faces.shape or np.any(F != self._faces):
             raise RuntimeError("mirror mesh topology changed")  # cannot happen: same builder
         local = (V - self.scene_info.anchor_A).astype(np.float32)
-        self._params["mirror_group.mirror.vertex_positions"] = mi.Float(local.ravel())
-        M = _camera_matrix(self.optics, window_origin, self.window_px)
+        return {"mirror_group.mirror.vertex_positions": mi.Float(local.ravel())}
+
+    def _sensor_update(self, state) -> dict:
+        import mitsuba as mi
+
+        M = _camera_matrix(self.optics, state["window_origin"], self.window_px)
         M[:3, 3] -= self.scene_info.world_shift_A
-        self._params["sensor.to_world"] = mi.ScalarTransform4f(M.tolist())
-        self._params.update()
+        return {"sensor.to_world": mi.ScalarTransform4f(M.tolist())}
 
     def warm_up(self, seed: int = 0) -> float:
         """Render one window at the reference pose (compiles the kernels). Returns seconds."""
@@ -413,8 +403,6 @@ class AutocollimatorRenderer:
         :class:`GeometryWarning`; when no light comes back onto the detector nothing is rendered
         (zeros). Values are expected photons per pixel for ``source_photons`` (default: the
         renderer's). ``spp`` overrides the renderer's (each new value compiles once)."""
-        import mitsuba as mi
-
         spp = self.spp if spp is None else int(spp)
         _check_sampler(spp, self.sampler)
         t0 = time.perf_counter()
@@ -435,10 +423,7 @@ class AutocollimatorRenderer:
             return AutocollimatorWindow(np.zeros((W, W)), tuple(origin), tr, flags, dict(pose_rad), spp, int(seed),
                                         time.perf_counter() - t0, False, np.zeros((W, W)), tuple(origin))
         t1 = time.perf_counter()
-        self._set(pose_rad, origin)
-        img = mi.render(self._scene, seed=int(seed), spp=spp)
-        arr = np.array(img, dtype=np.float64)
-        arr = arr[..., 0] if arr.ndim == 3 else arr
+        arr = self._scene.render({"pose": pose_rad, "window_origin": origin}, seed=int(seed), spp=spp)
         t_mi = time.perf_counter() - t1
         arr = np.ascontiguousarray(arr[:, ::-1]) * (self.scene_info.photons_per_unit * photons
                                                     / self.scene_info.source_photons)
@@ -459,29 +444,29 @@ class AutocollimatorRenderer:
                                     time.perf_counter() - t0, True, geo, geo_origin, t_mi)
 
     def render_frame(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False,
-                     source_photons: float | None = None, spp: int | None = None) -> AutocollimatorFrame:
+                     source_photons: float | None = None, spp: int | None = None) -> Frame:
         """Full detector frame: the window composited on black (exact: only the reticle emits and
         ``spot_exceeds_window`` says whether light was lost), then the detector model with
         ``rig.autocollimator.detector`` and this ``seed`` (Mitsuba and the detector noise both
-        take it); the sidecar holds the truth."""
+        take it); the sidecar holds the truth, ``extra["window"]`` the rendered window."""
         win = self.render_window(pose_rad, seed, source_photons=source_photons, spp=spp)
         H, W = self.optics.height, self.optics.width
         photons = win.paste_into(np.zeros((H, W)))
-        cfg = self.rig.autocollimator.detector
-        det = apply_detector(photons, cfg, seed=int(seed), noiseless=noiseless)
-        if det.saturated_pixels > 0:
-            warnings.warn(f"{det.saturated_pixels} saturated pixels in the autocollimator frame: lower "
+        fr = digitise(photons, self.rig.autocollimator.detector, seed=int(seed), noiseless=noiseless,
+                      truth=self.truth_dict(win.truth),
+                      render=self.settings(spp=win.spp, source_photons=source_photons),
+                      geometry_flags=win.flags, pose=_pose_dict(pose_rad),
+                      sidecar_extra={"window_origin_uv": list(win.origin_uv), "rendered": win.rendered,
+                                     "render_seconds": win.seconds,
+                                     "window_centroid_uv": win.centroid().tolist(),
+                                     "window_centroid_geometric_uv": win.centroid_geometric().tolist()},
+                      extra={"window": win}, seconds=win.seconds)
+        if fr.detector.saturated_pixels > 0:
+            warnings.warn(f"{fr.detector.saturated_pixels} saturated pixels in the autocollimator frame: lower "
                           "source_photons (the centroid is biased)", GeometryWarning, stacklevel=2)
-        sidecar = build_sidecar(truth=self.truth_dict(win.truth), render=self.settings(spp=win.spp,
-                                source_photons=source_photons), detector_frame=det,
-                                geometry_flags=win.flags, pose=_pose_dict(pose_rad), seed=int(seed),
-                                extra={"window_origin_uv": list(win.origin_uv), "rendered": win.rendered,
-                                       "render_seconds": win.seconds,
-                                       "window_centroid_uv": win.centroid().tolist(),
-                                       "window_centroid_geometric_uv": win.centroid_geometric().tolist()})
-        return AutocollimatorFrame(photons, det, sidecar, win)
+        return fr
 
-    def write(self, path, frame: AutocollimatorFrame):
+    def write(self, path, frame: Frame):
         return write_frame(path, frame.dn, frame.sidecar)
 
     # -- descriptions ------------------------------------------------------------------------

@@ -45,7 +45,7 @@ directions). Over the 1.3 m return path 32′ spreads the spot to ~12 mm more th
 (~14.6 mm in all), larger than the default aiming camera's 12.7 × 8.6 mm field on the screen,
 which the flags then report.
 
-The numpy twin of the camera (:class:`AimingCameraModel`) and the screen homography are written
+The camera (:class:`rigsim.optics.aiming.PosedCamera`) and the screen homography are written
 independently of Mitsuba; the truth in every sidecar is the exact placement trace projected
 through it.
 """
@@ -68,6 +68,8 @@ from rigsim.truth.cube_mirror.diaphragm import (
 )
 from rigsim.truth.cube_mirror.placement import cube_pose
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
+from rigsim.render.frame import Frame, digitise
+from rigsim.render.scene import Scene
 
 __all__ = ["GeometryWarning", "DiaphragmGeometry", "DiaphragmTruth", "DiaphragmFrames", "DiaphragmRenderer",
            "diaphragm_geometry", "build_diaphragm_scene_dict", "screen_with_hole_mesh", "true_cube_mesh",
@@ -104,6 +106,28 @@ def _disk_matrix(centre, normal, radius: float) -> np.ndarray:
     M[:3, 2] = n
     M[:3, 3] = centre
     return M
+
+
+def perspective_to_world(cam) -> np.ndarray:
+    """``to_world`` of Mitsuba's built-in ``perspective`` sensor for a :class:`~rigsim.optics.aiming.PosedCamera`:
+    Mitsuba's camera-local frame is x left, y up, z forward, so x and y flip (det stays +1)."""
+    M = np.eye(4)
+    M[:3, 0] = -cam.R_world_from_cam[:, 0]
+    M[:3, 1] = -cam.R_world_from_cam[:, 1]
+    M[:3, 2] = cam.R_world_from_cam[:, 2]
+    M[:3, 3] = cam.centre
+    return M
+
+
+def perspective_props(cam) -> dict:
+    """``fov`` (deg, along x) and ``principal_point_offset_x/y`` (fractions of the film size; measured:
+    +offset moves the principal point towards −u / −v) of the built-in ``perspective`` sensor."""
+    return {
+        "fov": math.degrees(2.0 * math.atan(cam.width / (2.0 * cam.f_px))),
+        "fov_axis": "x",
+        "principal_point_offset_x": (cam.width / 2.0 - 0.5 - cam.cx) / cam.width,
+        "principal_point_offset_y": (cam.height / 2.0 - 0.5 - cam.cy) / cam.height,
+    }
 
 
 def cube_to_scene_matrix(geom: DiaphragmGeometry, pose_rad: dict) -> np.ndarray:
@@ -169,8 +193,8 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
     cam = geom.camera
     film = {"type": "hdrfilm", "width": cam.width, "height": cam.height, "rfilter": {"type": "box"},
             "pixel_format": "luminance", "component_format": "float32"}
-    sensor = {"type": "perspective", **cam.mitsuba_props(), "near_clip": 1.0, "far_clip": 1.0e5,
-              "to_world": T(cam.mitsuba_to_world()), "film": film,
+    sensor = {"type": "perspective", **perspective_props(cam), "near_clip": 1.0, "far_clip": 1.0e5,
+              "to_world": T(perspective_to_world(cam)), "film": film,
               "sampler": {"type": sampler, "sample_count": int(spp)}}
     has_hole = geom.return_into_hole == "absorb" or content != "spot"
     screen_mesh = screen_with_hole_mesh(ds.width_mm, ds.height_mm, geom.hole_radius_mm if has_hole else None)
@@ -257,20 +281,20 @@ class DiaphragmFrames:
     seed: int
     hole_photons: np.ndarray
     spot_photons: np.ndarray
-    hole: object  # DetectorFrame
-    spot: object  # DetectorFrame
+    hole: Frame
+    spot: Frame
     truth: DiaphragmTruth
     flags: dict
-    sidecars: dict
     seconds: dict
+
+    @property
+    def sidecars(self) -> dict:
+        return {"hole": self.hole.sidecar, "spot": self.spot.sidecar}
 
     def write(self, prefix) -> dict:
         """Write ``<prefix>_hole`` and ``<prefix>_spot`` (16-bit PNG + JSON sidecar each)."""
-        from rigsim.render.frame import write_frame
-
         prefix = Path(prefix)
-        return {k: write_frame(prefix.with_name(f"{prefix.name}_{k}"), getattr(self, k).dn, self.sidecars[k])
-                for k in ("hole", "spot")}
+        return {k: getattr(self, k).write(prefix.with_name(f"{prefix.name}_{k}")) for k in ("hole", "spot")}
 
 
 class DiaphragmRenderer:
@@ -306,7 +330,6 @@ class DiaphragmRenderer:
         from rigsim.render.backend import ensure_variant
 
         self.variant = ensure_variant()
-        import mitsuba as mi
 
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
@@ -340,15 +363,15 @@ class DiaphragmRenderer:
         self.photons_per_radiance = self.spot_photons_per_px / spot_radiance(self.screen_reflectance, 1.0)
         t0 = time.perf_counter()
         pose0 = dict(self.geometry.layout.null_pose_rad)
-        self._spot_scene = mi.load_dict(self.scene_dict(pose0, "spot"))
-        self._spot_params = mi.traverse(self._spot_scene)
         self._cube_local = np.array(true_cube_mesh(rig, self.real).vertices, float)
-        n_loaded = len(self._spot_params["cube.vertex_positions"]) // 3
+        # the render loop's elements: per frame only the cube moves (its vertices follow the pose)
+        self._spot_scene = Scene.from_dict(self.scene_dict(pose0, "spot"), {"cube": self._cube_update})
+        n_loaded = len(self._spot_scene.params["cube.vertex_positions"]) // 3
         if n_loaded != len(self._cube_local):
             raise RuntimeError(f"Mitsuba loaded {n_loaded} cube vertices, expected {len(self._cube_local)}")
         self._hole_scene = None
         if self.hole_glow_ratio > 0:
-            self._hole_scene = mi.load_dict(self.scene_dict(pose0, "hole"))
+            self._hole_scene = Scene.from_dict(self.scene_dict(pose0, "hole"))
         self.build_seconds = time.perf_counter() - t0
         self.warmup_seconds = 0.0
         if warmup:
@@ -362,31 +385,22 @@ class DiaphragmRenderer:
         return build_diaphragm_scene_dict(self.rig, self.real, pose_rad, self.face_index, content=content,
                                           **self._opts)
 
-    def set_pose(self, pose_rad: dict) -> float:
-        """Move the cube to turntable pose ``pose_rad`` (mi.traverse). Returns seconds taken."""
+    def _cube_update(self, state) -> dict:
         import mitsuba as mi
 
-        t0 = time.perf_counter()
-        M = cube_to_scene_matrix(self.geometry, pose_rad)
+        M = cube_to_scene_matrix(self.geometry, state["pose"])
         v = self._cube_local @ M[:3, :3].T + M[:3, 3]
-        self._spot_params["cube.vertex_positions"] = mi.Float(v.astype(np.float32).ravel())
-        self._spot_params.update()
+        return {"cube.vertex_positions": mi.Float(v.astype(np.float32).ravel())}
+
+    def set_pose(self, pose_rad: dict) -> float:
+        """Move the cube to turntable pose ``pose_rad`` (mi.traverse). Returns seconds taken."""
+        t0 = time.perf_counter()
+        self._spot_scene.update({"pose": pose_rad})
         return time.perf_counter() - t0
 
     # -- rendering ----------------------------------------------------------------------------
-    def _render(self, scene, seed: int) -> np.ndarray:
-        import drjit as dr
-        import mitsuba as mi
-
-        prev = dr.thread_count()
-        if self.deterministic and prev != 1:
-            dr.set_thread_count(1)
-        try:
-            arr = np.array(mi.render(scene, seed=int(seed), spp=self.spp), dtype=np.float64)
-        finally:
-            if dr.thread_count() != prev:
-                dr.set_thread_count(prev)
-        arr = arr[..., 0] if arr.ndim == 3 else arr
+    def _render(self, scene: Scene, seed: int) -> np.ndarray:
+        arr = scene.render(seed=int(seed), spp=self.spp, single_thread=self.deterministic)
         return np.maximum(arr, 0.0) * self.photons_per_radiance
 
     def render_photons(self, pose_rad: dict, seed: int = 0, *, hole: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict]:
@@ -409,9 +423,6 @@ class DiaphragmRenderer:
     def render(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False) -> DiaphragmFrames:
         """Render both frames of ``pose_rad``; geometry problems become sidecar flags and
         :class:`GeometryWarning` s, saturation a flag and a :class:`SaturationWarning`."""
-        from rigsim.detector import apply_detector
-        from rigsim.render.frame import build_sidecar
-
         if int(seed) != seed or seed < 0:
             raise ValueError(f"seed = {seed!r}: must be an integer >= 0")
         t_all = time.perf_counter()
@@ -422,37 +433,35 @@ class DiaphragmRenderer:
         spot_ph, hole_ph, sec = self.render_photons(pose_rad, seed)
         t0 = time.perf_counter()
         spot_in = spot_ph + hole_ph if self.hole_glow_in_spot_frame else spot_ph
-        f_hole = apply_detector(hole_ph, self.detector, _derived_seed(seed, 3), noiseless=noiseless)
-        f_spot = apply_detector(spot_in, self.detector, _derived_seed(seed, 4), noiseless=noiseless)
-        sec["detector"] = time.perf_counter() - t0
         settings = self.settings()
-        sidecars = {}
-        for name, fr in (("hole", f_hole), ("spot", f_spot)):
+        frames = {}
+        for name, photons, stream in (("hole", hole_ph, 3), ("spot", spot_in, 4)):
             tdict = truth.as_dict()
             tdict["frame"] = name
             tdict["frame_contains"] = (["hole_glow"] if name == "hole"
                                        else (["spot", "hole_glow"] if self.hole_glow_in_spot_frame else ["spot"]))
-            if fr.saturated_pixels:
-                warnings.warn(f"{name} frame: {fr.saturated_pixels} saturated pixels (lower spot_photons_per_px "
-                              "or the exposure)", SaturationWarning, stacklevel=2)
             gflags = dict(truth.flags)
             if name == "hole":  # no spot in this frame: spot flags do not apply
                 for k in ("spot_off_detector", "spot_cut_by_edge", "spot_overlaps_hole"):
                     gflags[k] = False
-            sidecars[name] = build_sidecar(
-                truth=tdict, render=settings, detector_frame=fr, geometry_flags=gflags,
+            frames[name] = fr = digitise(
+                photons, self.detector, seed=_derived_seed(seed, stream), noiseless=noiseless, frame_seed=int(seed),
+                truth=tdict, truth_object=truth, render=settings, geometry_flags=gflags,
                 pose={"true_angles_rad": dict(pose_rad),
                       "true_angles_deg": {k: math.degrees(v) for k, v in pose_rad.items()},
                       "face": self.geometry.face},
-                seed=int(seed),
-                extra={"render_seeds": {"spot": _derived_seed(seed, 1), "hole": _derived_seed(seed, 2)},
-                       "detector_seed": _derived_seed(seed, 3 if name == "hole" else 4)})
+                sidecar_extra={"render_seeds": {"spot": _derived_seed(seed, 1), "hole": _derived_seed(seed, 2)},
+                               "detector_seed": _derived_seed(seed, stream)})
+            if fr.detector.saturated_pixels:
+                warnings.warn(f"{name} frame: {fr.detector.saturated_pixels} saturated pixels (lower "
+                              "spot_photons_per_px or the exposure)", SaturationWarning, stacklevel=2)
+        sec["detector"] = time.perf_counter() - t0
         sec["total"] = time.perf_counter() - t_all
         flags = dict(truth.flags)
-        flags["saturated_pixels"] = {"hole": f_hole.saturated_pixels, "spot": f_spot.saturated_pixels}
-        flags["saturated"] = bool(f_hole.saturated_pixels or f_spot.saturated_pixels)
-        return DiaphragmFrames(dict(pose_rad), int(seed), hole_ph, spot_ph, f_hole, f_spot, truth, flags,
-                               sidecars, sec)
+        flags["saturated_pixels"] = {k: f.detector.saturated_pixels for k, f in frames.items()}
+        flags["saturated"] = bool(any(flags["saturated_pixels"].values()))
+        return DiaphragmFrames(dict(pose_rad), int(seed), hole_ph, spot_ph, frames["hole"], frames["spot"], truth,
+                               flags, sec)
 
     def settings(self) -> dict:
         g = self.geometry

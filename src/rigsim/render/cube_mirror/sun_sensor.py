@@ -39,15 +39,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.detector import apply_detector
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, _basis, _unit, spot_geometry_flags, spot_truth, window_centroid
 from rigsim.render.backend import ensure_variant
-from rigsim.render.frame import build_sidecar, write_frame
-from rigsim.render.plugins import PINHOLE_PLUGIN, register_sensors
+from rigsim.render.plugins import register_sensors
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
+from rigsim.render.scene import Element, PinholeSensor, Scene
+from rigsim.render.frame import Frame, digitise
 
 __all__ = ["SUN_FULL_ANGLE_RAD", "GeometryWarning", "SpotWindow", "SunSpotRenderer", "spot_truth",
            "spot_geometry_flags", "window_centroid"]
@@ -126,39 +126,28 @@ class SunSpotRenderer:
         if on_axis + 2.0 > window_px:
             raise ValueError(f"window_px = {window_px} is too small for a spot of {on_axis:.1f} px "
                              "diameter on axis (need diameter + 2 px margin)")
-        self._scene, self._params = self._build(window_px, window_px, self.spp)
-        self._full = None  # (scene, params, spp) for render_full, built on demand
+        self._scene = self._build(window_px, window_px, self.spp)
+        self._full = None  # (Scene, spp) for render_full, built on demand
 
     # -- scene --------------------------------------------------------------------------------
     def _radiance(self) -> float:
         omega = 2.0 * math.pi * (1.0 - math.cos(self.full_angle_rad / 2.0))
         return self.spot_photons / (self.camera.fx * self.camera.fy * omega)
 
-    def _build(self, w: int, h: int, spp: int):
+    def _build(self, w: int, h: int, spp: int) -> Scene:
+        """Elements: the camera's window (moved by ``window_origin``) and the sun disk (placed by
+        ``sun_dir``, the unit vector to the sun in the camera frame)."""
         import mitsuba as mi
 
-        cam = self.camera
-        scene = mi.load_dict({
-            "type": "scene",
-            "integrator": {"type": "path", "max_depth": 1},
-            "sensor": {
-                "type": PINHOLE_PLUGIN,
-                "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
-                "k1": cam.k1, "k2": cam.k2, "k3": cam.k3, "p1": cam.p1, "p2": cam.p2,
-                "detector_width": cam.width, "detector_height": cam.height,
-                "window_u0": 0, "window_v0": 0, "response": self.response,
-                "film": {"type": "hdrfilm", "width": w, "height": h,
-                         "rfilter": {"type": "box"}, "pixel_format": "luminance"},
-                "sampler": {"type": self.sampler, "sample_count": spp},
-            },
-            "sun": {
-                "type": "disk",
-                "to_world": mi.ScalarTransform4f(self._disk_matrix(np.array([0.0, 0.0, 1.0]))),
-                "emitter": {"type": "area", "radiance": {"type": "uniform",
-                                                         "value": self._radiance()}},
-            },
-        })
-        return scene, mi.traverse(scene)
+        def place_disk(state) -> dict:
+            return {"sun.to_world": mi.Transform4f(self._disk_matrix(state["sun_dir"]))} if "sun_dir" in state else {}
+
+        sun = Element("sun", {"type": "disk",
+                              "to_world": mi.ScalarTransform4f(self._disk_matrix(np.array([0.0, 0.0, 1.0]))),
+                              "emitter": {"type": "area", "radiance": {"type": "uniform", "value": self._radiance()}}},
+                      place_disk)
+        sensor = PinholeSensor(self.camera, width=w, height=h, spp=spp, sampler=self.sampler, response=self.response)
+        return Scene({"type": "path", "max_depth": 1}, [sensor, sun])
 
     def _disk_matrix(self, s: np.ndarray) -> np.ndarray:
         """Disk (local z-normal, unit radius) -> world: centred at D s, facing the pinhole."""
@@ -177,19 +166,10 @@ class SunSpotRenderer:
         return (int(math.floor(center_uv[0] + 0.5)) - half,
                 int(math.floor(center_uv[1] + 0.5)) - half)
 
-    def _set_pose(self, params, s: np.ndarray, origin: tuple[int, int]) -> None:
-        import mitsuba as mi
-
-        params["sun.to_world"] = mi.Transform4f(self._disk_matrix(s))
-        params["sensor.window_origin"] = mi.Point2f(float(origin[0]), float(origin[1]))
-        params.update()
-
     # -- rendering ----------------------------------------------------------------------------
     def render(self, sun_dir_cam, seed: int = 0) -> SpotWindow:
         """Render the crop window around the predicted spot. Geometry problems become flags
         (and a :class:`GeometryWarning`); a spot outside the model/detector is not rendered."""
-        import mitsuba as mi
-
         s = _unit(sun_dir_cam)
         t0 = time.perf_counter()
         c_uv, c_ok = self.camera.project_valid(s[None, :])
@@ -211,10 +191,7 @@ class SunSpotRenderer:
         if flags["spot_exceeds_window"]:
             warnings.warn(f"the spot ({flags['spot_extent_px']} px) does not fit the "
                           f"{W} px window; flux is lost", GeometryWarning, stacklevel=2)
-        self._set_pose(self._params, s, origin)
-        img = mi.render(self._scene, seed=int(seed), spp=self.spp)
-        arr = np.array(img, dtype=np.float64)
-        arr = arr[..., 0] if arr.ndim == 3 else arr
+        arr = self._scene.render({"sun_dir": s, "window_origin": origin}, seed=int(seed), spp=self.spp)
         return SpotWindow(arr, origin, s, center, flags, self.spp, int(seed), self.variant,
                           time.perf_counter() - t0, settings)
 
@@ -230,16 +207,10 @@ class SunSpotRenderer:
 
     def render_full(self, sun_dir_cam, seed: int = 0, spp: int = 16) -> np.ndarray:
         """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks."""
-        import mitsuba as mi
-
         _check_spp(spp, self.sampler)
-        if self._full is None or self._full[2] != spp:
-            scene, params = self._build(self.camera.width, self.camera.height, spp)
-            self._full = (scene, params, spp)
-        scene, params, _ = self._full
-        self._set_pose(params, _unit(sun_dir_cam), (0, 0))
-        arr = np.array(mi.render(scene, seed=int(seed), spp=spp), dtype=np.float64)
-        return arr[..., 0] if arr.ndim == 3 else arr
+        if self._full is None or self._full[1] != spp:
+            self._full = (self._build(self.camera.width, self.camera.height, spp), spp)
+        return self._full[0].render({"sun_dir": _unit(sun_dir_cam), "window_origin": (0, 0)}, seed=int(seed), spp=spp)
 
     def truth(self, sun_dir_cam, n: int = 2_000_000) -> dict:
         return spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n,
@@ -262,18 +233,6 @@ class SunSpotRenderer:
         }
 
 # ------------------------------------------------------------------------------------------ (from sun_sensor.py)
-@dataclass
-class SunSensorFrame:
-    dn: np.ndarray  # (H, W) uint16 — or only the crop window when rendered with full_frame=False
-    photons_window: SpotWindow
-    sidecar: dict
-    seconds: float
-    dn_origin_uv: tuple[int, int] = (0, 0)  # detector pixel of dn[0, 0]
-
-    def write(self, path) -> tuple:
-        return write_frame(path, self.dn, self.sidecar)
-
-
 def default_spot_photons(rig: CubeMirrorRig) -> float:
     """Photons per spot that put the on-axis peak pixel near half the full well."""
     ss = rig.sun_sensor
@@ -307,24 +266,22 @@ class SunSensorScene:
         return s / np.linalg.norm(s)
 
     def render(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False, truth_points: int = 400_000,
-               full_frame: bool = True) -> SunSensorFrame:
+               full_frame: bool = True) -> Frame:
         """Render one frame. ``full_frame=False`` digitises only the crop window (same pixels, same
-        fixed pattern, same noise statistics as the full frame; 10× faster for sweeps)."""
+        fixed pattern, same noise statistics as the full frame; 10× faster for sweeps). The frame's
+        ``extra["window"]`` is the rendered :class:`SpotWindow`."""
         t0 = time.perf_counter()
         s = self.sun_dir_cam(pose_rad)
         ss = self.rig.sun_sensor
         if full_frame:
             photons, win = self.renderer.render_frame(s, seed=seed)
-            det = apply_detector(photons, ss.detector, seed=seed, noiseless=noiseless)
-            origin = (0, 0)
+            origin, shape = (0, 0), None
         else:
             win = self.renderer.render(s, seed=seed)
-            origin = tuple(win.origin_uv)
-            det = apply_detector(win.image, ss.detector, seed=seed, noiseless=noiseless, origin_uv=origin,
-                                 detector_shape=(ss.resolution_px[1], ss.resolution_px[0]))
+            photons, origin, shape = win.image, tuple(win.origin_uv), (ss.resolution_px[1], ss.resolution_px[0])
         truth = self.renderer.truth(s, n=truth_points) if not (win.flags.get("spot_off_detector") or win.flags.get("spot_outside_model")) else {"valid": False}
-        flags = dict(win.flags)
-        sidecar = build_sidecar(
+        return digitise(
+            photons, ss.detector, seed=seed, noiseless=noiseless, origin_uv=origin, detector_shape=shape,
             truth={
                 "rig": self.rig.name,
                 "sun_dir_cam": s.tolist(),
@@ -333,12 +290,9 @@ class SunSensorScene:
                 "R_sun_from_mount": self.real.R_sun_from_mount.tolist(),
             },
             render={**win.settings, "noiseless": noiseless, "window_origin_uv": list(win.origin_uv)},
-            detector_frame=det,
-            geometry_flags=flags,
+            geometry_flags=dict(win.flags),
             pose={k: math.degrees(v) for k, v in pose_rad.items()},
-            seed=seed,
-        )
-        return SunSensorFrame(det.dn, win, sidecar, time.perf_counter() - t0, origin)
+            extra={"window": win}, seconds=time.perf_counter() - t0)
 
 
 def sun_sensor_export_dict(scene: SunSensorScene, pose_rad: dict, spp: int = 64) -> tuple[dict, list[str]]:

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rigsim.optics.aiming import PosedCamera, aiming_camera, screen_homography
+
 from rigsim.errors import GeometryError
 from rigsim.optics.cube import FACE_NORMALS
 from rigsim.optics.sun_disk import disk_directions
@@ -35,63 +37,6 @@ def _perp_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     e1 = _unit(np.cross(a, d))
     return e1, np.cross(d, e1)
-
-
-@dataclass(frozen=True)
-class AimingCameraModel:
-    """Pinhole aiming camera (no distortion, square pixels): numpy twin of Mitsuba's ``perspective``.
-
-    OpenCV camera frame (x right, y down, z forward); ``R_world_from_cam`` has the camera axes as
-    columns, ``centre`` in scene millimetres. Pixel (0, 0)'s centre is (u, v) = (0, 0).
-    """
-
-    R_world_from_cam: np.ndarray
-    centre: np.ndarray
-    f_px: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-
-    def project(self, p_scene) -> tuple[np.ndarray, np.ndarray]:
-        p = (np.asarray(p_scene, float) - self.centre) @ self.R_world_from_cam
-        z = p[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.stack([self.f_px * p[..., 0] / z + self.cx, self.f_px * p[..., 1] / z + self.cy], axis=-1)
-        return uv, z > 0
-
-    @property
-    def K(self) -> np.ndarray:
-        return np.array([[self.f_px, 0.0, self.cx], [0.0, self.f_px, self.cy], [0.0, 0.0, 1.0]])
-
-    def on_detector(self, uv, margin: float = 0.0) -> np.ndarray:
-        uv = np.asarray(uv, float)
-        return ((uv[..., 0] >= -0.5 + margin) & (uv[..., 0] < self.width - 0.5 - margin)
-                & (uv[..., 1] >= -0.5 + margin) & (uv[..., 1] < self.height - 0.5 - margin))
-
-    def mitsuba_to_world(self) -> np.ndarray:
-        """Mitsuba's camera-local frame is x left, y up, z forward: flip x and y (det stays +1)."""
-        M = np.eye(4)
-        M[:3, 0] = -self.R_world_from_cam[:, 0]
-        M[:3, 1] = -self.R_world_from_cam[:, 1]
-        M[:3, 2] = self.R_world_from_cam[:, 2]
-        M[:3, 3] = self.centre
-        return M
-
-    def mitsuba_props(self) -> dict:
-        """``fov`` (deg, along x) and ``principal_point_offset_x/y`` (fractions of the film size;
-        measured: +offset moves the principal point towards −u / −v)."""
-        return {
-            "fov": math.degrees(2.0 * math.atan(self.width / (2.0 * self.f_px))),
-            "fov_axis": "x",
-            "principal_point_offset_x": (self.width / 2.0 - 0.5 - self.cx) / self.width,
-            "principal_point_offset_y": (self.height / 2.0 - 0.5 - self.cy) / self.height,
-        }
-
-    def as_dict(self) -> dict:
-        return {"R_world_from_cam": self.R_world_from_cam, "centre_scene_mm": self.centre, "f_px": self.f_px,
-                "cx": self.cx, "cy": self.cy, "width": self.width, "height": self.height,
-                "camera_frame": "OpenCV (x right, y down, z forward)"}
 
 
 @dataclass(frozen=True)
@@ -151,7 +96,7 @@ class DiaphragmGeometry:
     face_index: int
     layout: DiaphragmLayout
     shift_mm: np.ndarray
-    camera: AimingCameraModel
+    camera: PosedCamera
     H_screen_to_uv: np.ndarray  # homogeneous (s, t, 1) mm → (u, v, 1) px; s, t = lab X', Y' from the hole
     hole_radius_mm: float
     d_sun_rot: np.ndarray
@@ -331,26 +276,9 @@ def diaphragm_geometry(rig: CubeMirrorRig, real: Realization | None = None, face
     real = real if real is not None else realization_from_rig(rig)
     lay = diaphragm_layout(rig, real, face_index)
     shift, _ = face_in_rot(rig, real, lay.face, lay.null_pose_rad)
-    ac = rig.aiming_camera
-    W, H = (int(x) for x in ac.resolution_px)
-    f_px = ac.focal_length_mm / (ac.pixel_pitch_um * 1e-3)
-    cx, cy = ((W - 1) / 2.0, (H - 1) / 2.0) if principal_point_px is None else (float(principal_point_px[0]), float(principal_point_px[1]))
-    a = math.radians(ac.view_angle_deg)
-    psi = math.radians(view_azimuth_deg)
-    side = np.array([math.cos(psi), math.sin(psi), 0.0])
     hole = lay.hole_centre_mm - shift
-    C = hole + ac.working_distance_mm * (math.sin(a) * side - math.cos(a) * _EZ)
-    fwd = _unit(hole - C)
-    up = np.array([0.0, 1.0, 0.0])
-    if abs(up @ fwd) > 0.99:
-        up = np.array([1.0, 0.0, 0.0])
-    y_c = -_unit(up - (up @ fwd) * fwd)  # image down = −(lab up)
-    x_c = np.cross(y_c, fwd)
-    R = np.column_stack([x_c, y_c, fwd])
-    cam = AimingCameraModel(R, C, float(f_px), cx, cy, W, H)
-    Rc = R.T
-    Hmat = cam.K @ np.column_stack([Rc @ np.array([1.0, 0.0, 0.0]), Rc @ np.array([0.0, 1.0, 0.0]), Rc @ (hole - C)])
-    Hmat = Hmat / Hmat[2, 2]
+    cam = aiming_camera(rig.aiming_camera, hole, view_azimuth_deg=view_azimuth_deg, principal_point_px=principal_point_px)
+    Hmat = screen_homography(cam, hole)
     div = 0.0
     if beam == "divergent":
         arcmin = rig.sun_simulator.collimation_full_angle_arcmin if divergence_full_angle_arcmin is None else divergence_full_angle_arcmin
