@@ -1,4 +1,4 @@
-"""Project-wide test rules.
+"""Project-wide test rules and shared fixtures. The tree mirrors src/rigsim (one folder per layer).
 
 Tests marked ``@pytest.mark.slow`` are skipped in the default run (which must stay well under
 ten minutes on 2 cores) and run with ``-m slow`` or ``RIGSIM_SLOW=1``; .ci/run runs them after
@@ -22,3 +22,19 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(scope="session")
+def star_rig():
+    """The default star-sensor rig (seed 004)."""
+    from rigsim.rig.load import load_star_rig
+
+    return load_star_rig()
+
+
+@pytest.fixture(scope="session")
+def star_sky(star_rig):
+    """Its true sky: the catalogue and the true camera (truth side)."""
+    from rigsim.truth.star import StarSky
+
+    return StarSky(star_rig)
