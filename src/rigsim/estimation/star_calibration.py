@@ -81,9 +81,13 @@ def normalized_with_jacobians(uv, theta, p12=(0.0, 0.0)):
     the known tangential terms) and its implicit-function Jacobians, mapped onto θ = (f, u0, v0, k1, k2)."""
     f, u0, v0, k1, k2 = (float(t) for t in theta)
     p1, p2 = (float(p) for p in p12)
-    xy, dxy_duv, dxy_dp = unproject(np.asarray(uv, dtype=float), np.array([f, f, u0, v0, k1, k2, p1, p2, 0.0]),
-                                    get_gradients=True)
-    return xy, dxy_dp @ _THETA_TO_PARAMS, dxy_duv, np.all(np.isfinite(xy), axis=-1)
+    params = np.array([f, f, u0, v0, k1, k2, p1, p2, 0.0])
+    uv = np.asarray(uv, dtype=float)
+    # an EKF on a biased model (improved ADS) may wander far outside the distortion model's domain:
+    # keep its values there (the filter decides), and report where they are valid
+    xy, dxy_duv, dxy_dp = unproject(uv, params, get_gradients=True, keep_invalid=True)
+    ok = np.all(np.isfinite(unproject(uv, params)), axis=-1)
+    return xy, dxy_dp @ _THETA_TO_PARAMS, dxy_duv, ok
 
 
 def pair_sets(uv: np.ndarray):

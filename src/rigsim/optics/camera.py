@@ -226,12 +226,14 @@ def project(p, params, *, get_gradients: bool = False):
     return uv, du_dp, du_dk
 
 
-def unproject(uv, params, *, get_gradients: bool = False, iterations: int = 20):
+def unproject(uv, params, *, get_gradients: bool = False, iterations: int = 20, keep_invalid: bool = False):
     """Pixels (..., 2) → normalised undistorted ``xy`` (..., 2) (z = 1 implied); NaN where invalid.
 
     Newton inversion as :func:`brown_undistort`, valid where it decides so with
     r2_max = radial_r2_max. With ``get_gradients`` returns ``(xy, dxy_duv (..., 2, 2),
     dxy_dparams (..., 2, 9))`` by the implicit function theorem, NaN where xy is NaN.
+    ``keep_invalid``: keep Newton's values (and their gradients) where they are not valid instead
+    of NaN — for iterative estimators that may wander outside the domain on their way.
     """
     uv = np.asarray(uv, dtype=np.float64)
     params = np.asarray(params, dtype=np.float64)
@@ -242,7 +244,7 @@ def unproject(uv, params, *, get_gradients: bool = False, iterations: int = 20):
     xd = (u - cx) / fx
     yd = (v - cy) / fy
     x, y, ok = brown_undistort(xd, yd, k1, k2, p1, p2, k3, r2_max, iterations)
-    invalid = np.broadcast_to(~ok, shape)
+    invalid = np.broadcast_to(~ok, shape) if not keep_invalid else np.zeros(shape, bool)
     xy = np.empty(shape + (2,))
     xy[..., 0], xy[..., 1] = x, y
     xy[invalid] = np.nan
