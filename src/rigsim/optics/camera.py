@@ -66,14 +66,17 @@ def brown_undistort(xd, yd, k1, k2, p1, p2, k3, r2_max=np.inf, iterations: int =
     yd = np.asarray(yd, dtype=np.float64)
     c = (k1, k2, p1, p2, k3)
     x, y = xd.copy(), yd.copy()
-    for _ in range(iterations):
-        fxd, fyd = brown_distort(x, y, *c)
-        ex, ey = fxd - xd, fyd - yd
-        a, b, cc, d = brown_jacobian(x, y, *c)
-        det = a * d - b * cc
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = x - (d * ex - b * ey) / det
-            y = y - (-cc * ex + a * ey) / det
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for _ in range(iterations):
+            fxd, fyd = brown_distort(x, y, *c)
+            ex, ey = fxd - xd, fyd - yd
+            a, b, cc, d = brown_jacobian(x, y, *c)
+            det = a * d - b * cc
+            sx, sy = (d * ex - b * ey) / det, (-cc * ex + a * ey) / det
+            x, y = x - sx, y - sy
+            # stop once every finite point has converged to rounding (quadratic convergence)
+            if not np.any(np.abs(sx) + np.abs(sy) > 1e-15 * (1.0 + np.abs(x) + np.abs(y))):
+                break
     fxd, fyd = brown_distort(x, y, *c)
     a, b, cc, d = brown_jacobian(x, y, *c)
     valid = (np.hypot(fxd - xd, fyd - yd) < 1e-9) & (x * x + y * y < r2_max) & (a * d - b * cc > 0)
