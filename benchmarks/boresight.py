@@ -35,12 +35,12 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="fewer repetitions, no rendering")
     args = ap.parse_args()
 
-    from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
     from rigsim.estimation.dvad import dvad, simplified
-    from rigsim.rig.load import load_boresight_rig
-    from rigsim.procedures.boresight.pipeline import CameraProcessor
     from rigsim.frames import ARCSEC_PER_RAD as AS
     from rigsim.imaging import NoiseModel
+    from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
+    from rigsim.procedures.boresight.pipeline import CameraProcessor
+    from rigsim.rig.load import load_boresight_rig
 
     rig = load_boresight_rig()
     g = CameraGeometry.from_rig(rig.cameras[0])
@@ -56,7 +56,7 @@ def main() -> int:
         rois, origins = [], []
         for uv in spots_uv(g, E, 0.004):
             o = (int(round(uv[0])) - W // 2, int(round(uv[1])) - W // 2)
-            img = disk_image((W, W), uv - np.array(o), 2.5) * 2500.0 + 70.0
+            img = disk_image((W, W), uv[0] - o[0], uv[1] - o[1], 2.5) * 2500.0 + 70.0
             rois.append(np.round(img).astype(np.uint16))
             origins.append(o)
         render_note = "synthetic disk ROIs"

@@ -15,6 +15,7 @@ import time
 import warnings
 
 import numpy as np
+
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 
@@ -27,7 +28,6 @@ def main() -> None:
     a = ap.parse_args()
 
     t_import = time.perf_counter()
-    from rigsim.procedures.cube_mirror import campaign as cm
     from rigsim.procedures.cube_mirror import rendered_campaign as rc
     from rigsim.render.backend import ensure_variant
     from rigsim.rig import load_rig

@@ -7,12 +7,12 @@ import time
 
 import numpy as np
 
+from rigsim.errors import GeometryError
 from rigsim.estimation.cube_attitude import cube_from_rot_triad
 from rigsim.frames import ARCSEC_PER_RAD, random_rotations, rotation_angle
 from rigsim.optics.cube import FACE_NORMALS
 from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
-from rigsim.errors import GeometryError
 from rigsim.rig.turntable import TurntableModel
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 

@@ -44,7 +44,13 @@ import warnings
 import numpy as np
 
 from rigsim.imaging import (
-    NoiseModel, centroid_gauss, centroid_gauss_lsq, centroid_tcom, centroid_wcom, crlb_gaussian, extract_rois,
+    NoiseModel,
+    centroid_gauss,
+    centroid_gauss_lsq,
+    centroid_tcom,
+    centroid_wcom,
+    crlb_gaussian,
+    extract_rois,
 )
 from rigsim.imaging.synth import add_noise, flux_for_snr, gaussian_spots
 

@@ -34,9 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
+from rigsim.errors import GeometryWarning  # noqa: E402
 from rigsim.render import backend  # noqa: E402
 from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
-from rigsim.errors import GeometryWarning  # noqa: E402
 from rigsim.rig import load_rig  # noqa: E402
 from rigsim.truth.cube_mirror.realization import realization_from_rig  # noqa: E402
 
@@ -153,7 +153,7 @@ def main() -> None:
             p = pose_of(ref, dy, dx)
             w0 = rr.optics.window_for(rr.truth(p).mean_uv, rr.window_px)[:2]
             t0 = time.perf_counter()
-            rr._set(p, w0)
+            rr._scene.update({"pose": p, "window_origin": w0})
             t_upd.append(time.perf_counter() - t0)
             rr.render_window(p, seed=9000 + k)
         hist = [h for h in dr.kernel_history() if h["type"] == dr.KernelType.JIT]

@@ -36,11 +36,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from rigsim.detector import apply_detector  # noqa: E402
 from rigsim.frames import from_arcsec  # noqa: E402
+from rigsim.imaging.screen import screen_centroid, screen_circle_fit
 from rigsim.render.cube_mirror import diaphragm as D  # noqa: E402
 from rigsim.rig import load_rig  # noqa: E402
-from rigsim.truth.cube_mirror.realization import realization_from_rig  # noqa: E402
 from rigsim.truth.cube_mirror.diaphragm import rasterise_screen_disk
-from rigsim.imaging.screen import screen_centroid, screen_circle_fit
+from rigsim.truth.cube_mirror.realization import realization_from_rig  # noqa: E402
 
 RIG = load_rig("sun_sensor_2axis_diaphragm")
 REAL = realization_from_rig(RIG)

@@ -32,9 +32,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from rigsim.detector import DetectorConfig, apply_detector  # noqa: E402
-from rigsim.render import backend  # noqa: E402
 from rigsim.optics.camera import PinholeBrown  # noqa: E402
 from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, spot_truth, window_centroid
+from rigsim.render import backend  # noqa: E402
 from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
 
 CAM = PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
@@ -165,7 +165,7 @@ def main() -> None:
     print(f"kernel launches {len(hist)}, compiled fresh {fresh}, loaded from disk cache {disk}")
     import mitsuba as mi
 
-    params = r._params
+    params = r._scene.params
     t0 = time.perf_counter()
     for k in range(50):
         params["sensor.window_origin"] = mi.Point2f(float(k), 3.0)

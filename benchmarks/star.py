@@ -10,13 +10,13 @@ import time
 import numpy as np
 
 from rigsim.detector import apply_detector
-from rigsim.optics import attitude as att
-from rigsim.render.star import render_stars
 from rigsim.estimation.star_calibration import run_ekf
 from rigsim.imaging.stars import extract_stars
-from rigsim.truth.star import StarSky
-from rigsim.rig.load import load_star_rig
+from rigsim.optics import attitude as att
 from rigsim.procedures.star.study import CentroidNoise, case_setup, simulate_frames
+from rigsim.render.star import render_stars
+from rigsim.rig.load import load_star_rig
+from rigsim.truth.star import StarSky
 
 
 def best(fn, n=10):

@@ -5,12 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
 from rigsim.estimation.dvad import dvad, estimate, simplified
-from rigsim.optics.line_camera import relative_rotation
-from rigsim.rig.load import load_boresight_rig
-from rigsim.optics.line_camera import small_angles_arcsec
 from rigsim.frames import ARCSEC_PER_RAD as AS
+from rigsim.optics.line_camera import CameraGeometry, relative_rotation, rotation_xyz, small_angles_arcsec, spots_uv
+from rigsim.rig.load import load_boresight_rig
 
 RIG = load_boresight_rig()
 G = CameraGeometry.from_rig(RIG.cameras[0])
@@ -123,8 +121,8 @@ def test_bad_inputs():
 
 def test_fast_thresholded_com_equals_rigsim_imaging():
     """The real-time centroider is rigsim.imaging.centroid_tcom without the flags: same numbers."""
-    from rigsim.imaging.rois import tcom_fast
     from rigsim.imaging import NoiseModel, centroid_tcom
+    from rigsim.imaging.rois import tcom_fast
     from rigsim.imaging.synth import disk_image
 
     rng = np.random.default_rng(4)

@@ -3,11 +3,17 @@
 import numpy as np
 import pytest
 
-from rigsim.optics import attitude as att
-from rigsim.estimation.star_calibration import (
-    FrameObs, MODELS, THETA_NAMES, batch_lsq, frame_system, pair_sets, run_ekf,
-)
 from rigsim.estimation.observability import observability
+from rigsim.estimation.star_calibration import (
+    MODELS,
+    THETA_NAMES,
+    FrameObs,
+    batch_lsq,
+    frame_system,
+    pair_sets,
+    run_ekf,
+)
+from rigsim.optics import attitude as att
 from rigsim.procedures.star.study import CentroidNoise, random_slew, simulate_frames
 
 

@@ -3,9 +3,9 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rigsim.optics import attitude as att
-from rigsim.imaging.stars import extract_stars
 from rigsim.estimation.star_id import identify
+from rigsim.imaging.stars import extract_stars
+from rigsim.optics import attitude as att
 from rigsim.render.star import render_frame
 
 

@@ -10,8 +10,19 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from rigsim.imaging import (
-    Flag, METHODS, NoiseModel, centroid, centroid_gauss, centroid_tcom, detect, edge_points, estimate_background,
-    extract_rois, find_spots, fit_circle, fit_ellipse,
+    METHODS,
+    Flag,
+    NoiseModel,
+    centroid,
+    centroid_gauss,
+    centroid_tcom,
+    detect,
+    edge_points,
+    estimate_background,
+    extract_rois,
+    find_spots,
+    fit_circle,
+    fit_ellipse,
 )
 from rigsim.imaging.synth import add_noise, gaussian_spots
 

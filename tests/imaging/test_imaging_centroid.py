@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import (
-    NoiseModel, centroid, centroid_gauss, centroid_gauss_lsq, centroid_tcom, centroid_wcom, crlb_gaussian,
+    NoiseModel,
+    centroid,
+    centroid_gauss,
+    centroid_gauss_lsq,
+    centroid_tcom,
+    centroid_wcom,
+    crlb_gaussian,
     fit_circle,
 )
 from rigsim.imaging.synth import add_noise, disk_image, flux_for_snr, gaussian_spots, pixel_fractions

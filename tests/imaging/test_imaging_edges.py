@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import (
-    Flag, NoiseModel, concentricity, edge_points, fit_circle, fit_circle_points, fit_ellipse, fit_ellipse_points,
+    Flag,
+    NoiseModel,
+    concentricity,
+    edge_points,
+    fit_circle,
+    fit_circle_points,
+    fit_ellipse,
+    fit_ellipse_points,
 )
 from rigsim.imaging.synth import add_noise, disk_image
 

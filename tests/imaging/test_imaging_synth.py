@@ -8,7 +8,13 @@ from scipy import integrate
 
 from rigsim.imaging import NoiseModel
 from rigsim.imaging.synth import (
-    add_noise, disk_image, flux_for_snr, gaussian_frame, gaussian_spots, pixel_fractions, snr_gaussian,
+    add_noise,
+    disk_image,
+    flux_for_snr,
+    gaussian_frame,
+    gaussian_spots,
+    pixel_fractions,
+    snr_gaussian,
 )
 
 

@@ -19,10 +19,15 @@ import pytest
 
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.optics.autocollimator import (
-    AutocollimatorOptics, PlanoConvexObjective, _refract, flat_mirror, n_bk7, retilt,
+    AutocollimatorOptics,
+    PlanoConvexObjective,
+    _refract,
+    flat_mirror,
+    n_bk7,
+    retilt,
 )
-from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout, mirror_target
 from rigsim.rig import load_rig
+from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout, mirror_target
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 RIG = load_rig("sun_sensor_3axis_autocollimator")

@@ -9,7 +9,13 @@ import pytest
 
 from rigsim.optics import camera as C
 from rigsim.optics.camera import (
-    PARAM_NAMES, PinholeBrown, TelecentricCamera, distort, project, radial_r2_max, unproject,
+    PARAM_NAMES,
+    PinholeBrown,
+    TelecentricCamera,
+    distort,
+    project,
+    radial_r2_max,
+    unproject,
 )
 
 W = H = 1024

@@ -11,9 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from rigsim.optics.line_camera import CameraGeometry, loop_trace, rotation_xyz, spots_uv
+from rigsim.optics.line_camera import CameraGeometry, facet_normals_ota, loop_trace, rotation_xyz, spots_uv
 from rigsim.rig.load import load_boresight_rig
-from rigsim.optics.line_camera import facet_normals_ota
 
 RIG = load_boresight_rig()
 G = CameraGeometry.from_rig(RIG.cameras[0])

@@ -23,7 +23,7 @@ def test_parse_counts_and_first_record():
 def test_proper_motion_matches_astropy():
     """Zero-radial-velocity space motion vs astropy's apply_space_motion: < 0.05 mas over 33.75 yr
     (the two differ only by light-time/time-scale details far below Hipparcos' ~1 mas errors)."""
-    astropy = pytest.importorskip("astropy")
+    pytest.importorskip("astropy")
     import astropy.units as u
     from astropy.coordinates import SkyCoord
     from astropy.time import Time

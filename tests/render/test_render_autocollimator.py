@@ -16,11 +16,11 @@ import warnings
 import numpy as np
 import pytest
 
+from rigsim.errors import GeometryWarning
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.render.backend import ensure_variant
-from rigsim.render.frame import read_frame
 from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer, build_autocollimator_scene_dict
-from rigsim.errors import GeometryWarning
+from rigsim.render.frame import read_frame
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 

@@ -10,9 +10,9 @@ of 590k light paths ~0.002 px).
 import numpy as np
 import pytest
 
+from rigsim.frames import ARCSEC_PER_RAD as AS
 from rigsim.optics.line_camera import CameraGeometry, rotation_xyz
 from rigsim.rig.load import load_boresight_rig
-from rigsim.frames import ARCSEC_PER_RAD as AS
 
 pytestmark = pytest.mark.render
 
@@ -86,8 +86,8 @@ def test_pipeline_recovers_the_state_from_rendered_rois(renderers):
     Expected error: centroid noise ~0.005 px (shot noise of 4e5 photons on a 2.5-px disk) plus
     the thresholded CoM's disk bias (<= 0.02 px) -> alpha, beta ~0.002", gamma ~0.03" (eq 22 at
     0.02 px: 0.03" for 1 sigma); the bound below is 3x that."""
-    from rigsim.procedures.boresight.pipeline import CameraProcessor
     from rigsim.imaging import NoiseModel
+    from rigsim.procedures.boresight.pipeline import CameraProcessor
 
     g = CameraGeometry.from_rig(RIG.cameras[0])
     ref = [renderers[j].render(None, 0.0, seed=100 + j) for j in (0, 1)]

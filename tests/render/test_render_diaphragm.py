@@ -15,13 +15,13 @@ import pytest
 from rigsim.detector import apply_detector
 from rigsim.frames import from_arcsec
 from rigsim.imaging import fit_ellipse
-from rigsim.render.frame import FLAG_KEYS, read_frame
-from rigsim.render.cube_mirror import diaphragm as D
-from rigsim.rig import load_rig
-from rigsim.truth.cube_mirror.realization import realization_from_rig
 from rigsim.imaging.screen import pixel_area_mm2, screen_centroid, screen_circle_fit
-from rigsim.truth.cube_mirror.diaphragm import rasterise_screen_disk
 from rigsim.optics.meshes import HOLE_POLYGON_SIDES
+from rigsim.render.cube_mirror import diaphragm as D
+from rigsim.render.frame import FLAG_KEYS, read_frame
+from rigsim.rig import load_rig
+from rigsim.truth.cube_mirror.diaphragm import rasterise_screen_disk
+from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 pytestmark = pytest.mark.render
 

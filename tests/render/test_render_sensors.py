@@ -17,8 +17,8 @@ import cv2
 import numpy as np
 import pytest
 
-from rigsim.render.backend import ensure_variant
 from rigsim.optics.camera import PinholeBrown
+from rigsim.render.backend import ensure_variant
 from rigsim.render.plugins import PINHOLE_PLUGIN, TELECENTRIC_PLUGIN, register_sensors
 
 ensure_variant()

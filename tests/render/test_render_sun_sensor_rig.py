@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from rigsim.imaging import centroid_tcom
-from rigsim.procedures.cube_mirror import campaign as cm
-from rigsim.render.frame import read_frame
 from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
+from rigsim.render.frame import read_frame
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 

@@ -18,10 +18,10 @@ import cv2
 import numpy as np
 import pytest
 
+from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sun_disk import SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, spot_truth
 from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
-from rigsim.errors import GeometryWarning
 
 WIDE = PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
                      k1=-0.15, k2=0.012, k3=-0.0003, p1=3e-4, p2=-2e-4)

@@ -5,10 +5,9 @@ import tomllib
 
 import pytest
 
-from rigsim.optics.line_camera import CameraGeometry
-from rigsim.rig.load import load_boresight_rig, parse_boresight_rig
-from rigsim.rig.load import SCENES_DIR
 from rigsim.errors import RigError
+from rigsim.optics.line_camera import CameraGeometry
+from rigsim.rig.load import SCENES_DIR, load_boresight_rig, parse_boresight_rig
 
 BASE = tomllib.loads((SCENES_DIR / "dual_line_array_prism.toml").read_text())
 

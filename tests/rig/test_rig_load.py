@@ -6,9 +6,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.errors import RigError
 from rigsim.rig import default_rigs, load_rig, parse_rig
+from rigsim.rig.cube_mirror import CubeMirrorRig
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 BASE = tomllib.loads((SCENES / "sun_sensor_2axis_diaphragm.toml").read_text())

@@ -4,9 +4,8 @@ import tomllib
 
 import pytest
 
-from rigsim.rig.load import SCENES_DIR
 from rigsim.errors import RigError
-from rigsim.rig.load import load_star_rig, parse_star_rig
+from rigsim.rig.load import SCENES_DIR, load_star_rig, parse_star_rig
 
 
 def test_default_rig(star_rig):

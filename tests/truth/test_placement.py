@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from rigsim.frames import from_arcsec
-from rigsim.truth.cube_mirror.placement import diaphragm_layout, face_in_rot, trace_return_spot
 from rigsim.rig import load_rig
+from rigsim.truth.cube_mirror.placement import diaphragm_layout, face_in_rot, trace_return_spot
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 
 RIG = load_rig("sun_sensor_2axis_diaphragm")

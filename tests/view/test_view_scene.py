@@ -11,10 +11,10 @@ import pytest
 pytest.importorskip("pyvista")
 
 from rigsim.optics.autocollimator import AutocollimatorOptics
-from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout, mirror_target
 from rigsim.optics.cube import reflect
-from rigsim.truth.cube_mirror.placement import diaphragm_layout, face_in_rot, trace_return_spot
 from rigsim.rig import load_rig
+from rigsim.truth.cube_mirror.autocollimator import autocollimator_layout, mirror_target
+from rigsim.truth.cube_mirror.placement import diaphragm_layout, face_in_rot, trace_return_spot
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 from rigsim.view import ViewError, build_scene
 from rigsim.view.cube_mirror import resolve_pose_deg
@@ -147,8 +147,8 @@ def test_seed001_beams_equal_the_autocollimator_trace(rig001, scene001):
 
 
 def test_star_beams_equal_the_field_truth():
-    from rigsim.truth.star import StarSky
     from rigsim.rig.load import load_star_rig
+    from rigsim.truth.star import StarSky
     from rigsim.view.star import RAY_LENGTH_MM, first_attitude, image_point_mm
 
     rig = load_star_rig("star_sensor")

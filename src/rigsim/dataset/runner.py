@@ -25,7 +25,13 @@ from pathlib import Path
 
 from rigsim.dataset.generators import GENERATORS, make_generator, worker_generator
 from rigsim.dataset.store import (
-    FORMAT, atomic_write_json, frame_complete, frame_files, read_json, sha256_file, write_frame_atomic,
+    FORMAT,
+    atomic_write_json,
+    frame_complete,
+    frame_files,
+    read_json,
+    sha256_file,
+    write_frame_atomic,
 )
 from rigsim.errors import DatasetError
 

@@ -144,7 +144,6 @@ def dvad(geom: CameraGeometry, ref_uv, meas_uv, reading: str = "consistent", *,
     F, Kf, w = geom.F, geom.telecentric_factor, geom.off_axis_rad
     P_ref = geom.xy_to_focal(ref)                       # eqs 8–11 (with d), nominal tilts
     P_meas = geom.xy_to_focal(meas)
-    C = geom.R_ota_from_hrc
     if reading == "as_printed":
         vr = _vectors(P_ref, F)
         vm = _vectors(P_meas, F)

@@ -1,4 +1,6 @@
-"""TODO docstring"""
+"""Centroids of a stack of regions of interest cut from one detector frame (one row per ROI, rigsim
+pixels).
+"""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ MAD_TO_SD = 1.482602218505602
 
 
 @dataclass
-class SpotMeasurement:
+class RoiCentroids:
     uv: np.ndarray          # (n, 2) rigsim pixels
     sigma_uv: np.ndarray    # (n, 2) propagated 1-sigma
     flags: np.ndarray       # (n,) rigsim.imaging.Flag bits
@@ -21,7 +23,7 @@ class SpotMeasurement:
 
 
 def centroid_rois(rois, origins_uv, *, method: str = "tcom", noise: NoiseModel | None = None,
-                  **kw) -> SpotMeasurement:
+                  **kw) -> RoiCentroids:
     """Centroid a stack of ROIs (n, h, w) whose pixel (0, 0) is detector pixel ``origins_uv[k]``.
 
     ``method="tcom"`` is seed 003's thresholded centre of mass (threshold: background + 3σ of the
@@ -40,7 +42,7 @@ def centroid_rois(rois, origins_uv, *, method: str = "tcom", noise: NoiseModel |
         res = centroid_any(stack, method=method, noise=noise, origin_uv=org, **kw)
     uv = np.column_stack([res.u, res.v])
     sig = np.column_stack([res.sigma_u, res.sigma_v])
-    return SpotMeasurement(uv, sig, np.asarray(res.flags), np.asarray(res.valid))
+    return RoiCentroids(uv, sig, np.asarray(res.flags), np.asarray(res.valid))
 
 
 def tcom_fast(rois, origins_uv, *, noise: NoiseModel | None = None, threshold_sigma: float = 3.0):

@@ -1,4 +1,6 @@
-"""TODO docstring"""
+"""One bright spot on a full DN frame (the autocollimator's return): background, detection, window,
+thresholded centroid.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +10,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from rigsim.imaging import Background, Flag, centroid_tcom, detect, estimate_background, extract_rois
-from rigsim.optics.autocollimator import a_frame_basis  # noqa: F401  (re-exported)
 
 ROI_PX = 49
 """Side of the centroid window. The diffraction cross of a square face stays above 3σ of the

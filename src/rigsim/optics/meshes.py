@@ -1,4 +1,6 @@
-"""TODO docstring"""
+"""Triangle meshes of the rig's optical parts (screen with a hole, cube, plano-convex lens, stop),
+as trimesh objects.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""TODO docstring"""
+"""The finite solar disk (0.53°) through a camera: sampled directions, spot outline, true spot
+centroid and geometry flags.
+"""
 
 from __future__ import annotations
 

@@ -39,10 +39,10 @@ import numpy as np
 from rigsim.errors import GeometryWarning
 from rigsim.optics.line_camera import CameraGeometry, facet_normals_ota, loop_trace
 from rigsim.render.backend import ensure_variant
-from rigsim.render.plugins import LENS_PLUGIN, MIRROR_PLUGIN, register_plugins
-from rigsim.rig.boresight import BoresightRig
 from rigsim.render.frame import Frame, digitise
+from rigsim.render.plugins import LENS_PLUGIN, MIRROR_PLUGIN, register_plugins
 from rigsim.render.scene import Scene
+from rigsim.rig.boresight import BoresightRig
 
 __all__ = ["LoopRenderer", "register_plugins", "trace_scene_rays", "GeometryWarning",
            "LENS_PLUGIN", "MIRROR_PLUGIN"]
@@ -147,7 +147,7 @@ class LoopRenderer:
 
     # -- geometry ------------------------------------------------------------------------------
     def _uv_of_world(self, pW) -> tuple[float, float]:
-        g, j = self.geom, self.j
+        g = self.geom
         dpos = np.asarray(pW, float) - self.det_centre_W
         return (float(dpos @ self.u_axis / g.pitch_mm + g.cx), float(dpos @ self.v_axis / g.pitch_mm + g.cy))
 

@@ -1,43 +1,11 @@
 """Star-field frames: truth → expected photons (analytic or Mitsuba) → detector DN.
 
-Rendering only: nothing here extracts, identifies or estimates. A :class:`~rigsim.render.frame.Frame` carries
-the 16-bit frame and the truth it was rendered from (which the estimators never read).
-
-Fast analytic star-frame renderer: pixel-integrated Gaussian PSFs splatted in numpy.
-
-A star of ``photons`` centred at (u, v) puts into pixel (i, j) (which covers [i−½, i+½] ×
-[j−½, j+½], rigsim's OpenCV convention) exactly
-
-    photons · ½[erf((i+½−u)/(√2σ)) − erf((i−½−u)/(√2σ))] · ½[erf((j+½−v)/(√2σ)) − erf((j−½−v)/(√2σ))]
-
-(the Gaussian integrated over the pixel; separable). Each star is splatted over a square of
-half-width ⌈``nsigma``·σ⌉ px (the flux beyond 5σ is 6e-7 of the total, and symmetric); pixels
-off the detector are dropped. Motion smear = the sum of K sub-exposure Gaussians. Output:
-expected photons per pixel (float64, ``img[v, u]``), background included — feed it to
-:func:`rigsim.detector.apply_detector`.
-
-Star frames through Mitsuba 3: a sky patch with the PSF baked in, seen through the distorted
-``rigsim_pinhole`` sensor. Mitsuba is imported lazily (only when a renderer is built).
-
-Scene (millimetres, camera frame = world frame, OpenCV axes):
-
-* **Sky patch**: an emissive ``rectangle`` perpendicular to the boresight at distance D, facing
-  the camera. A plane at z = D is seen by a pinhole exactly as the *undistorted* image scaled
-  by f/D: world (X, Y, D) ↦ undistorted pixel (f X/D + cx, f Y/D + cy). Its radiance is a
-  bitmap (``bilinear``, ``raw``) sampled ``oversample`` times per pixel in undistorted pixel
-  coordinates, holding the ideal image: per star a point-sampled Gaussian of σ_u = σ/√det J
-  (J the distortion's Jacobian at the star, so the distorted image has σ ≈ σ px) with integral
-  photons / det J (so the star delivers its photons through the distortion's area change),
-  one Gaussian per smear sub-step.
-* **Sensor**: ``rigsim_pinhole`` with the true fx, fy, cx, cy, k1, k2, p1, p2 and
-  ``response='radiance'`` (a pixel records the mean radiance over its footprint): the Brown
-  distortion is applied per ray by the sensor, independently of the numpy camera model.
-* **Windows** (default): a ``window_px``² film moved to every star by ``window_origin`` (a
-  traversable parameter: no recompile), ``ldsampler`` at ``spp``; windows are pasted into a black
-  frame by assignment (overlapping windows hold the same scene). ``mode='full'`` renders the whole
-  detector instead. The uniform sky background is added in numpy afterwards.
-
-Per frame only the bitmap's data and the window origin change, through ``mi.traverse``.
+Rendering only: nothing here extracts, identifies or estimates; each :class:`~rigsim.render.frame.Frame`
+carries the 16-bit frame and the :class:`~rigsim.truth.star.StarField` it was rendered from.
+Two renderers: :func:`render_stars` (pixel-integrated Gaussians in numpy, exact) and
+:class:`MitsubaStarRenderer` (a sky patch with the PSF baked in, seen through the distorted
+``rigsim_pinhole`` sensor; Mitsuba imported lazily). Both are described, with their measured
+agreement, in docs/star_calibration.md ("Star-field frames").
 """
 
 from __future__ import annotations
@@ -48,9 +16,9 @@ import time
 import numpy as np
 from scipy.special import erf
 
-from rigsim.truth.star import StarSky
-from rigsim.render.scene import Element, PinholeSensor, Scene
 from rigsim.render.frame import Frame, digitise
+from rigsim.render.scene import Element, PinholeSensor, Scene
+from rigsim.truth.star import StarSky
 
 __all__ = ['render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
 

@@ -6,11 +6,11 @@ value and the allowed range — never a traceback from inside pydantic or tomlli
 
 from __future__ import annotations
 
+import tomllib
 import typing
 from pathlib import Path
 
 import annotated_types as at
-import tomllib
 from pydantic import BaseModel, ValidationError
 
 from rigsim.errors import RigError  # noqa: F401  (re-exported)

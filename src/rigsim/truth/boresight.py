@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rigsim.optics.line_camera import CameraGeometry, relative_rotation, small_angles_arcsec
 from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.optics.line_camera import CameraGeometry, relative_rotation, small_angles_arcsec
 from rigsim.rig.boresight import BoresightRig
 
 AS = ARCSEC_PER_RAD

@@ -24,7 +24,7 @@ import numpy as np
 
 from rigsim.errors import ViewError
 from rigsim.view import primitives as P
-from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec, _pose_text
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec, _pose_text
 
 __all__ = ["build_boresight_scene", "PAIR_OFFSET_MM", "camera_placement", "laser_loops"]
 
@@ -183,7 +183,7 @@ def build_boresight_scene(rig, *, pose=None, face=None) -> RigScene:
                                 "cameras", m1.mean(0), P.unit(np.array([-0.35, 0.35, -1.0])), np.array([0.0, 1.0, 0.0]),
                                 float(np.max(np.ptp(m1, axis=0))) + 220.0, scale_bar_mm=50.0))
     name, centre, R, half_w = det_views[0]
-    scene.views.append(ViewSpec(f"detector", f"close-up: {name.replace('_', ' ')} (emitter = return spot at the "
+    scene.views.append(ViewSpec("detector", f"close-up: {name.replace('_', ' ')} (emitter = return spot at the "
                                              "reference)", centre, R[:, 2], R[:, 1], 2.6 * half_w, parallel=True,
                                 scale_bar_mm=10.0, eye_distance_mm=300.0))
     return scene

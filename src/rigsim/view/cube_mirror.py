@@ -36,7 +36,7 @@ from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.placement import cube_pose, face_in_rot, plane_hit, trace_return_spot
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 from rigsim.view import primitives as P
-from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec
 
 __all__ = ["build_cube_rig_scene", "resolve_pose_deg", "resolve_face", "POSE_KEYWORDS"]
 

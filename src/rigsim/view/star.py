@@ -22,7 +22,7 @@ import numpy as np
 
 from rigsim.errors import ViewError
 from rigsim.view import primitives as P
-from rigsim.view.scene import Beam, COLOURS, RigScene, ViewSpec, _pose_text
+from rigsim.view.scene import COLOURS, Beam, RigScene, ViewSpec, _pose_text
 
 __all__ = ["build_star_scene", "RAY_LENGTH_MM", "first_attitude"]
 

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
 from rigsim.estimation.dvad import estimate
-from rigsim.rig.load import load_boresight_rig
-from rigsim.procedures.boresight.studies import PARAMS, fig8_residual, mc_errors, predicted_3sigma, rotation_order
-from rigsim.truth.boresight import orbit_truth
 from rigsim.frames import ARCSEC_PER_RAD as AS
+from rigsim.optics.line_camera import CameraGeometry, rotation_xyz, spots_uv
+from rigsim.procedures.boresight.studies import PARAMS, fig8_residual, mc_errors, predicted_3sigma, rotation_order
+from rigsim.rig.load import load_boresight_rig
+from rigsim.truth.boresight import orbit_truth
 
 RIG = load_boresight_rig()
 G = CameraGeometry.from_rig(RIG.cameras[0])

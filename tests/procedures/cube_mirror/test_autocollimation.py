@@ -19,16 +19,19 @@ import warnings
 import numpy as np
 import pytest
 
-from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC, angle_between
-from rigsim.truth.cube_mirror.autocollimator import (
-    autocollimator_layout, mirror_target, reference_axis_rot, reference_pose_rad,
-)
-from rigsim.procedures.cube_mirror import autocollimation as ac
-from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import numerical_jacobian
+from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC, angle_between
+from rigsim.procedures.cube_mirror import autocollimation as ac
+from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
 from rigsim.rig.turntable import pose_deg_to_rad
+from rigsim.truth.cube_mirror.autocollimator import (
+    autocollimator_layout,
+    mirror_target,
+    reference_axis_rot,
+    reference_pose_rad,
+)
 from rigsim.truth.cube_mirror.realization import Noise, realization_from_rig, tilt
 
 RIG = load_rig("sun_sensor_3axis_autocollimator")

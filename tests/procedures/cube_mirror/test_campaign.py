@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rigsim.estimation.cube_attitude import cube_from_rot_triad, normal_in_mount
+from rigsim.errors import GeometryError
+from rigsim.estimation.cube_attitude import cube_from_rot_triad
 from rigsim.estimation.triad import triad
 from rigsim.frames import ARCSEC_PER_RAD, Rot_X, Rot_Y, angle_between, random_rotations, rotation_angle
 from rigsim.optics.cube import FACE_NORMALS, reflect
 from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig import load_rig
-from rigsim.errors import GeometryError
 from rigsim.rig.turntable import TurntableModel
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 

@@ -6,11 +6,10 @@ import warnings
 import numpy as np
 import pytest
 
-from rigsim.estimation.null_search import offset_model
-from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search, null_bias_offset_px
-from rigsim.imaging.screen import hole_spot_offset
 from rigsim.errors import SearchError
-from rigsim.estimation.null_search import numerical_jacobian
+from rigsim.estimation.null_search import numerical_jacobian, offset_model
+from rigsim.imaging.screen import hole_spot_offset
+from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer, concentricity_search, null_bias_offset_px
 from rigsim.rig import load_rig
 from rigsim.rig.turntable import pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import realization_from_rig

@@ -12,10 +12,10 @@ import numpy as np
 
 from rigsim.estimation.dvad import BoresightEstimate, estimate
 from rigsim.imaging import NoiseModel
-from rigsim.imaging.rois import SpotMeasurement, centroid_rois, tcom_fast
+from rigsim.imaging.rois import RoiCentroids, centroid_rois, tcom_fast
 from rigsim.optics.line_camera import CameraGeometry
 
-__all__ = ["centroid_rois", "tcom_fast", "CameraProcessor", "SpotMeasurement"]
+__all__ = ["centroid_rois", "tcom_fast", "CameraProcessor", "RoiCentroids"]
 
 
 class CameraProcessor:
@@ -44,7 +44,7 @@ class CameraProcessor:
         self._ref = np.asarray(ref, float).reshape(2, 2)
         self._solver = DVADSolver(self.geom, self._ref) if (self.method, self.reading) == ("dvad", "consistent") else None
 
-    def spots(self, roi_m1, roi_m2, origin_m1, origin_m2) -> SpotMeasurement:
+    def spots(self, roi_m1, roi_m2, origin_m1, origin_m2) -> RoiCentroids:
         return centroid_rois(np.stack([roi_m1, roi_m2]), [origin_m1, origin_m2], method=self.centroider,
                              noise=self.noise)
 

@@ -32,10 +32,14 @@ from rigsim.errors import SearchError
 from rigsim.estimation.sun_calibration import SunCalibration
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.procedures.cube_mirror.campaign import (
-    BudgetRow, CampaignResult, PAPER_RSS_ARCSEC, compare, simulate_sweep,
+    PAPER_RSS_ARCSEC,
+    BudgetRow,
+    CampaignResult,
+    compare,
+    simulate_sweep,
 )
-from rigsim.procedures.cube_mirror.pipeline import default_axis_order, estimate, fit_sun_sensor
 from rigsim.procedures.cube_mirror.nulls import TracedSearch
+from rigsim.procedures.cube_mirror.pipeline import default_axis_order, estimate, fit_sun_sensor
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.realization import Noise, Realization, draw_realization, noise_from_rig
 
@@ -160,7 +164,9 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
         measured.update(_null_noise(resid, "px"))
     else:
         from rigsim.procedures.cube_mirror.autocollimation import (
-            FaceReadingMeasurer, autocollimator_face_search, step_a_align,
+            FaceReadingMeasurer,
+            autocollimator_face_search,
+            step_a_align,
         )
 
         pb.set_description("step A: autocollimator on the plane mirror")

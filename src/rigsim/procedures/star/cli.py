@@ -51,8 +51,8 @@ def cmd_run_star_calibration(args) -> int:
     from tqdm import tqdm
 
     import rigsim
-    from rigsim.procedures.star.run import run_pipeline
     from rigsim.procedures.star.report import summary_lines, write_report
+    from rigsim.procedures.star.run import run_pipeline
     from rigsim.procedures.star.study import CentroidNoise, run_study
     from rigsim.rig.load import load_star_rig
     from rigsim.rig.load import resolve_rig_path as resolve_star_rig_path

@@ -299,7 +299,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
     for i, n in enumerate(("f [px]", "u0 [px]", "v0 [px]", "k1", "k2")):
         md.append(f"| {n} | {t[i]:.5g} | {b.theta[i]:.6g} | {b.theta[i] - t[i]:+.4g} | {b.sigma[i]:.3g} | "
                   f"{(b.theta[i] - t[i]) / b.sigma[i]:+.2f} |")
-    md += [f"", f"χ²/dof = {b.chi2_reduced:.3f} over {b.n_eq} equations.", ""]
+    md += ["", f"χ²/dof = {b.chi2_reduced:.3f} over {b.n_eq} equations.", ""]
     md += ["## Observability (SVD of the Jacobians, eqs 20-22)", "", "![](observability.png)", "",
            "| model | state | raw singular values | whitened singular values | 1/σ_whitened [px or state units] |",
            "|---|---|---|---|---|"]
@@ -329,7 +329,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
         t1 = study.improvement_table(w, "ads")
         t2 = study.improvement_table(w, "ads_improved")
         for case in CASES:
-            (e1, l1, h1), (e2, l2, h2) = t1[case], t2[case]
+            (e1, l1, h1), (e2, _, _) = t1[case], t2[case]
             md.append(f"| {CASE_LABEL[case]} | {100 * e1[0]:+.1f}% [{100 * l1[0]:+.1f}, {100 * h1[0]:+.1f}] | "
                       f"{100 * e1[1]:+.1f}% [{100 * l1[1]:+.1f}, {100 * h1[1]:+.1f}] | {100 * e2[0]:+.3g}% | {100 * e2[1]:+.3g}% |")
         md += ["", f"**Claim (+64.0 % u0, +21.7 % v0): {claim_verdict(study)}.**", ""]

@@ -36,12 +36,11 @@ import warnings
 import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
-from rigsim.render.cube_mirror.diaphragm import DiaphragmRenderer, _WARN_FLAGS, _derived_seed
+from rigsim.render.cube_mirror.diaphragm import _WARN_FLAGS, DiaphragmFrames, DiaphragmRenderer, _derived_seed
+from rigsim.render.frame import digitise
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.diaphragm import DiaphragmTruth, diaphragm_geometry, rasterise_screen_disk
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
-from rigsim.render.cube_mirror.diaphragm import DiaphragmFrames
-from rigsim.render.frame import digitise
 
 __all__ = ["ConcentricityRenderer", "divergence_radius_mm"]
 

@@ -51,15 +51,17 @@ from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.autocollimator import AutocollimatorOptics, MirrorTarget, SpotTruth
 from rigsim.optics.meshes import lens_mesh, stop_mesh
 from rigsim.render.backend import ensure_variant
-from rigsim.render.frame import write_frame
+from rigsim.render.frame import Frame, digitise, write_frame
 from rigsim.render.meshes import mesh_ply
+from rigsim.render.scene import Scene
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.autocollimator import (
-    AutocollimatorLayout, autocollimator_layout, mirror_mesh_A, mirror_target,
+    AutocollimatorLayout,
+    autocollimator_layout,
+    mirror_mesh_A,
+    mirror_target,
 )
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
-from rigsim.render.frame import Frame, digitise
-from rigsim.render.scene import Scene
 
 __all__ = [
     "CAMERA_STANDOFF_MM",

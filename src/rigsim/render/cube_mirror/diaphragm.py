@@ -62,14 +62,20 @@ import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
 from rigsim.optics.meshes import screen_with_hole_mesh
+from rigsim.render.frame import Frame, digitise
+from rigsim.render.scene import Scene
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.diaphragm import (
-    DiaphragmGeometry, DiaphragmTruth, _EZ, _perp_basis, _unit, diaphragm_geometry, true_cube_mesh,
+    _EZ,
+    DiaphragmGeometry,
+    DiaphragmTruth,
+    _perp_basis,
+    _unit,
+    diaphragm_geometry,
+    true_cube_mesh,
 )
 from rigsim.truth.cube_mirror.placement import cube_pose
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
-from rigsim.render.frame import Frame, digitise
-from rigsim.render.scene import Scene
 
 __all__ = ["GeometryWarning", "DiaphragmGeometry", "DiaphragmTruth", "DiaphragmFrames", "DiaphragmRenderer",
            "diaphragm_geometry", "build_diaphragm_scene_dict", "screen_with_hole_mesh", "true_cube_mesh",

@@ -1,33 +1,11 @@
-"""Sun-spot primitive: a finite sun-simulator disk seen by the distorted pinhole sensor.
+"""The sun simulator seen by the sun sensor (seeds 000 step 1, 001 step B).
 
-The source is a Lambertian disk emitter of uniform radiance, perpendicular to the sun direction
-at ``distance_mm`` from the pinhole, with radius ``distance_mm * tan(full_angle / 2)``: seen from
-the pinhole it fills exactly the cone of the stated full angle (0.53 deg for the sun, 32' for the
-seed-001 simulator), so the distance does not matter (only directions reach a pinhole).
-
-Rendering happens in a fixed-size crop window (default 32 x 32 px) placed around the predicted
-spot. Per frame only two things change, both through ``mi.traverse`` (no scene rebuild, no
-kernel recompile): the disk's ``to_world`` and the sensor's integer ``window_origin``. Window
-pixel (i, j) is exactly detector pixel (u0 + i, v0 + j).
-
-Units: with the default ``response='flux'`` sensor, image values are expected photons per pixel;
-``spot_photons`` is the total number of photons the aperture collects from the whole disk at
-normal incidence, so a spot at field angle theta carries ``spot_photons * <cos theta>``.
-
-Truth (:func:`spot_truth`, numpy only): the flux-weighted mean of the distorted projection over
-the disk (the continuous image centroid) and its pixel-binned version (what a first moment over
-pixels returns for a perfect renderer). The projection of the disk *centre* differs from both by
-a small, field-dependent bias that :func:`spot_truth` reports (``disk_bias_px``,
-``pixel_bias_px``).
-
-The sun simulator seen by the rig's sun sensor at a turntable pose (seeds 000 step 1, 001 step B).
-
-Everything comes from the same CubeMirrorRig and Realization as the analytic campaign: the sun direction
-in the sensor frame is ``R_sun_from_mount · R_rot_from_mount(θ)ᵀ · d_sun`` with the *true*
-turntable kinematics, the camera is the rig's true intrinsics and Brown distortion, and the
-simulator is a uniform disk of ``collimation_full_angle_arcmin``. Rendering is done by
-:class:`rigsim.render.cube_mirror.sun_sensor.SunSpotRenderer` (fixed crop window, mi.traverse updates), the
-detector by :func:`rigsim.detector.apply_detector`.
+:class:`SunSpotRenderer` is the primitive: a uniform Lambertian disk filling the simulator's full
+angle, seen by the distorted ``rigsim_pinhole`` sensor in a fixed crop window moved per frame by
+``window_origin`` (no recompile). :class:`SunSensorScene` places it for a turntable pose with the
+*true* kinematics and intrinsics of the rig and its realization, and applies the detector. The
+truth (:func:`rigsim.optics.sun_disk.spot_truth`) is numpy only. Details and measured fidelity:
+docs/rendering.md ("Sun spot", "Sun-sensor frames").
 """
 
 from __future__ import annotations
@@ -43,11 +21,11 @@ from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, _basis, _unit, spot_geometry_flags, spot_truth, window_centroid
 from rigsim.render.backend import ensure_variant
+from rigsim.render.frame import Frame, digitise
 from rigsim.render.plugins import register_sensors
+from rigsim.render.scene import Element, PinholeSensor, Scene
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
-from rigsim.render.scene import Element, PinholeSensor, Scene
-from rigsim.render.frame import Frame, digitise
 
 __all__ = ["SUN_FULL_ANGLE_RAD", "GeometryWarning", "SpotWindow", "SunSpotRenderer", "spot_truth",
            "spot_geometry_flags", "window_centroid"]

@@ -1,4 +1,6 @@
-"""TODO docstring"""
+"""True geometry of the seed-000 diaphragm screen: where the sun beam's disk and its cube-face
+return land on the screen, seen by the aiming camera.
+"""
 
 from __future__ import annotations
 
@@ -7,14 +9,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.optics.aiming import PosedCamera, aiming_camera, screen_homography
-
 from rigsim.errors import GeometryError
+from rigsim.optics.aiming import PosedCamera, aiming_camera, screen_homography
 from rigsim.optics.cube import FACE_NORMALS
 from rigsim.optics.sun_disk import disk_directions
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.placement import (
-    DiaphragmLayout, cube_pose, diaphragm_layout, face_in_rot, in_square_face, plane_hit, trace_return_spot,
+    DiaphragmLayout,
+    cube_pose,
+    diaphragm_layout,
+    face_in_rot,
+    in_square_face,
+    plane_hit,
+    trace_return_spot,
 )
 from rigsim.truth.cube_mirror.realization import Realization, realization_from_rig
 

@@ -14,8 +14,7 @@ from scipy.spatial.transform import Rotation
 from rigsim.frames import RAD_PER_ARCSEC
 from rigsim.optics.cube import face_normal_cube
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import AxisKinematics, NOMINAL_D, TruePose, TurntableModel
-
+from rigsim.rig.turntable import NOMINAL_D, AxisKinematics, TruePose, TurntableModel
 
 
 def _perp_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
