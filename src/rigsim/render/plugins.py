@@ -354,7 +354,19 @@ def register_plugins() -> None:
         bs.sampled_component = mi.UInt32(0)
         return bs, dr.select(active, mi.Spectrum(1.0), mi.Spectrum(0.0))
 
-    class IdealLens(mi.BSDF):
+    class _DeltaBSDF(mi.BSDF):
+        """A BSDF made of one Dirac lobe: nothing to evaluate, zero density (sample() does the work)."""
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+
+    class IdealLens(_DeltaBSDF):
         """Thin ideal lens: focal_length (mm), centre (world), axis e3, in-plane axes e1, e2."""
 
         def __init__(self, props):
@@ -381,15 +393,6 @@ def register_plugins() -> None:
             d = dr.normalize(qx * self.e1 + qy * self.e2 + sz * self.e3)
             return _delta_sample(si, d, mi.BSDFFlags.DeltaTransmission, active)
 
-        def eval(self, ctx, si, wo, active=True):
-            return mi.Spectrum(0.0)
-
-        def pdf(self, ctx, si, wo, active=True):
-            return mi.Float(0.0)
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            return mi.Spectrum(0.0), mi.Float(0.0)
-
         def traverse(self, cb):
             cb.put("focal_length", self.f, mi.ParamFlags.NonDifferentiable)
             cb.put("centre", self.C, mi.ParamFlags.NonDifferentiable)
@@ -400,7 +403,7 @@ def register_plugins() -> None:
         def to_string(self):
             return f"IdealLens[f={self.f}, centre={self.C}]"
 
-    class NormalMirror(mi.BSDF):
+    class NormalMirror(_DeltaBSDF):
         """Perfect mirror about the given world-space unit normal (independent of the carrier)."""
 
         def __init__(self, props):
@@ -415,15 +418,6 @@ def register_plugins() -> None:
             d = -si.to_world(si.wi)
             wo = d - 2.0 * dr.dot(d, self.N) * self.N
             return _delta_sample(si, wo, mi.BSDFFlags.DeltaReflection, active)
-
-        def eval(self, ctx, si, wo, active=True):
-            return mi.Spectrum(0.0)
-
-        def pdf(self, ctx, si, wo, active=True):
-            return mi.Float(0.0)
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            return mi.Spectrum(0.0), mi.Float(0.0)
 
         def traverse(self, cb):
             cb.put("normal", self.N, mi.ParamFlags.NonDifferentiable)

@@ -7,45 +7,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from rigsim.estimation.null_search import null_search
+from rigsim.estimation.null_search import SearchResult, SearchStep, null_search
 from rigsim.rig.turntable import TruePose, TurntableReading
 
 __all__ = ["TracedStep", "TracedSearch", "traced_search"]
 
 
 @dataclass
-class TracedStep:
-    iteration: int
-    reading_deg: dict[str, float]
-    measured: np.ndarray  # (2,) in TracedSearch.unit
-    true: np.ndarray | None  # (2,) the exact value of the same quantity (truth; for the log only)
-    seconds: float = 0.0
-    flags: dict = field(default_factory=dict)
+class TracedStep(SearchStep):
+    """A search step with the exact value of the measured quantity (truth; for the log only)."""
+
+    true: np.ndarray | None = None  # (2,) in the search's unit
 
 
 @dataclass
-class TracedSearch:
-    face: str
-    unit: str  # "px" (diaphragm offset) or "arcsec" (autocollimator reading)
-    free_axes: list[str]
-    threshold: float
-    steps: list[TracedStep]
-    converged: bool
-    final_reading_rad: TurntableReading
-    final_true_pose_rad: TruePose
-    message: str = ""
+class TracedSearch(SearchResult):
+    """A search result whose steps are TracedSteps, with the true pose the final reading stands for."""
 
-    @property
-    def n_frames(self) -> int:
-        return len(self.steps)
-
-    @property
-    def final_measured(self) -> np.ndarray:
-        return self.steps[-1].measured
+    final_true_pose_rad: TruePose | None = None
 
     @property
     def final_true(self) -> np.ndarray | None:
@@ -85,7 +68,8 @@ def traced_search(measure_true: Callable[[TruePose], tuple[np.ndarray, np.ndarra
         return m, flags
 
     res = null_search(measure, model, start_reading_rad, free, **search)
-    steps = [TracedStep(s.iteration, s.reading_deg, s.measured, None if e is None else np.asarray(e, float), s.seconds,
-                        s.flags) for s, e in zip(res.steps, exact)]
-    return TracedSearch(res.face, res.unit, res.free_axes, res.threshold, steps, res.converged, res.final_reading_rad,
-                        reading_to_true(res.final_reading_rad), res.message)
+    steps = [TracedStep(iteration=s.iteration, reading_deg=s.reading_deg, measured=s.measured, seconds=s.seconds,
+                        flags=s.flags, true=None if e is None else np.asarray(e, float)) for s, e in zip(res.steps, exact)]
+    return TracedSearch(face=res.face, unit=res.unit, free_axes=res.free_axes, threshold=res.threshold, steps=steps,
+                        converged=res.converged, final_reading_rad=res.final_reading_rad, message=res.message,
+                        final_true_pose_rad=reading_to_true(res.final_reading_rad))
