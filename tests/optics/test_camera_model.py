@@ -185,6 +185,14 @@ def test_domain_is_nan_with_nan_gradients():
     assert np.isfinite(xy[1]).all() and np.isfinite(dxy_dk[1]).all()
     d, ok = cam.backproject(q)
     assert ok.tolist() == [False, True] and np.isnan(cam.unproject(q)[0]).all()
+    # keep_invalid: Newton's values stay (finite) and the valid mask says which ones hold
+    xk, duk, dkk, valid = unproject(q, prm, get_gradients=True, keep_invalid=True)
+    assert valid.tolist() == [False, True] and np.isfinite(xk).all() and np.isfinite(dkk).all()
+    np.testing.assert_array_equal(xk[1], xy[1])
+    np.testing.assert_array_equal(dkk[1], dxy_dk[1])
+    xk2, valid2 = unproject(q, prm, keep_invalid=True)
+    np.testing.assert_array_equal(xk2, xk)
+    np.testing.assert_array_equal(valid2, valid)
 
 
 def _first_fold_by_scan(k1, k2, k3, cap=1e6):

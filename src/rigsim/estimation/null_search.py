@@ -179,5 +179,4 @@ def reading_model(rig: CubeMirrorRig, face: str, start_reading_rad: Mapping[str,
     def model(reading_rad: Mapping) -> np.ndarray:
         return exact_reading_rad(R, tt.R_rot_from_mount(reading_rad) @ n_est) * ARCSEC_PER_RAD
 
-    model.face = face  # type: ignore[attr-defined]
     return model

@@ -85,8 +85,7 @@ def normalized_with_jacobians(uv, theta, p12=(0.0, 0.0)):
     uv = np.asarray(uv, dtype=float)
     # an EKF on a biased model (improved ADS) may wander far outside the distortion model's domain:
     # keep its values there (the filter decides), and report where they are valid
-    xy, dxy_duv, dxy_dp = unproject(uv, params, get_gradients=True, keep_invalid=True)
-    ok = np.all(np.isfinite(unproject(uv, params)), axis=-1)
+    xy, dxy_duv, dxy_dp, ok = unproject(uv, params, get_gradients=True, keep_invalid=True)
     return xy, dxy_dp @ _THETA_TO_PARAMS, dxy_duv, ok
 
 

@@ -236,7 +236,8 @@ def unproject(uv, params, *, get_gradients: bool = False, iterations: int = 20, 
     r2_max = radial_r2_max. With ``get_gradients`` returns ``(xy, dxy_duv (..., 2, 2),
     dxy_dparams (..., 2, 9))`` by the implicit function theorem, NaN where xy is NaN.
     ``keep_invalid``: keep Newton's values (and their gradients) where they are not valid instead
-    of NaN — for iterative estimators that may wander outside the domain on their way.
+    of NaN, and append the valid mask (...,) to what is returned — for iterative estimators that
+    may wander outside the domain on their way.
     """
     uv = np.asarray(uv, dtype=np.float64)
     params = np.asarray(params, dtype=np.float64)
@@ -247,12 +248,13 @@ def unproject(uv, params, *, get_gradients: bool = False, iterations: int = 20, 
     xd = (u - cx) / fx
     yd = (v - cy) / fy
     x, y, ok = brown_undistort(xd, yd, k1, k2, p1, p2, k3, r2_max, iterations)
-    invalid = np.broadcast_to(~ok, shape) if not keep_invalid else np.zeros(shape, bool)
+    valid = np.broadcast_to(ok, shape)
+    invalid = ~valid if not keep_invalid else np.zeros(shape, bool)
     xy = np.empty(shape + (2,))
     xy[..., 0], xy[..., 1] = x, y
     xy[invalid] = np.nan
     if not get_gradients:
-        return xy
+        return (xy, valid) if keep_invalid else xy
     with np.errstate(divide="ignore", invalid="ignore"):
         a, b, c, d = brown_jacobian(x, y, k1, k2, p1, p2, k3)
         det = a * d - b * c
@@ -274,7 +276,7 @@ def unproject(uv, params, *, get_gradients: bool = False, iterations: int = 20, 
             dxy_dk[..., 1, 4 + j] = -(ic * gx[j] + id_ * gy[j])
     dxy_duv[invalid] = np.nan
     dxy_dk[invalid] = np.nan
-    return xy, dxy_duv, dxy_dk
+    return (xy, dxy_duv, dxy_dk, valid) if keep_invalid else (xy, dxy_duv, dxy_dk)
 
 
 # -- camera objects ---------------------------------------------------------------------------

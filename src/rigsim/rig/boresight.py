@@ -3,7 +3,7 @@
 Same conventions as :mod:`rigsim.rig.cube_mirror`: frozen models, unknown keys rejected, units in the
 field names (``_mm``, ``_um``, ``_px``, ``_deg``, ``_arcsec``, ``_min``). The loader
 (:func:`rigsim.rig.load.load_boresight_rig`) turns every validation problem into one
-:class:`rigsim.rig.load.RigError` naming the file, the field, the value and the allowed range.
+:class:`rigsim.errors.RigError` naming the file, the field, the value and the allowed range.
 
 Geometry (docs/boresight.md has the figure in words):
 

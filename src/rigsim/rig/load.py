@@ -13,7 +13,7 @@ from pathlib import Path
 import annotated_types as at
 from pydantic import BaseModel, ValidationError
 
-from rigsim.errors import RigError  # noqa: F401  (re-exported)
+from rigsim.errors import RigError
 from rigsim.rig.boresight import BoresightRig
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.star import StarRig

@@ -2,7 +2,7 @@
 
 One file describes the *true* instrument (what is rendered; estimators never see it), the sky
 model, the attitude sequence, and the settings of identification, calibration and the study.
-Units are in the field names. Errors in a file become :class:`rigsim.rig.load.RigError` naming
+Units are in the field names. Errors in a file become :class:`rigsim.errors.RigError` naming
 the file, the field, the value and the allowed range.
 
 Camera conventions are rigsim's (docs/conventions.md): OpenCV pixel origin (pixel (0,0)'s centre

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from rigsim.errors import GeometryError  # noqa: F401  (re-exported)
+from rigsim.errors import GeometryError
 from rigsim.frames import RAD_PER_ARCSEC, rot_axis
 from rigsim.rig.cube_mirror import Turntable
 

@@ -26,6 +26,7 @@ import numpy as np
 
 from rigsim.estimation.star_calibration import FrameObs, batch_lsq, run_ekf
 from rigsim.optics import attitude as att
+from rigsim.procedures.star.pipeline import pipeline_case_setup
 
 __all__ = ["CASES", "CentroidNoise", "usable_truth_obs", "simulate_frames", "StudyResult", "run_study",
            "improvement", "CLAIM"]
@@ -97,19 +98,14 @@ def random_slew(rig, rng: np.random.Generator):
 
 
 def case_setup(rig, case: str):
-    """(θ0 start, estimated names, prior σ) of a study case, θ = (f, u0, v0, k1, k2): the nominal
-    intrinsics, with f replaced by the true one in the ``f_known`` case (the study's oracle)."""
-    n = rig.nominal_rig().sensor
-    th = np.array(n.theta, dtype=float)
-    pp = n.principal_point_sigma_px
+    """(θ0 start, estimated names, prior σ) of a study case, θ = (f, u0, v0, k1, k2): the pipeline's
+    cases (``f_biased`` is its ``f_nominal``), plus ``f_known``, the study's oracle, with the true f."""
+    if case not in CASES:
+        raise ValueError(f"case = {case!r}: allowed {CASES}")
+    th, est, ps = pipeline_case_setup(rig.nominal_rig(), "f_joint" if case == "f_joint" else "f_nominal")
     if case == "f_known":
         th[0] = rig.sensor.f_px
-        return th, ("u0", "v0"), [pp, pp]
-    if case == "f_biased":
-        return th, ("u0", "v0"), [pp, pp]
-    if case == "f_joint":
-        return th, ("f", "u0", "v0"), [n.focal_length_sigma_px, pp, pp]
-    raise ValueError(f"case = {case!r}: allowed {CASES}")
+    return th, est, ps
 
 
 def improvement(err_ad: np.ndarray, err_ads: np.ndarray, rng: np.random.Generator, n_boot: int = 2000):
