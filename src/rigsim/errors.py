@@ -8,7 +8,7 @@ derive from ``ValueError`` so that generic ``except ValueError`` code keeps work
 
 from __future__ import annotations
 
-__all__ = ["RigsimError", "CliError", "RigError", "GeometryError", "SearchError", "DatasetError", "ViewError",
+__all__ = ["RigsimError", "CliError", "RigError", "GeometryError", "SearchError", "DatasetError", "InputError", "ViewError",
            "ExportError", "GeometryWarning", "SaturationWarning"]
 
 
@@ -40,6 +40,11 @@ class GeometryError(RigsimError, ValueError):
 
 class SearchError(RigsimError, RuntimeError):
     """A null search cannot proceed (no measurable spot, or it does not converge)."""
+
+
+class InputError(RigsimError, ValueError):
+    """A user's file (frame, table, JSON result) is unreadable or holds a wrong column, unit, shape,
+    bit depth or value: the message names the file, the line/column and what was expected."""
 
 
 class DatasetError(RigsimError):

@@ -1,0 +1,111 @@
+"""Frames as plain image files: 8/16-bit single-channel PNG and TIFF (OpenCV) and FITS (astropy).
+
+Pixel convention everywhere in rigsim: ``img[v, u]``, pixel (0, 0)'s centre at (u, v) = (0, 0)
+(OpenCV's; FITS counts from 1, so FITS pixel (1, 1) is rigsim's (0, 0))."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from rigsim.errors import InputError
+
+from .atomic import atomic_write_bytes
+
+FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".fits", ".fit", ".fts")
+_BITS = {np.dtype(np.uint8): 8, np.dtype(np.uint16): 16}
+
+
+def _regular_file(path: Path) -> None:
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if not path.is_file():
+        raise InputError(f"{path}: not a regular file (a folder, FIFO or device); expected an image file")
+
+
+def _read_fits(path: Path) -> np.ndarray:
+    from astropy.io import fits
+
+    try:
+        with fits.open(path, memmap=False) as hdul:
+            for hdu in hdul:
+                if hdu.data is not None and getattr(hdu, "is_image", True):
+                    data = np.asarray(hdu.data)
+                    break
+            else:
+                raise InputError(f"{path}: no image HDU with data; expected a 2-D image")
+    except (OSError, TypeError, ValueError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{path}: not a readable FITS file ({exc})") from None
+    if data.ndim != 2:
+        raise InputError(f"{path}: FITS image of shape {data.shape}; expected a 2-D (rows, cols) image")
+    if data.dtype.kind == "f":
+        data = data.astype(np.float64)
+        if not np.all(np.isfinite(data)):
+            raise InputError(f"{path}: FITS image holds NaN or infinite pixels; expected finite values")
+        return data
+    if data.dtype.kind in "iu":
+        lo, hi = int(data.min()), int(data.max())
+        if lo < 0 or hi > 65535:
+            raise InputError(f"{path}: FITS pixel values {lo}..{hi}; expected 0..65535 (an 8- or 16-bit frame)")
+        return data.astype(np.uint16 if hi > 255 or data.dtype.itemsize > 1 else np.uint8)
+    raise InputError(f"{path}: FITS data type {data.dtype}; expected integer or float pixels")
+
+
+def read_image(path, *, shape: tuple[int, int] | None = None, allowed_bits=(8, 16), what: str = "frame") -> np.ndarray:
+    """A single-channel frame as an array ``img[v, u]``: uint8/uint16 for PNG and TIFF (and
+    integer FITS), float64 for float FITS. ``shape`` = (rows, cols) to check the size against."""
+    path = Path(path)
+    _regular_file(path)
+    suffix = path.suffix.lower()
+    if suffix not in FRAME_SUFFIXES:
+        raise InputError(f"{path}: unsupported {what} file type {suffix or '(none)'!r}; expected one of "
+                         f"{', '.join(FRAME_SUFFIXES)}")
+    if suffix in (".fits", ".fit", ".fts"):
+        img = _read_fits(path)
+    else:
+        import cv2
+
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise InputError(f"{path}: not a readable {suffix[1:].upper()} image")
+        if img.ndim != 2:
+            raise InputError(f"{path}: {img.shape[2]}-channel (colour) image; expected a single-channel grey {what}")
+        if img.dtype not in _BITS or _BITS[img.dtype] not in allowed_bits:
+            allowed = " or ".join(f"{b}-bit" for b in allowed_bits)
+            raise InputError(f"{path}: pixel type {img.dtype}; expected an unsigned {allowed} {what}")
+    if shape is not None and tuple(img.shape) != tuple(shape):
+        raise InputError(f"{path}: {img.shape[1]}×{img.shape[0]} px (width×height); expected "
+                         f"{shape[1]}×{shape[0]} px, the rig's detector")
+    return img
+
+
+def encode_image(dn: np.ndarray, suffix: str) -> bytes:
+    """The bytes of ``dn`` (2-D uint8/uint16) as a PNG, TIFF or FITS file."""
+    img = np.ascontiguousarray(dn)
+    if img.ndim != 2 or img.dtype not in _BITS:
+        raise ValueError(f"frames are 2-D uint8/uint16 images; got shape {img.shape}, dtype {img.dtype}")
+    suffix = suffix.lower()
+    if suffix in (".fits", ".fit", ".fts"):
+        from astropy.io import fits
+
+        buf = io.BytesIO()
+        fits.PrimaryHDU(img).writeto(buf)
+        return buf.getvalue()
+    import cv2
+
+    ok, enc = cv2.imencode(".tiff" if suffix == ".tif" else suffix, img)
+    if not ok:
+        raise ValueError(f"OpenCV cannot encode a {suffix} image")
+    return enc.tobytes()
+
+
+def write_image(path, dn: np.ndarray) -> Path:
+    """Write a frame as PNG, TIFF or FITS (by the suffix), atomically."""
+    path = Path(path)
+    if path.suffix.lower() not in FRAME_SUFFIXES:
+        raise InputError(f"{path}: unsupported frame file type {path.suffix!r}; expected one of {', '.join(FRAME_SUFFIXES)}")
+    return atomic_write_bytes(path, encode_image(dn, path.suffix))

@@ -1,0 +1,68 @@
+"""JSON results: written atomically, numpy-aware, NaN as null; every covariance in one shape
+(:func:`covariance_block`)."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from rigsim.errors import InputError
+
+from .atomic import atomic_write_bytes
+
+
+def _plain(x):
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _plain(x.tolist())
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def write_json(path, obj) -> Path:
+    """Write ``obj`` as indented JSON (NaN and infinities become null), atomically."""
+    return atomic_write_bytes(path, (json.dumps(_plain(obj), indent=1, allow_nan=False) + "\n").encode())
+
+
+def read_json(path, required: Sequence[str] = (), *, what: str = "result") -> dict:
+    """Read a JSON object and check that it has the ``required`` top-level keys."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file (the {what})" if not path.exists() else
+                         f"{path}: not a regular file; expected the {what} as JSON")
+    try:
+        obj = json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not UTF-8 text; expected the {what} as JSON") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: line {exc.lineno}, column {exc.colno}: not valid JSON ({exc.msg})") from None
+    if not isinstance(obj, dict):
+        raise InputError(f"{path}: a JSON {type(obj).__name__}; expected an object (the {what})")
+    missing = [k for k in required if k not in obj]
+    if missing:
+        raise InputError(f"{path}: no key {missing[0]!r}; expected the {what} with {', '.join(required)}")
+    return obj
+
+
+def covariance_block(names: Sequence[str], cov, units: Sequence[str]) -> dict:
+    """The JSON shape of a covariance: the parameters' names and units and the matrix (units are
+    the products of the two parameters' units)."""
+    c = np.asarray(cov, float)
+    if c.shape != (len(names), len(names)) or len(units) != len(names):
+        raise ValueError(f"covariance of shape {c.shape} for {len(names)} names and {len(units)} units")
+    return {"names": list(names), "units": list(units), "matrix": c.tolist(),
+            "sigma": np.sqrt(np.clip(np.diag(c), 0.0, None)).tolist()}
