@@ -26,7 +26,7 @@ def test_triad_table1(capsys):
     assert main(["triad", "181.398", "0.528", "91.386", "-0.048", "--json"]) == 0
     out = capsys.readouterr().out
     data = json.loads(out.strip().splitlines()[-1])
-    R = np.array(data["R_pm_from_rot"])
+    R = np.array(data["R_cube_from_rot"]["matrix"])
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
     assert data["axis_order"] == "XY"
     assert data["normal_angle_deg"] == pytest.approx(90.0121, abs=1e-4)
@@ -35,7 +35,7 @@ def test_triad_table1(capsys):
 
 @pytest.mark.parametrize("args,expected", [
     (["triad", "181.398", "0.528", "91.386", "500"], "θ4 = 500.0: allowed range is -360 to 360 degrees"),
-    (["triad", "1", "2", "3", "4", "--axis-order", "ZX"], "--axis-order = 'ZX': allowed ['XY', 'YX']"),
+    (["triad", "1", "2", "3", "4", "--axis-order", "ZX"], "--axis-order = 'ZX': allowed for this 2-axis table: XY, YX"),
     (["run", "cube-mirror", "--rig", "nope"], "no such rig file"),
     (["run", "cube-mirror", "--trials", "1"], "--trials = 1: allowed range is 2 to 100000"),
     (["run", "cube-mirror", "--axis-order", "XZ", "--no-budget"], "--axis-order = 'XZ': must be a permutation"),

@@ -11,6 +11,7 @@ import rigsim
 from rigsim.dataset import cli as dataset_cli
 from rigsim.errors import RigsimError
 from rigsim.families import FAMILIES, family_of
+from rigsim.procedures import centroid as centroid_stage
 from rigsim.view import cli as view_cli
 
 EPILOG = """\
@@ -110,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     # every rig family adds its commands (rigsim.families); datasets and the 3D view serve all of them
     for fam in FAMILIES:
         fam.add_cli(groups)
+    centroid_stage.add_cli(groups)
     dataset_cli.add_cli(groups)
     view_cli.add_cli(groups)
     return p

@@ -59,8 +59,8 @@ def read_json(path, required: Sequence[str] = (), *, what: str = "result") -> di
 
 
 def covariance_block(names: Sequence[str], cov, units: Sequence[str]) -> dict:
-    """The JSON shape of a covariance: the parameters' names and units and the matrix (units are
-    the products of the two parameters' units)."""
+    """The JSON shape of a covariance: the parameters' names, their units, the matrix (entry (i, j)
+    in unit_i·unit_j) and the 1σ of each parameter."""
     c = np.asarray(cov, float)
     if c.shape != (len(names), len(names)) or len(units) != len(names):
         raise ValueError(f"covariance of shape {c.shape} for {len(names)} names and {len(units)} units")

@@ -50,7 +50,7 @@ def solve_axis(m: float, var: float) -> tuple[float, float]:
     conditioned, and slower.)"""
     from scipy.optimize import least_squares
 
-    w0 = 2.0 * np.sqrt(max(var - 1.0 / 12.0, 0.05))
+    w0 = min(max(2.0 * np.sqrt(max(var - 1.0 / 12.0, 0.05)), 0.2), 50.0)
 
     def f(x):
         mm, vv = binned_moments(x[0], x[1])

@@ -208,6 +208,22 @@ class Frame:
                          (self.photons * v).sum() / s + self.origin_uv[1]])
 
 
+def full_detector_frame(frame: Frame, detector_config, *, seed: int, noiseless: bool = False) -> np.ndarray:
+    """The whole detector image of a windowed frame, as a camera that reads out every pixel would
+    deliver it: the window's DN where it was rendered, and elsewhere the detector's own dark frame
+    (the same fixed patterns, fresh temporal noise from ``seed``). A whole frame is returned as is."""
+    from rigsim.detector import apply_detector
+
+    shape = tuple(frame.detector_shape or frame.dn.shape)
+    if tuple(frame.dn.shape) == shape:
+        return frame.dn
+    full = apply_detector(np.zeros(shape), detector_config, seed=seed, noiseless=noiseless).dn
+    u0, v0 = frame.origin_uv
+    h, w = frame.dn.shape
+    full[v0:v0 + h, u0:u0 + w] = frame.dn
+    return full
+
+
 def digitise(photons: np.ndarray, detector_config, *, seed: int, noiseless: bool = False, origin_uv=(0, 0),
              detector_shape: tuple[int, int] | None = None, truth: dict | None = None, truth_object=None,
              render: dict | None = None, geometry_flags: dict | None = None, pose: dict | None = None,

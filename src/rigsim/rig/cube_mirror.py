@@ -16,6 +16,8 @@ Frames (see docs/conventions.md):
 
 from __future__ import annotations
 
+import math
+
 from typing import Annotated, Literal
 
 import numpy as np
@@ -285,6 +287,16 @@ class CubeMirrorRig(_Model):
         if bad:
             raise ValueError(f"procedure.sweep_axes names {sorted(bad)}; this turntable has {sorted(labels)}")
         return self
+
+    @property
+    def null_sigma_rad(self) -> float:
+        """1σ of a face normal's direction at the end of a null (per axis): the aiming camera's
+        residual offset on the screen (the reflection doubles the angle) or the autocollimator's
+        reading accuracy."""
+        if self.procedure.method == "diaphragm":
+            ac = self.aiming_camera
+            return ac.null_sigma_px * ac.object_pixel_mm / (2.0 * self.diaphragm_screen.distance_to_cube_mm)
+        return self.autocollimator.resolution_arcsec * math.pi / (180.0 * 3600.0)
 
     # -- derived truth ------------------------------------------------------------------
     def R_sun_from_mount(self) -> np.ndarray:

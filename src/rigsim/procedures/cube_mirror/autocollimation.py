@@ -52,7 +52,7 @@ from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TurntableReading, pose_deg_to_rad
 from rigsim.truth.cube_mirror.realization import Realization, tilt
 
-__all__ = ["DEFAULT_SPP", "StepAResult", "FaceReadingMeasurer", "step_a_align", "autocollimator_face_search"]
+__all__ = ["DEFAULT_SPP", "FaceReadingMeasurer", "StepAResult", "autocollimator_face_search", "step_a_align"]
 
 DEFAULT_SPP = 1024
 """Stratified samples per pixel of the rendered frames (the renderer's default; 0.005 px rms

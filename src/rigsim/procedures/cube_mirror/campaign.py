@@ -31,7 +31,7 @@ PAPER_RSS_ARCSEC = 3.69
 PAPER_SIGMAS_ARCSEC = {"σ1 aiming null (1 px)": 2.34, "σ2 turntable perpendicularity": 2.0, "σ3 aiming-camera mounting": 2.0, "σ4 angle readout": 0.4}
 
 
-def compare(rig: CubeMirrorRig, est: CubeMirrorEstimate, real: Realization) -> "CampaignResult":
+def compare(rig: CubeMirrorRig, est: CubeMirrorEstimate, real: Realization) -> CampaignResult:
     """The estimate beside the rig instance's truth. Without a step-1 calibration (the budget's rows
     that leave the sweep untouched) R(sun←rot) is taken as exact: the row then measures the other
     sources alone."""

@@ -13,6 +13,7 @@ import numpy as np
 
 import rigsim
 from rigsim.errors import CliError
+from rigsim.procedures.cube_mirror import file_commands
 from rigsim.reporting import text_table
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -22,13 +23,7 @@ __all__ = ["add_cli"]
 def add_cli(groups: dict) -> None:
     """Add the family's commands to the parser groups {"top", "run", "render"} of ``rigsim``."""
     sub, rs, rds = groups["top"], groups["run"], groups["render"]
-    t = sub.add_parser("triad", help="R(pm<-rot) by TRIAD from the four null angles (seed 000 Table 1)",
-                       description="Dual-vector attitude of the mirror cube in the turntable frame from θ1..θ4 (degrees).")
-    t.add_argument("angles_deg", nargs=4, type=float, metavar="θ", help="θ1 θ2 θ3 θ4 in degrees (θ1, θ3 about X'; θ2, θ4 about Y')")
-    t.add_argument("--axis-order", default="XY", help="nesting reading: XY (eq 7, default) or YX (step text); docs/readings.md")
-    t.add_argument("--faces", nargs=2, default=["+Z", "+Y"], choices=["+X", "-X", "+Y", "-Y", "+Z", "-Z"], help="cube faces nulled first and second (default +Z +Y, eq 6)")
-    t.add_argument("--json", action="store_true")
-    t.set_defaults(func=cmd_triad)
+    file_commands.add_cli(groups)
 
     cmr = rs.add_parser("cube-mirror", help="seeds 000/001: sun sensor ↔ mirror cube calibration campaign",
                         description="Run the cube-mirror campaign on a rig and compare with truth; then the Monte-Carlo error budget.",
@@ -46,6 +41,13 @@ def add_cli(groups: dict) -> None:
     cmr.add_argument("--axis-order", default=None, help="estimator's axis nesting reading, outermost first (default: the rig's)")
     cmr.add_argument("--no-budget", action="store_true", help="skip the Monte-Carlo error budget")
     cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
+    cmr.add_argument("--export-frames", default=None, metavar="DIR", help="rendered: also write the sweep and null-search "
+                     "frames as bare image files (no truth) with angles.csv, nulls.csv and null_frames.csv, for your own pipeline")
+    cmr.add_argument("--frame-format", default="png", choices=["png", "tiff", "fits"], help="rendered: file type of --export-frames")
+    cmr.add_argument("--centroider", default=None, metavar="PKG.MODULE:FUNC", help="rendered: your centroider (frame → (u, v) "
+                     "px) on the same sweep frames; the report shows its end-to-end error beside rigsim's")
+    cmr.add_argument("--import-centroids", default=None, metavar="FILE", help="rendered: your centroids (frame, u_px, v_px) "
+                     "of frames exported with --export-frames (same rig, seed, sweep options); compared as --centroider")
     cmr.add_argument("--quiet", action="store_true", help="no progress bar")
     cmr.set_defaults(func=cmd_run_cube_mirror)
 
@@ -72,39 +74,6 @@ def add_cli(groups: dict) -> None:
     sce.set_defaults(func=cmd_scene_export)
 
 
-def cmd_triad(args) -> int:
-    from rigsim.estimation.cube_attitude import AXIS_ORDERS_2AXIS, cube_from_rot_triad
-    from rigsim.frames import angle_between
-
-    if args.axis_order not in AXIS_ORDERS_2AXIS:
-        raise CliError(f"--axis-order = {args.axis_order!r}: allowed {sorted(AXIS_ORDERS_2AXIS)}")
-    for name, v in zip(("θ1", "θ2", "θ3", "θ4"), args.angles_deg):
-        if not -360.0 <= v <= 360.0:
-            raise CliError(f"{name} = {v}: allowed range is -360 to 360 degrees")
-    t1, t2, t3, t4 = np.radians(args.angles_deg)
-    poses = [{"X": t1, "Y": t2}, {"X": t3, "Y": t4}]
-    try:
-        R, r1, r2 = cube_from_rot_triad(poses, args.faces, args.axis_order)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
-    np.set_printoptions(precision=7, suppress=True)
-    print(f"R(pm<-rot) by TRIAD (seed 000 eqs 1-10), faces n1={args.faces[0]} n2={args.faces[1]} (cube frame)")
-    print(f"reading: axis order {args.axis_order} — {AXIS_ORDERS_2AXIS[args.axis_order]}")
-    print("normals r = R_rot_from_mount(θ)ᵀ·d with d = (0,0,1), the beam direction (towards the source)")
-    print(f"θ1={args.angles_deg[0]}° θ2={args.angles_deg[1]}° θ3={args.angles_deg[2]}° θ4={args.angles_deg[3]}°")
-    print(R)
-    print(f"r1 (rot) = {r1}\nr2 (rot) = {r2}")
-    ang = np.degrees(angle_between(r1, r2))
-    print(f"angle between the two measured normals: {ang:.5f}° (a perfect cube: 90°; deviation {(ang - 90) * 3600:+.1f}″)")
-    other = "YX" if args.axis_order == "XY" else "XY"
-    R2, _, _ = cube_from_rot_triad(poses, args.faces, other)
-    from rigsim.frames import rotation_angle
-    print(f"the other reading ({other}) differs by {np.degrees(rotation_angle(R, R2)):.4f}°")
-    if args.json:
-        print(json.dumps({"R_pm_from_rot": R.tolist(), "axis_order": args.axis_order, "normal_angle_deg": float(ang)}))
-    return 0
-
-
 def _progress(total, desc, enabled=True):
     from tqdm import tqdm
 
@@ -129,6 +98,9 @@ def cmd_run_cube_mirror(args) -> int:
     if args.trials is None:
         args.trials = 300 if args.analytic else 200
     if args.analytic:
+        used = [o for o in ("export_frames", "centroider", "import_centroids") if getattr(args, o)]
+        if used:
+            raise CliError(f"--{used[0].replace('_', '-')}: works on rendered frames; drop --analytic")
         return _run_cube_mirror_analytic(args)
     return _run_cube_mirror_rendered(args)
 
@@ -163,6 +135,7 @@ def _run_cube_mirror_rendered(args) -> int:
     real = realization_from_rig(rig, ideal=args.ideal)
     noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
     out_dir = Path(args.out) if args.out else Path("renders") / f"cube_mirror_{rig.name}"
+    frames = _user_frames(args, rig)
     threshold = args.threshold if args.threshold is not None else (0.01 if args.ideal and rig.procedure.method == "diaphragm"
                                                                    else 0.005 if args.ideal else None)
     print(f"rigsim {rigsim.__version__} — cube-mirror campaign on rendered frames (seed {rig.seed_document}), rig '{rig.name}'")
@@ -177,7 +150,7 @@ def _run_cube_mirror_rendered(args) -> int:
             camp = rc.run_rendered_campaign(rig, real, seed=args.seed, axis_order=axis_order, noise=noise,
                                             noiseless=args.ideal, threshold=threshold, sweep_spp=args.sweep_spp,
                                             sweep_step_deg=args.sweep_step, repeat_frames=args.repeat_frames,
-                                            progress=bar)
+                                            progress=bar, frames=frames)
     wall = dict(camp.times)
     res = camp.result
     cal = camp.calibration
@@ -195,6 +168,7 @@ def _run_cube_mirror_rendered(args) -> int:
     print(table1_text(camp.searches))
 
     _print_truth_vs_recovered(res, ("R(sun←rot)  sweep fit", "R(cube←rot) search + TRIAD", "R(cube←sun) composed"))
+    user = _user_frames_finish(args, rig, frames, camp, real, axis_order)
     budget = None
     if not args.no_budget:
         mn = camp.measured_noise
@@ -222,7 +196,7 @@ def _run_cube_mirror_rendered(args) -> int:
         rig_path = os.path.relpath(resolve_rig_path(args.rig))
     except Exception:
         rig_path = args.rig
-    files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall,
+    files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall, user=user,
                          command="rigsim " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rigsim") else None)
     print("\nWall time by stage (s): " + ", ".join(f"{k} {v:.1f}" for k, v in wall.items()))
     print(f"report: {files['report']}  (plots: " + ", ".join(p.name for k, p in files.items() if k not in ("report", "json")) + ")")
@@ -230,6 +204,50 @@ def _run_cube_mirror_rendered(args) -> int:
         Path(args.json_out).write_text(files["json"].read_text())
         print(f"wrote {args.json_out}")
     return 0
+
+
+def _user_frames(args, rig):
+    """The sweep-frame collector for --export-frames / --centroider / --import-centroids (or None)."""
+    if not (args.export_frames or args.centroider or args.import_centroids):
+        return None
+    from rigsim.procedures.cube_mirror.user_frames import CampaignFrames, load_centroider
+
+    if args.centroider and args.import_centroids:
+        raise CliError("--centroider and --import-centroids: give one of them")
+    out = None
+    if args.export_frames:
+        out = Path(args.export_frames)
+        if out.exists() and not out.is_dir():
+            raise CliError(f"--export-frames = {out}: exists and is not a folder")
+        out.mkdir(parents=True, exist_ok=True)
+    fn = load_centroider(args.centroider) if args.centroider else None
+    return CampaignFrames(rig, out, centroider=fn, centroider_name=args.centroider or "", seed=args.seed,
+                          suffix={"png": ".png", "tiff": ".tif", "fits": ".fits"}[args.frame_format])
+
+
+def _user_frames_finish(args, rig, frames, camp, real, axis_order):
+    if frames is None:
+        return None
+    if frames.out_dir is not None:
+        logs = frames.write_logs([s.final_reading_rad for s in camp.searches], rig.procedure.faces)
+        print(f"\nexported {len(frames.names)} sweep frames and {len(frames.null_rows)} null-search frames to "
+              f"{frames.out_dir}/ with " + ", ".join(p.name for p in logs.values()))
+    if args.import_centroids:
+        frames.import_centroids(args.import_centroids)
+    if not (args.centroider or args.import_centroids):
+        return None
+    from rigsim.procedures.cube_mirror.user_frames import user_comparison
+
+    cmp = user_comparison(rig, frames, camp, real, axis_order)
+    rows = []
+    for who, label in (("rigsim", "rigsim"), ("user", "yours")):
+        c = cmp[who]
+        rows.append([label, str(c["centroids"]["n"]), ", ".join(f"{x:.4f}" for x in c["centroids"]["rms_px"]),
+                     ", ".join(f"{x:+.3f}" for x in c["R_sun_from_rot_error_arcsec"]),
+                     ", ".join(f"{x:+.3f}" for x in c["R_cube_from_sun_error_arcsec"])])
+    print(f"\nYour centroider ({cmp['centroider']}) beside rigsim's on the same sweep frames (errors against the truth):")
+    print(text_table(["centroider", "frames", "centroid−exact rms u, v px", "R(sun←rot) err ″", "R(cube←sun) err ″"], rows))
+    return cmp
 
 
 def _run_cube_mirror_analytic(args) -> int:

@@ -14,7 +14,7 @@ import numpy as np
 from rigsim.estimation.null_search import SearchResult, SearchStep, null_search
 from rigsim.rig.turntable import TruePose, TurntableReading
 
-__all__ = ["TracedStep", "TracedSearch", "traced_search"]
+__all__ = ["TracedSearch", "TracedStep", "traced_search"]
 
 
 @dataclass

@@ -87,7 +87,7 @@ def _null_noise(resid: list, unit: str) -> dict:
     r = np.array(resid)
     return {"null_measurement_rms": float(np.sqrt(np.mean(r**2))),
             "null_measurement_rms_xy": np.sqrt(np.mean(r**2, axis=0)).tolist(),
-            "null_measurement_unit": unit, "null_measurement_n": int(len(r))}
+            "null_measurement_unit": unit, "null_measurement_n": len(r)}
 
 
 def expected_frames(rig: CubeMirrorRig) -> int:
@@ -99,14 +99,15 @@ def expected_frames(rig: CubeMirrorRig) -> int:
 def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 0, axis_order: str | None = None,
                           noise: Noise | None = None, noiseless: bool = False, threshold: float | None = None,
                           sweep_spp: int = 256, sweep_step_deg: float | None = None, repeat_frames: int = 0,
-                          progress=None) -> RenderedCampaign:
+                          progress=None, frames=None) -> RenderedCampaign:
     """One campaign on rendered frames against the rig instance ``real``.
 
     ``noise``: the random errors that are not image noise (encoder noise; default the rig's).
     ``noiseless``: detector noise off in every frame (rendering noise stays). ``threshold``
     overrides the null-search threshold (px for seed 000, arcsec for 001). ``repeat_frames`` > 0
     renders that many extra frames at the first face's final pose to measure the null measurement
-    scatter (for :func:`rendered_error_budget`).
+    scatter (for :func:`rendered_error_budget`). ``frames``
+    (:class:`~rigsim.procedures.cube_mirror.user_frames.CampaignFrames`) sees every sweep frame.
     """
     from rigsim.procedures.cube_mirror.sweep import render_sweep
 
@@ -121,7 +122,8 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     pb.set_description("sun-sensor sweep")
     t0 = time.perf_counter()
     sweep, sweep_truth = render_sweep(rig, real, noise, int(rng.integers(2**31)), spp=sweep_spp, noiseless=noiseless,
-                                      step_deg=sweep_step_deg, progress=pb.update)
+                                      step_deg=sweep_step_deg, progress=pb.update,
+                                      on_frame=None if frames is None else frames.sweep_frame)
     times["sweep render + centroid"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     cal = fit_sun_sensor(rig, sweep.readings, sweep.uv, order)
@@ -357,6 +359,15 @@ def budget_trials_count(rig: CubeMirrorRig, n_trials: int) -> int:
     return n_trials * (len(rendered_budget_sources(rig, 0.0, 0.0)) + 2)
 
 
-__all__ = ["RenderedCampaign", "run_rendered_campaign", "surrogate_campaign", "rendered_error_budget",
-           "RenderedBudget", "rendered_budget_sources", "expected_frames", "budget_trials_count",
-           "ARCSEC_PER_RAD", "RAD_PER_ARCSEC"]
+__all__ = [
+    "ARCSEC_PER_RAD",
+    "RAD_PER_ARCSEC",
+    "RenderedBudget",
+    "RenderedCampaign",
+    "budget_trials_count",
+    "expected_frames",
+    "rendered_budget_sources",
+    "rendered_error_budget",
+    "run_rendered_campaign",
+    "surrogate_campaign",
+]

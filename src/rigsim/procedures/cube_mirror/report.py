@@ -190,7 +190,7 @@ def _search_table_md(s) -> list[str]:
 
 
 def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None = None,
-                 wall_times: dict | None = None, command: str | None = None) -> dict[str, Path]:
+                 wall_times: dict | None = None, command: str | None = None, user: dict | None = None) -> dict[str, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files = {"calibration_residuals": plot_calibration_residuals(campaign, out / "calibration_residuals.png"),
@@ -275,6 +275,10 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
                   "differences (σ1 from the search is smaller than the paper's 1 px; the sun-sensor calibration is left out of "
                   "the paper's budget)."]
         L += ["", "![budget histogram](budget_histogram.png)", ""]
+    if user is not None:
+        from rigsim.procedures.cube_mirror.user_frames import comparison_markdown
+
+        L += comparison_markdown(user)
     if wall_times:
         L += ["## Wall time by stage", "", "| stage | s |", "|---|---:|"]
         for k, v in wall_times.items():
@@ -285,10 +289,15 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
     rec = {"rig": rig.name, "rig_file": rig_path, "seed": campaign.seed, "axis_order": r.axis_order,
            "error_arcsec": {"R_cube_from_sun": r.error_arcsec.tolist(), "R_sun_from_rot": r.sun_error_arcsec.tolist(),
                             "R_cube_from_rot": r.cube_error_arcsec.tolist()},
+           "recovered": {"R_sun_from_rot": r.R_sun_from_rot_est.tolist(), "R_cube_from_rot": r.R_cube_from_rot_est.tolist(),
+                         "R_cube_from_sun": r.R_cube_from_sun_est.tolist(),
+                         "intrinsics": dict(zip(cal.param_names[:-3], cal.params[:-3].tolist()))},
            "null_readings_deg": r.null_poses_deg, "searches": [s.as_dict() for s in campaign.searches],
            "measured_noise": campaign.measured_noise, "times_s": wall_times or campaign.times,
            "calibration": {"names": cal.param_names, "params": cal.params.tolist(), "sigma": list(sig.values()),
                            "rms_px": cal.rms_px, "n_points": cal.n_points}}
+    if user is not None:
+        rec["user_centroider"] = user
     if budget is not None:
         rec["budget"] = [{"source": b.source, "sigma_arcsec": b.sigma_arcsec.tolist(), "paper_arcsec": b.paper_arcsec,
                           "n": b.n} for b in budget.rows]

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor, sweep_poses
-from rigsim.imaging import Flag, centroid_tcom
+from rigsim.imaging import NoiseModel
+from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TruePose, TurntableModel, TurntableReading
 from rigsim.truth.cube_mirror.realization import Noise, Realization
@@ -51,17 +52,19 @@ def render_sweep(
     noiseless: bool = False,
     step_deg: float | None = None,
     centroider: str = "scurve",
+    on_frame: Callable | None = None,
 ) -> tuple[SweepObservation, SweepTruth]:
     """Render, centroid and record the sweep (module docstring): (observation, truth). ``noiseless``: detector noise off
     (rendering noise and quantisation stay). ``step_deg`` overrides the procedure's sweep step.
-    ``centroider``: ``"scurve"`` (default: first moment with the disk's pixel-phase correction,
-    :mod:`rigsim.imaging.scurve`) or ``"tcom"`` (thresholded first moment, biased by up to 0.02 px
-    on this 2.5 px sun disk)."""
-    if centroider not in ("scurve", "tcom"):
-        raise ValueError(f"centroider = {centroider!r}: must be 'scurve' or 'tcom'")
+    ``centroider``: a method of :func:`rigsim.imaging.frame_spots.measure_frame` (the ``rigsim
+    centroid`` stage): ``"scurve"`` (default: first moment with the disk's pixel-phase correction)
+    or ``"tcom"``/``"wcom"``/``"gauss"``. ``on_frame(frame, spots, k, reading_rad, pose_index)`` sees
+    every rendered frame, its spots, the index of the one measured (None: rejected), the turntable
+    reading and the sweep pose's index."""
+    if centroider not in FRAME_METHODS:
+        raise ValueError(f"centroider = {centroider!r}: allowed {', '.join(FRAME_METHODS)}")
     import time
 
-    from rigsim.imaging.scurve import centroid_disk_scurve
     from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 
     t0 = time.perf_counter()
@@ -71,8 +74,10 @@ def render_sweep(
     step = proc.sweep_step_deg if step_deg is None else float(step_deg)
     poses = sweep_poses(proc.sweep_axes, proc.sweep_range_deg, step, fixed)
     n = len(next(iter(poses.values())))
+    # what the encoders read at every pose (true + bias + noise), drawn before the frames
+    read = {k: v + real.encoder_bias_rad.get(k, 0.0) + rng.normal(0.0, noise.encoder_sigma_rad.get(k, 0.0), n)
+            for k, v in poses.items()}
     scene = SunSensorScene(rig, real, spp=spp)
-    offset = rig.sun_sensor.detector.offset_dn
     keep, uv, uv_true, uv_centre = [], [], [], []
     rejected = 0
     rendered = 0
@@ -91,32 +96,24 @@ def render_sweep(
             fr = scene.render(pose, seed=int(rng.integers(2**31)), truth_points=200_000, full_frame=False,
                                  noiseless=noiseless)
         rendered += 1
-        f = fr.sidecar["flags"]
-        roi = fr.dn.astype(float) - offset  # the crop window, at fr.origin_uv on the detector
-        cen = centroid_tcom(roi, origin_uv=fr.origin_uv, saturation=rig.sun_sensor.detector.max_dn - offset)
-        bad = Flag.INVALID | Flag.SATURATED | Flag.EDGE
-        if f["spot_cut_by_edge"] or f["saturated"] or (cen.flags & bad):
+        det = rig.sun_sensor.detector
+        spots = measure_frame(fr.dn, NoiseModel.from_detector(det), method=centroider, saturation_dn=det.max_dn,
+                              threshold_dn=0.5 if noiseless else None, origin_uv=fr.origin_uv,
+                              detector_shape=fr.detector_shape)
+        k = single_spot(spots)
+        if on_frame is not None:
+            on_frame(fr, spots, k, {a: float(r[i]) for a, r in read.items()}, i)
+        if k is None:
             rejected += 1
         else:
             keep.append(i)
-            if centroider == "scurve":
-                det = rig.sun_sensor.detector
-                # above the noise (5σ of the read noise, ≥ 3 DN); a noise-free frame only needs to
-                # clear the quantisation, and every faint rim pixel matters to the S-curve model
-                thr = 0.5 if noiseless else max(3.0, 5.0 * det.read_noise_e * det.gain_dn_per_e)
-                c, _w = centroid_disk_scurve(roi, fr.origin_uv, threshold=thr)
-                uv.append([float(c[0]), float(c[1])])
-            else:
-                uv.append([cen.u, cen.v])
+            uv.append([float(spots.u[k]), float(spots.v[k])])
             uv_true.append(fr.sidecar["truth"]["spot"]["pixel_centroid_uv"])
             uv_centre.append(fr.sidecar["truth"]["spot"]["center_uv"])
         if progress:
             progress(1)
     keep = np.array(keep, dtype=int)
-    readings = TurntableReading({
-        k: v[keep] + real.encoder_bias_rad.get(k, 0.0) + rng.normal(0.0, noise.encoder_sigma_rad.get(k, 0.0), keep.size)
-        for k, v in poses.items()
-    })
+    readings = TurntableReading({a: r[keep] for a, r in read.items()})
     obs = SweepObservation(readings, np.array(uv), rendered, rejected, time.perf_counter() - t0)
     return obs, SweepTruth(TruePose({k: v[keep] for k, v in poses.items()}), np.array(uv_true), np.array(uv_centre))
 

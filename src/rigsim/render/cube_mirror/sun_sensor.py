@@ -256,7 +256,12 @@ class SunSensorScene:
             origin, shape = (0, 0), None
         else:
             win = self.renderer.render(s, seed=seed)
-            photons, origin, shape = win.image, tuple(win.origin_uv), (ss.resolution_px[1], ss.resolution_px[0])
+            shape = (ss.resolution_px[1], ss.resolution_px[0])
+            # the detector's part of the window: a window reaching past the edge reads out only real pixels
+            (u0, v0), (h, w) = win.origin_uv, win.image.shape
+            a0, b0 = max(0, u0), max(0, v0)
+            a1, b1 = max(a0, min(shape[1], u0 + w)), max(b0, min(shape[0], v0 + h))
+            photons, origin = win.image[b0 - v0:b1 - v0, a0 - u0:a1 - u0], (a0, b0)
         truth = self.renderer.truth(s, n=truth_points) if not (win.flags.get("spot_off_detector") or win.flags.get("spot_outside_model")) else {"valid": False}
         return digitise(
             photons, ss.detector, seed=seed, noiseless=noiseless, origin_uv=origin, detector_shape=shape,

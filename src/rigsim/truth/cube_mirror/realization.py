@@ -92,12 +92,7 @@ def realization_from_rig(rig: CubeMirrorRig, ideal: bool = False) -> Realization
 
 def noise_from_rig(rig: CubeMirrorRig) -> Noise:
     enc = {a.label: a.encoder_sigma_arcsec * RAD_PER_ARCSEC for a in rig.turntable.axes}
-    if rig.procedure.method == "diaphragm":
-        ac = rig.aiming_camera
-        null = ac.null_sigma_px * ac.object_pixel_mm / (2.0 * rig.diaphragm_screen.distance_to_cube_mm)
-    else:
-        null = rig.autocollimator.resolution_arcsec * RAD_PER_ARCSEC
-    return Noise(enc, null, rig.sun_sensor.centroid_sigma_px)
+    return Noise(enc, rig.null_sigma_rad, rig.sun_sensor.centroid_sigma_px)
 
 
 def perpendicularity_perturbed(turntable: TurntableModel, angles_rad) -> TurntableModel:

@@ -1,0 +1,306 @@
+"""The cube-mirror stages on a user's files (seeds 000/001): the sun-sensor calibration from an angle
+log and a centroid table, TRIAD from the readings at the two face nulls, and R(cube←sun) with its
+covariance. Observations and the nominal rig only; the in-process campaign calls the same
+estimators (:mod:`rigsim.procedures.cube_mirror.pipeline`).
+
+Rotations are written as matrices with a covariance of the small rotation δ (arcsec²) in
+``R_true ≈ exp([δ]×)·R``, δ about the target frame's axes (the convention of the comparison step)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from rigsim.errors import InputError
+from rigsim.estimation.cube_attitude import AXIS_ORDERS_2AXIS, AXIS_ORDERS_3AXIS, cube_from_rot_triad
+from rigsim.estimation.sun_calibration import SunCalibration
+from rigsim.files import Column, covariance_block, read_json, read_table
+from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.imaging.frame_spots import REJECT
+from rigsim.optics.cube import FACE_NORMALS
+from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.turntable import TurntableReading
+
+__all__ = [
+    "ROTATION_CONVENTION",
+    "SunSensorInputs",
+    "angle_columns",
+    "axis_orders",
+    "calibrate_sun_sensor_files",
+    "compose_rotations",
+    "read_angle_log",
+    "read_nulls",
+    "read_spot_table",
+    "sun_calibration_json",
+    "sun_sensor_inputs",
+    "triad_json",
+    "triad_with_covariance",
+    "write_opencv_camera",
+]
+
+ROTATION_CONVENTION = "R_true ≈ exp([δ]×)·R, δ = (δx, δy, δz) about the target frame's axes, arcsec"
+ARCSEC3 = ["arcsec"] * 3  # per parameter; the matrix is in arcsec²
+
+
+def axis_orders(rig: CubeMirrorRig) -> dict[str, str]:
+    """The axis-nesting readings allowed for the rig's turntable."""
+    return AXIS_ORDERS_2AXIS if len(rig.turntable.axes) == 2 else AXIS_ORDERS_3AXIS
+
+
+def angle_columns(rig: CubeMirrorRig) -> list[Column]:
+    """One column per turntable axis: ``x_deg``, ``y_deg`` (and ``z_deg`` on a 3-axis table)."""
+    return [Column(a.label.lower(), "deg") for a in rig.turntable.axes]
+
+
+def read_angle_log(path, rig: CubeMirrorRig) -> tuple[list[str], TurntableReading, np.ndarray]:
+    """An angle log (``frame`` and one ``<axis>_deg`` column per axis): (frame names, the readings
+    in radians, each row's line). Frame names are unique."""
+    t = read_table(path, [Column("frame", kind="str"), *angle_columns(rig)], what="angle log")
+    frames = [Path(f).name for f in t["frame"]]
+    seen: dict[str, int] = {}
+    for f, line in zip(frames, t["__line__"]):
+        if f in seen:
+            raise InputError(f"{path}: line {line}, column frame: {f!r} already on line {seen[f]}; one row per frame")
+        seen[f] = int(line)
+    for a in rig.turntable.axes:
+        x = t[f"{a.label.lower()}_deg"]
+        bad = np.flatnonzero(np.abs(x) > 360.0)
+        if bad.size:
+            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
+                             "expected -360 to 360 degrees")
+    reading = TurntableReading({a.label: np.radians(t[f"{a.label.lower()}_deg"]) for a in rig.turntable.axes})
+    return frames, reading, t["__line__"]
+
+
+def read_spot_table(path) -> dict[str, tuple[float, float, int, int]]:
+    """A centroid table (``frame``, ``u_px``, ``v_px``, optional ``spot`` and ``flags``): per frame
+    its first spot (``spot`` 0, the brightest in ``rigsim centroid``'s tables), as (u, v, flags, line).
+    A NaN position is a failed measurement (kept, flagged INVALID)."""
+    t = read_table(path, [Column("frame", kind="str"), Column("u", "px", allow_nan=True),
+                          Column("v", "px", allow_nan=True), Column("spot", kind="int", required=False),
+                          Column("flags", kind="int", required=False)], what="centroid table")
+    n = len(t["__line__"])
+    spot = t.get("spot", np.zeros(n, np.int64))
+    flags = t.get("flags", np.zeros(n, np.int64))
+    out: dict[str, tuple[float, float, int, int]] = {}
+    for i in np.argsort(spot, kind="stable"):
+        f = Path(str(t["frame"][i])).name
+        if f in out:
+            continue
+        fl = int(flags[i]) | (int(REJECT) if not (np.isfinite(t["u_px"][i]) and np.isfinite(t["v_px"][i])) else 0)
+        out[f] = (float(t["u_px"][i]), float(t["v_px"][i]), fl, int(t["__line__"][i]))
+    return out
+
+
+@dataclass
+class SunSensorInputs:
+    """The sweep as the estimator sees it, joined from the two files."""
+
+    frames: list[str]
+    readings: TurntableReading
+    uv: np.ndarray
+    rejected: list[str] = field(default_factory=list)  # frames whose spot is flagged or missing
+
+
+def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSensorInputs:
+    """Join an angle log and a centroid table on the frame name. Every frame of the centroid table
+    must be in the log; frames without a usable spot (flags INVALID, SATURATED, EDGE, or none) are
+    left out, as the in-process sweep does."""
+    frames, reading, _ = read_angle_log(angles_path, rig)
+    spots = read_spot_table(centroids_path)
+    known = set(frames)
+    for f, (_, _, _, line) in spots.items():
+        if f not in known:
+            raise InputError(f"{centroids_path}: line {line}, column frame: {f!r} has no row in the angle log {angles_path}")
+    keep, uv, rejected = [], [], []
+    for i, f in enumerate(frames):
+        s = spots.get(f)
+        if s is None or s[2] & int(REJECT):
+            rejected.append(f)
+            continue
+        keep.append(i)
+        uv.append(s[:2])
+    keep = np.array(keep, dtype=int)
+    return SunSensorInputs([frames[i] for i in keep], TurntableReading({k: v[keep] for k, v in reading.items()}),
+                           np.array(uv, float).reshape(-1, 2), rejected)
+
+
+def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, axis_order: str | None = None
+                               ) -> tuple[SunCalibration, SunSensorInputs]:
+    """Step 1 / B on files: intrinsics, distortion and R(sun←rot) by least squares."""
+    order = axis_order or default_axis_order(rig)
+    inp = sun_sensor_inputs(rig, angles_path, centroids_path)
+    if len(inp.frames) < 8:
+        raise InputError(f"{centroids_path}: {len(inp.frames)} frames with a usable spot; the calibration needs at least 8")
+    return fit_sun_sensor(rig, inp.readings, inp.uv, order), inp
+
+
+def _rotation_block(R: np.ndarray, cov_rad2: np.ndarray) -> dict:
+    e = Rotation.from_matrix(R).as_euler("xyz", degrees=True)
+    return {"matrix": np.asarray(R).tolist(), "euler_xyz_deg": e.tolist(),
+            "covariance": covariance_block(["dx", "dy", "dz"], np.asarray(cov_rad2) * ARCSEC_PER_RAD**2, ARCSEC3),
+            "convention": ROTATION_CONVENTION}
+
+
+def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: str, inputs: SunSensorInputs) -> dict:
+    """The calibration as one JSON object: intrinsics with their covariance, R(sun←rot) with its
+    covariance, residual statistics, the frames used."""
+    cam = cal.camera
+    n_int = len(cal.param_names) - 3
+    units = {"fx": "px", "fy": "px", "cx": "px", "cy": "px"}
+    return {
+        "kind": "sun-sensor calibration", "rig": rig.name, "axis_order": axis_order,
+        "intrinsics": {"fx_px": cam.fx, "fy_px": cam.fy, "cx_px": cam.cx, "cy_px": cam.cy,
+                       "width_px": cam.width, "height_px": cam.height},
+        "distortion": {"k1": cam.k1, "k2": cam.k2, "p1": cam.p1, "p2": cam.p2, "k3": cam.k3,
+                       "model": "OpenCV (Brown), normalised coordinates"},
+        "intrinsics_covariance": covariance_block(cal.param_names[:n_int], cal.covariance[:n_int, :n_int],
+                                                  [units.get(a, "1") for a in cal.param_names[:n_int]]),
+        "R_sun_from_rot": _rotation_block(cal.R_sun_from_rot, cal.rotation_covariance_rad2),
+        "residual_rms_px": cal.rms_px, "n_frames": cal.n_points, "n_rejected": len(inputs.rejected),
+        "frames_rejected": inputs.rejected,
+        "sigma_source": "residual scatter of the fit (σ² = RSS / dof)",
+    }
+
+
+def write_opencv_camera(path, cal_camera) -> Path:
+    """OpenCV's FileStorage camera (``camera_matrix``, ``distortion_coefficients`` k1 k2 p1 p2 k3,
+    ``image_width``, ``image_height``), YAML or JSON by the suffix."""
+    import cv2
+
+    from rigsim.files import atomic_write_bytes
+
+    path = Path(path)
+    if path.suffix.lower() not in (".yml", ".yaml", ".json", ".xml"):
+        raise InputError(f"{path}: expected an OpenCV FileStorage name ending .yml, .yaml, .json or .xml")
+    fmt = {".json": cv2.FILE_STORAGE_FORMAT_JSON, ".xml": cv2.FILE_STORAGE_FORMAT_XML}.get(path.suffix.lower(),
+                                                                                          cv2.FILE_STORAGE_FORMAT_YAML)
+    fs = cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | fmt)
+    c = cal_camera
+    fs.write("image_width", int(c.width))
+    fs.write("image_height", int(c.height))
+    fs.write("camera_matrix", np.array([[c.fx, 0.0, c.cx], [0.0, c.fy, c.cy], [0.0, 0.0, 1.0]]))
+    fs.write("distortion_coefficients", np.array([[c.k1, c.k2, c.p1, c.p2, c.k3]]))
+    return atomic_write_bytes(path, fs.releaseAndGetString().encode())
+
+
+def plot_residuals(cal: SunCalibration, path, title: str = "") -> Path:
+    """Residuals (measured − model, px) of the sweep over the detector, magnified, and their histogram."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rigsim.files import atomic_write_bytes
+
+    r, uv = cal.residuals_px, cal.uv
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [1.3, 1]})
+    scale = 0.1 * max(cal.camera.width, cal.camera.height) / max(float(np.max(np.linalg.norm(r, axis=1))), 1e-12)
+    a.quiver(uv[:, 0], uv[:, 1], r[:, 0], r[:, 1], angles="xy", scale_units="xy", scale=1.0 / scale, width=0.003)
+    a.set_xlim(0, cal.camera.width)
+    a.set_ylim(cal.camera.height, 0)
+    a.set_aspect("equal")
+    a.set_xlabel("u (px)")
+    a.set_ylabel("v (px)")
+    a.set_title(f"residuals × {scale:.0f}")
+    b.hist(r[:, 0], bins=30, alpha=0.6, label=f"u: rms {np.sqrt(np.mean(r[:, 0] ** 2)):.4f} px")
+    b.hist(r[:, 1], bins=30, alpha=0.6, label=f"v: rms {np.sqrt(np.mean(r[:, 1] ** 2)):.4f} px")
+    b.set_xlabel("residual (px)")
+    b.set_ylabel("frames")
+    b.legend()
+    fig.suptitle(title or f"sun-sensor calibration: {cal.n_points} frames, rms {cal.rms_px:.4f} px")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+# ------------------------------------------------------------------------------ TRIAD and compose
+
+def read_nulls(path, rig: CubeMirrorRig) -> tuple[list[str], list[TurntableReading]]:
+    """The readings at the two face nulls: two rows of ``face`` (e.g. +Z) and ``<axis>_deg``."""
+    t = read_table(path, [Column("face", kind="str"), *angle_columns(rig)], what="null log")
+    if len(t["face"]) != 2:
+        raise InputError(f"{path}: {len(t['face'])} rows; expected 2 (one per nulled face)")
+    for f, line in zip(t["face"], t["__line__"]):
+        if f not in FACE_NORMALS:
+            raise InputError(f"{path}: line {line}, column face: {f!r}; expected one of {', '.join(FACE_NORMALS)}")
+    readings = [TurntableReading({a.label: float(np.radians(t[f"{a.label.lower()}_deg"][i])) for a in rig.turntable.axes})
+                for i in range(2)]
+    return [str(f) for f in t["face"]], readings
+
+
+def reading_sigma_rad(rig: CubeMirrorRig, free_axes: Sequence[str] = ("X", "Y")) -> dict[str, float]:
+    """1σ of each null reading: the encoder's, and on the two axes the null search drives, the
+    null's own pointing σ (the rig's aiming-camera or autocollimator accuracy) in quadrature."""
+    out = {}
+    for a in rig.turntable.axes:
+        s2 = (a.encoder_sigma_arcsec / ARCSEC_PER_RAD) ** 2
+        if a.label in free_axes:
+            s2 += rig.null_sigma_rad**2
+        out[a.label] = float(np.sqrt(s2))
+    return out
+
+
+def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: str, sigma_rad: dict[str, float],
+                          d_rot=(0.0, 0.0, 1.0), step_rad: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """TRIAD R(cube←rot) and the covariance (rad²) of its small rotation δ, propagated from
+    independent reading errors of σ ``sigma_rad`` per axis (central differences)."""
+    R0, _, _ = cube_from_rot_triad(readings, faces, axis_order, d_rot)
+    cols = []
+    for i in range(2):
+        for lab, s in sigma_rad.items():
+            if s <= 0:
+                continue
+            d = []
+            for sgn in (1.0, -1.0):
+                rr = [dict(r) for r in readings]
+                rr[i][lab] = rr[i].get(lab, 0.0) + sgn * step_rad
+                R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot)
+                d.append(Rotation.from_matrix(R @ R0.T).as_rotvec())
+            cols.append((d[0] - d[1]) / (2 * step_rad) * s)
+    J = np.array(cols).T if cols else np.zeros((3, 0))
+    return R0, J @ J.T
+
+
+def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, readings, sigma_rad: dict, rig_name="") -> dict:
+    return {"kind": "TRIAD", "rig": rig_name, "faces": list(faces), "axis_order": axis_order,
+            "readings_deg": [{k: float(np.degrees(v)) for k, v in r.items()} for r in readings],
+            "reading_sigma_arcsec": {k: v * ARCSEC_PER_RAD for k, v in sigma_rad.items()},
+            "R_cube_from_rot": _rotation_block(R, cov_rad2)}
+
+
+def _rotation_from(path, key: str) -> tuple[np.ndarray, np.ndarray]:
+    obj = read_json(path, required=(key,), what=f"result with {key}")
+    blk = obj[key]
+    try:
+        R = np.array(blk["matrix"], float)
+        C = np.array(blk["covariance"]["matrix"], float) / ARCSEC_PER_RAD**2
+    except (KeyError, TypeError, ValueError):
+        raise InputError(f"{path}: {key} needs 'matrix' (3×3) and 'covariance': {{'matrix': 3×3 in arcsec²}}") from None
+    if R.shape != (3, 3) or C.shape != (3, 3) or not (np.all(np.isfinite(R)) and np.all(np.isfinite(C))):
+        raise InputError(f"{path}: {key}: matrix {R.shape}, covariance {C.shape}; expected finite 3×3 each")
+    if abs(np.linalg.det(R) - 1.0) > 1e-6 or np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6:
+        raise InputError(f"{path}: {key}.matrix is not a rotation (det {np.linalg.det(R):.6f}); expected R·Rᵀ = I, det +1")
+    if np.max(np.abs(C - C.T)) > 1e-9 * max(np.max(np.abs(C)), 1e-30) or np.min(np.linalg.eigvalsh(C)) < -1e-12 * np.max(np.abs(C)):
+        raise InputError(f"{path}: {key}.covariance is not symmetric positive semi-definite")
+    return R, C
+
+
+def compose_rotations(cube_path, sun_path) -> dict:
+    """R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ (seed 001 eq 9) with Σ = Σ_cube + R·Σ_sun·Rᵀ (independent
+    inputs; δ_cube←sun = δ_cube←rot − R(cube←sun)·δ_sun←rot)."""
+    Rc, Cc = _rotation_from(cube_path, "R_cube_from_rot")
+    Rs, Cs = _rotation_from(sun_path, "R_sun_from_rot")
+    R = Rc @ Rs.T
+    C = Cc + R @ Cs @ R.T
+    return {"kind": "compose", "inputs": {"cube_from_rot": str(cube_path), "sun_from_rot": str(sun_path)},
+            "R_cube_from_sun": _rotation_block(R, C)}

@@ -1,0 +1,234 @@
+"""Seeds 000/001 on a user's files: the frames of a rendered campaign, copied out as bare renamed
+files with the turntable readings as CSV, go through `rigsim centroid`, `calibrate sun-sensor`,
+`triad` and `compose` and give the in-process campaign's rotations to 1e-9 relative. Also a
+user's centroider inside the campaign, and one-line errors for bad files."""
+
+import json
+import shutil
+import sys
+
+import numpy as np
+import pytest
+
+from rigsim.cli import main
+from rigsim.files import Column, read_table, write_table
+
+RIGS = {"000": "sun_sensor_2axis_diaphragm", "001": "sun_sensor_3axis_autocollimator"}
+
+
+def _rename(src, dst):
+    """The exported frames under new names (img_<k>.png) with the logs rewritten: no sidecars."""
+    dst.mkdir()
+    t = read_table(src / "angles.csv", [Column("frame", kind="str")])
+    names = {f: f"img_{k:03d}{f[-4:]}" for k, f in enumerate(reversed(list(t["frame"])))}
+    cols = {k: v for k, v in t.items() if k != "__line__"}
+    for f, g in names.items():
+        shutil.copy(src / f, dst / g)
+    cols["frame"] = [names[f] for f in cols["frame"]]
+    write_table(dst / "angles.csv", cols)
+    shutil.copy(src / "nulls.csv", dst / "nulls.csv")
+    return dst
+
+
+def _assert_rel(a, b, rel=1e-9):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    assert np.max(np.abs(a - b)) <= rel * np.max(np.abs(b)), np.max(np.abs(a - b))
+
+
+def _file_route(d, rig, capsys):
+    frames = sorted(str(p) for p in d.glob("img_*"))
+    assert main(["centroid", *frames, "--rig", rig, "--out", str(d / "c.csv"), "--quiet"]) == 0
+    assert main(["calibrate", "sun-sensor", "--rig", rig, "--angles", str(d / "angles.csv"), "--centroids",
+                 str(d / "c.csv"), "--out", str(d / "sun.json"), "--opencv", str(d / "cam.yml")]) == 0
+    assert main(["triad", "--nulls", str(d / "nulls.csv"), "--rig", rig, "--out", str(d / "cube.json")]) == 0
+    assert main(["compose", "--cube-from-rot", str(d / "cube.json"), "--sun-from-rot", str(d / "sun.json"),
+                 "--out", str(d / "cs.json")]) == 0
+    capsys.readouterr()
+    return {k: json.loads((d / f).read_text()) for k, f in (("sun", "sun.json"), ("cube", "cube.json"), ("cs", "cs.json"))}
+
+
+def _round_trip(tmp_path, seed, capsys, extra=()):
+    rig = RIGS[seed]
+    exp, rep = tmp_path / "export", tmp_path / "report"
+    assert main(["run", "cube-mirror", "--rig", rig, "--sweep-step", "15", "--sweep-spp", "16", "--no-budget",
+                 "--repeat-frames", "0", "--export-frames", str(exp), "--out", str(rep), "--quiet", *extra]) == 0
+    camp = json.loads((rep / "campaign.json").read_text())["recovered"]
+    out = _file_route(_rename(exp, tmp_path / "bare"), rig, capsys)
+    _assert_rel(out["sun"]["R_sun_from_rot"]["matrix"], camp["R_sun_from_rot"])
+    _assert_rel(out["cube"]["R_cube_from_rot"]["matrix"], camp["R_cube_from_rot"])
+    _assert_rel(out["cs"]["R_cube_from_sun"]["matrix"], camp["R_cube_from_sun"])
+    i = out["sun"]["intrinsics"]
+    _assert_rel([i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"]], [camp["intrinsics"][k] for k in ("fx", "fy", "cx", "cy")])
+    # the propagated covariance: R(cube←sun)'s is the sum of the two inputs' (the rotation preserves the trace)
+    tr = [np.trace(np.array(out[k][b]["covariance"]["matrix"]))
+          for k, b in (("cube", "R_cube_from_rot"), ("sun", "R_sun_from_rot"), ("cs", "R_cube_from_sun"))]
+    assert tr[2] == pytest.approx(tr[0] + tr[1], rel=1e-12)
+    return out, camp, rep
+
+
+@pytest.mark.slow
+@pytest.mark.render
+@pytest.mark.parametrize("seed", ["000", "001"])
+def test_campaign_frames_round_trip_through_the_commands(tmp_path, seed, capsys):
+    _round_trip(tmp_path, seed, capsys)
+
+
+@pytest.mark.slow
+@pytest.mark.render
+def test_user_centroider_in_the_campaign(tmp_path, capsys, monkeypatch):
+    """A user's centroider (a plain thresholded first moment) on the same frames: its centroid error
+    and end-to-end error appear beside rigsim's in the report, and --import-centroids of the same
+    numbers gives the same result."""
+    (tmp_path / "mycent.py").write_text(
+        "import numpy as np\n"
+        "def com(img):\n"
+        "    a = img.astype(float) - 64.0\n"
+        "    a[a < 10] = 0\n"
+        "    v, u = np.indices(a.shape)\n"
+        "    return (u * a).sum() / a.sum(), (v * a).sum() / a.sum()\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sys.modules.pop("mycent", None)
+    out, camp, rep = _round_trip(tmp_path, "000", capsys, extra=("--centroider", "mycent:com"))
+    user = json.loads((rep / "campaign.json").read_text())["user_centroider"]
+    assert "## Your centroider beside rigsim's" in (rep / "report.md").read_text()
+    # the plain first moment is biased by the disk's pixel phase: worse than the S-curve corrected one
+    assert user["user"]["centroids"]["n"] == user["rigsim"]["centroids"]["n"] > 40
+    assert np.mean(user["user"]["centroids"]["rms_px"]) > np.mean(user["rigsim"]["centroids"]["rms_px"])
+    # the same centroids imported as a table give the same end-to-end numbers
+    import mycent
+
+    from rigsim.files import read_image
+
+    exp = tmp_path / "export"
+    t = read_table(exp / "angles.csv", [Column("frame", kind="str")])
+    uv = [mycent.com(read_image(exp / f)) for f in t["frame"]]
+    write_table(tmp_path / "mine.csv", {"frame": list(t["frame"]), "u_px": [p[0] for p in uv], "v_px": [p[1] for p in uv]})
+    rep2 = tmp_path / "report2"
+    assert main(["run", "cube-mirror", "--sweep-step", "15", "--sweep-spp", "16", "--no-budget", "--repeat-frames", "0",
+                 "--import-centroids", str(tmp_path / "mine.csv"), "--out", str(rep2), "--quiet"]) == 0
+    user2 = json.loads((rep2 / "campaign.json").read_text())["user_centroider"]
+    _assert_rel(user2["user"]["R_cube_from_sun_error_arcsec"], user["user"]["R_cube_from_sun_error_arcsec"], 1e-9)
+
+
+def _sweep_export(tmp_path):
+    """A short rendered sweep (±60° every 30°, 16 spp) exported as bare files, in-process calibration."""
+    from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
+    from rigsim.procedures.cube_mirror.sweep import render_sweep
+    from rigsim.procedures.cube_mirror.user_frames import CampaignFrames
+    from rigsim.rig.load import load_rig
+    from rigsim.truth.cube_mirror.realization import noise_from_rig, realization_from_rig
+
+    rig = load_rig(RIGS["000"])
+    rig = rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"sweep_step_deg": 20.0})})
+    fr = CampaignFrames(rig, tmp_path / "export", seed=3)
+    fr.out_dir.mkdir()
+    obs, _ = render_sweep(rig, realization_from_rig(rig), noise_from_rig(rig), 5, spp=16, on_frame=fr.sweep_frame)
+    fr.write_logs([{"X": 3.1, "Y": 0.01}, {"X": 1.6, "Y": 0.0}], rig.procedure.faces)
+    return rig, fit_sun_sensor(rig, obs.readings, obs.uv, default_axis_order(rig)), obs
+
+
+@pytest.mark.render
+def test_sweep_frames_round_trip_fast(tmp_path, capsys):
+    """The default suite's version: the sweep alone (49 poses), the in-process fit against the file route."""
+    rig, cal, obs = _sweep_export(tmp_path)
+    d = _rename(tmp_path / "export", tmp_path / "bare")
+    frames = sorted(str(p) for p in d.glob("img_*"))
+    assert main(["centroid", *frames, "--rig", RIGS["000"], "--out", str(d / "c.parquet"), "--quiet"]) == 0
+    assert main(["calibrate", "sun-sensor", "--rig", RIGS["000"], "--angles", str(d / "angles.csv"),
+                 "--centroids", str(d / "c.parquet"), "--out", str(d / "sun.json")]) == 0
+    sun = json.loads((d / "sun.json").read_text())
+    assert sun["n_frames"] == len(obs.uv) == cal.n_points
+    _assert_rel(sun["R_sun_from_rot"]["matrix"], cal.R_sun_from_rot)
+    _assert_rel([sun["intrinsics"][k] for k in ("fx_px", "fy_px", "cx_px", "cy_px")],
+                [cal.camera.fx, cal.camera.fy, cal.camera.cx, cal.camera.cy])
+    _assert_rel(np.array(sun["R_sun_from_rot"]["covariance"]["matrix"]),
+                cal.rotation_covariance_rad2 * (180 / np.pi * 3600) ** 2, 1e-6)
+    assert (d / "sun.residuals.png").stat().st_size > 10_000
+    # OpenCV reads the camera it writes
+    import cv2
+
+    assert main(["calibrate", "sun-sensor", "--rig", RIGS["000"], "--angles", str(d / "angles.csv"),
+                 "--centroids", str(d / "c.parquet"), "--out", str(d / "sun.json"), "--opencv", str(d / "cam.yml")]) == 0
+    fs = cv2.FileStorage(str(d / "cam.yml"), cv2.FILE_STORAGE_READ)
+    K, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+    _assert_rel([K[0, 0], K[1, 1], K[0, 2], K[1, 2]], [cal.camera.fx, cal.camera.fy, cal.camera.cx, cal.camera.cy])
+    _assert_rel(dist[0, :2], [cal.camera.k1, cal.camera.k2])
+    assert int(fs.getNode("image_width").real()) == 1024
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: (d / "angles.csv").write_text((d / "angles.csv").read_text().replace("x_deg", "x_rad")),
+     r"angles\.csv: column x_rad: expected x_deg \(degrees\), got radians"),
+    (lambda d: (d / "c.csv").write_text((d / "c.csv").read_text().replace("img_000.png", "ghost.png")),
+     r"c\.csv: line \d+, column frame: 'ghost\.png' has no row in the angle log"),
+    (lambda d: (d / "angles.csv").write_text((d / "angles.csv").read_text().replace("img_003.png,", "img_003.png,abc")),
+     r"angles\.csv: line 5, column x_deg: 'abc-13\.3+2' is not a number"),
+    (lambda d: (d / "angles.csv").write_text((d / "angles.csv").read_text().replace("img_003.png,", "img_004.png,")),
+     r"angles\.csv: line 6, column frame: 'img_004\.png' already on line 5; one row per frame"),
+    (lambda d: (d / "c.csv").write_text((d / "c.csv").read_text().replace("u_px", "u_mm")),
+     r"c\.csv: column u_mm: expected u_px \(pixels\), got millimetres"),
+])
+def test_bad_logs_one_line(tmp_path, capsys, edit, message):
+    d = tmp_path
+    write_table(d / "angles.csv", {"frame": [f"img_{k:03d}.png" for k in range(10)], "x_deg": np.linspace(-40, 40, 10),
+                                   "y_deg": np.zeros(10)})
+    write_table(d / "c.csv", {"frame": [f"img_{k:03d}.png" for k in range(10)], "u_px": np.linspace(100, 900, 10),
+                              "v_px": np.full(10, 511.5)})
+    edit(d)
+    rc = main(["calibrate", "sun-sensor", "--angles", str(d / "angles.csv"), "--centroids", str(d / "c.csv"),
+               "--out", str(d / "sun.json")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1
+    import re
+
+    assert re.search(message, err), err
+
+
+def test_triad_3axis_and_compose_covariance(tmp_path, capsys):
+    """TRIAD on a 3-axis table from a null log, its covariance against a Monte Carlo of the same
+    reading errors, and compose's propagation against a Monte Carlo of both inputs."""
+    from scipy.spatial.transform import Rotation
+
+    from rigsim.estimation.cube_attitude import cube_from_rot_triad
+    from rigsim.frames import ARCSEC_PER_RAD
+    from rigsim.rig.turntable import TurntableReading
+
+    write_table(tmp_path / "nulls.csv", {"face": ["+X", "+Y"], "y_deg": [-90.2, 0.3], "x_deg": [0.1, 89.7], "z_deg": [5.0, 5.0]})
+    assert main(["triad", "--nulls", str(tmp_path / "nulls.csv"), "--rig", RIGS["001"], "--out", str(tmp_path / "c.json"),
+                 "--sigma-arcsec", "10"]) == 0
+    res = json.loads((tmp_path / "c.json").read_text())
+    R = np.array(res["R_cube_from_rot"]["matrix"])
+    C = np.array(res["R_cube_from_rot"]["covariance"]["matrix"])
+    rng = np.random.default_rng(0)
+    base = [{"Y": np.radians(-90.2), "X": np.radians(0.1), "Z": np.radians(5.0)},
+            {"Y": np.radians(0.3), "X": np.radians(89.7), "Z": np.radians(5.0)}]
+    d = []
+    for _ in range(3000):
+        rr = [TurntableReading({k: v + rng.normal(0, 10 / ARCSEC_PER_RAD) for k, v in b.items()}) for b in base]
+        Ri, _, _ = cube_from_rot_triad(rr, ["+X", "+Y"], "YXZ")
+        d.append(Rotation.from_matrix(Ri @ R.T).as_rotvec() * ARCSEC_PER_RAD)
+    S = np.cov(np.array(d).T)
+    # 3000 samples: each variance within ±8 % (5σ of a sample variance is ±13 %)
+    np.testing.assert_allclose(np.diag(S), np.diag(C), rtol=0.13)
+    # compose: the sun calibration as a second input with its own covariance
+    sun = {"R_sun_from_rot": {"matrix": Rotation.from_euler("z", 12, degrees=True).as_matrix().tolist(),
+                              "covariance": {"matrix": np.diag([4.0, 9.0, 1.0]).tolist()}}}
+    (tmp_path / "s.json").write_text(json.dumps(sun))
+    assert main(["compose", "--cube-from-rot", str(tmp_path / "c.json"), "--sun-from-rot", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "cs.json")]) == 0
+    cs = json.loads((tmp_path / "cs.json").read_text())["R_cube_from_sun"]
+    Rs = np.array(sun["R_sun_from_rot"]["matrix"])
+    Cs = np.diag([4.0, 9.0, 1.0])
+    L1, L2 = np.linalg.cholesky(C), np.linalg.cholesky(Cs)
+    Rcs = R @ Rs.T
+    d = []
+    for _ in range(3000):
+        a = Rotation.from_rotvec(L1 @ rng.normal(size=3) / ARCSEC_PER_RAD).as_matrix() @ R
+        b = Rotation.from_rotvec(L2 @ rng.normal(size=3) / ARCSEC_PER_RAD).as_matrix() @ Rs
+        d.append(Rotation.from_matrix(a @ b.T @ Rcs.T).as_rotvec() * ARCSEC_PER_RAD)
+    np.testing.assert_allclose(np.cov(np.array(d).T), np.array(cs["covariance"]["matrix"]), atol=0.13 * np.trace(C + Cs) / 3)
+    capsys.readouterr()
+    (tmp_path / "bad.json").write_text(json.dumps({"R_sun_from_rot": {"matrix": np.diag([1, 1, -1]).tolist(),
+                                                                       "covariance": {"matrix": np.eye(3).tolist()}}}))
+    assert main(["compose", "--cube-from-rot", str(tmp_path / "c.json"), "--sun-from-rot", str(tmp_path / "bad.json")]) == 2
+    assert "R_sun_from_rot.matrix is not a rotation (det -1.000000)" in capsys.readouterr().err
