@@ -21,6 +21,17 @@ from rigsim.render.backend import ensure_variant
 __all__ = ["SceneElement", "Element", "PinholeSensor", "Scene"]
 
 
+def mitsuba_seed(seed: int, *stream: int) -> int:
+    """Mitsuba's sampler seed (an unsigned 32-bit integer) for any integer ``seed`` and optional
+    sub-streams: a seed already in [0, 2³²) without streams is used as is (so frames stay the
+    same); anything else is hashed into that range (numpy's SeedSequence)."""
+    seed = int(seed)
+    if not stream and 0 <= seed < 2**32:
+        return seed
+    words = [0x5EED, len(stream), int(seed < 0), abs(seed) & (2**64 - 1), abs(seed) >> 64, *(int(s) & (2**64 - 1) for s in stream)]
+    return int(np.random.SeedSequence(words).generate_state(1, np.uint32)[0])
+
+
 class SceneElement:
     """Base of a scene element: a part of the Mitsuba scene dict and its per-frame updates."""
 
@@ -141,7 +152,7 @@ class Scene:
             dr.set_thread_count(1)
         try:
             kw = {} if spp is None else {"spp": int(spp)}
-            arr = np.array(mi.render(self.scene, seed=int(seed), **kw), dtype=np.float64)
+            arr = np.array(mi.render(self.scene, seed=mitsuba_seed(seed), **kw), dtype=np.float64)
         finally:
             if dr.thread_count() != prev:
                 dr.set_thread_count(prev)

@@ -22,6 +22,14 @@ from rigsim.truth.star import StarSky
 
 __all__ = ['render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
 
+def _window_seed(seed: int, k: int) -> int:
+    """The sampler seed of window k of a frame (the earlier seed·100003 + k while it fits 32 bits)."""
+    from rigsim.render.scene import mitsuba_seed
+
+    x = int(seed) * 100003 + int(k)
+    return x if 0 <= x < 2**32 else mitsuba_seed(seed, k)
+
+
 def frame_seed(seed: int, k: int) -> int:
     """Detector-noise seed of frame k of a run with ``seed`` (independent streams per frame)."""
     return int(np.random.SeedSequence([int(seed), 0x57A4, int(k)]).generate_state(1, np.uint32)[0])
@@ -254,7 +262,7 @@ class MitsubaStarRenderer:
                 v0 = int(math.floor(v + 0.5)) - half
                 if u0 + Wp <= 0 or v0 + Wp <= 0 or u0 >= cam.width or v0 >= cam.height:
                     continue
-                arr = self.scene.render({"window_origin": (u0, v0)}, seed=int(seed) * 100003 + k, spp=self.spp)
+                arr = self.scene.render({"window_origin": (u0, v0)}, seed=_window_seed(seed, k), spp=self.spp)
                 a0, b0 = max(0, u0), max(0, v0)
                 a1, b1 = min(cam.width, u0 + Wp), min(cam.height, v0 + Wp)
                 frame[b0:b1, a0:a1] = arr[b0 - v0:b1 - v0, a0 - u0:a1 - u0]
