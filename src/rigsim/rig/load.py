@@ -6,6 +6,7 @@ value and the allowed range — never a traceback from inside pydantic or tomlli
 
 from __future__ import annotations
 
+import importlib.resources
 import tomllib
 import typing
 from pathlib import Path
@@ -18,7 +19,8 @@ from rigsim.rig.boresight import BoresightRig
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.star import StarRig
 
-SCENES_DIR = Path(__file__).resolve().parents[3] / "scenes"
+SCENES_DIR = Path(str(importlib.resources.files("rigsim") / "scenes"))
+"""The default rigs shipped with the package (in the repository: the top-level scenes/ folder)."""
 
 
 def _field_at(model: type[BaseModel], loc: tuple) -> tuple[type[BaseModel] | None, object | None]:
@@ -138,13 +140,16 @@ def parse_rig(data: dict, source: str | Path = "<dict>") -> CubeMirrorRig:
 
 
 def resolve_rig_path(name_or_path: str | Path) -> Path:
-    """A path, or the stem of a file in scenes/ (``sun_sensor_2axis_diaphragm``)."""
+    """A path, or a rig name (``sun_sensor_2axis_diaphragm``): ``NAME.toml`` in the current folder
+    first, then the packaged default rigs."""
     p = Path(name_or_path)
     if p.suffix == ".toml" and p.exists():
         return p
-    cand = SCENES_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
-    if cand.exists():
-        return cand
+    fname = p.name if p.suffix == ".toml" else f"{p.name}.toml"
+    if len(p.parts) == 1:
+        for cand in (Path.cwd() / fname, SCENES_DIR / fname):
+            if cand.is_file():
+                return cand
     if p.exists():
         return p
     known = ", ".join(sorted(x.stem for x in SCENES_DIR.glob("*.toml"))) or "(none)"
