@@ -72,3 +72,24 @@ def test_saturated_spot_is_flagged():
     sc = SunSensorScene(RIG, realization_from_rig(RIG), spp=64, spot_photons=5e7)
     fr = sc.render({"X": 0.0, "Y": 0.0}, seed=1)
     assert fr.sidecar["flags"]["saturated"] and fr.sidecar["flags"]["saturated_pixels"] > 0
+
+
+def test_window_follows_the_rig_geometry():
+    """The render window is derived from the largest sun image on the detector: f = 20 mm on 5.5 µm
+    pixels gives a 34 px disk on axis (38 px at the corners), which the fixed 32 px window refused."""
+    import math
+
+    from rigsim.optics.camera import PinholeBrown
+    from rigsim.optics.sun_disk import max_spot_extent_px, sun_window_px
+
+    full = math.radians(32.0 / 60.0)
+    cam = PinholeBrown(20 / 0.0055, 20 / 0.0055, 1023.5, 1023.5, width=2048, height=2048)
+    on_axis = 2 * math.tan(full / 2) * cam.fx
+    assert on_axis == pytest.approx(33.85, abs=0.01)
+    # a pinhole stretches the disk by 1/cos² radially: at the corner (field angle θ) the extent along u
+    # is ≈ on_axis/cos²θ·cos(45°)-ish; bound it between the on-axis size and the pure radial stretch
+    corner = math.atan(math.hypot(1023.5, 1023.5) / cam.fx)
+    ext = max_spot_extent_px(cam, full)
+    assert on_axis < ext < on_axis / math.cos(corner) ** 2
+    w = sun_window_px(cam, full)
+    assert w % 2 == 0 and w >= ext + 12 and w == 50

@@ -148,3 +148,26 @@ def spot_geometry_flags(camera: PinholeBrown, sun_dir, full_angle_rad: float,
         flags["spot_exceeds_window"] = False
     flags["spot_extent_px"] = [float(hi[0] - lo[0]), float(hi[1] - lo[1])]
     return flags
+
+
+def max_spot_extent_px(camera: PinholeBrown, full_angle_rad: float, grid: int = 9) -> float:
+    """The largest width or height (px) of the sun's image anywhere on the detector: its projected
+    rim at a grid of points over the detector (distortion and obliquity stretch it off axis)."""
+    uu = np.linspace(0.0, camera.width - 1.0, grid)
+    vv = np.linspace(0.0, camera.height - 1.0, grid)
+    U, V = np.meshgrid(uu, vv)
+    dirs = camera.unproject(np.column_stack([U.ravel(), V.ravel()]))
+    ext = 2.0 * math.tan(full_angle_rad / 2.0) * max(camera.fx, camera.fy)
+    for d in dirs[np.all(np.isfinite(dirs), axis=1)]:
+        rim, rim_ok = spot_outline(camera, d, full_angle_rad)
+        if np.all(rim_ok):
+            ext = max(ext, float(np.max(rim.max(axis=0) - rim.min(axis=0))))
+    return ext
+
+
+def sun_window_px(camera: PinholeBrown, full_angle_rad: float, minimum: int = 32, margin_px: int = 6) -> int:
+    """The render/readout window for the sun's image on this camera: the largest spot plus a margin
+    on each side, even, at least ``minimum``."""
+    w = int(math.ceil(max_spot_extent_px(camera, full_angle_rad))) + 2 * margin_px
+    return max(int(minimum), w + (w % 2))
+

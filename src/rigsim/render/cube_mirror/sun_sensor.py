@@ -19,7 +19,7 @@ import numpy as np
 
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
-from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, _basis, _unit, spot_geometry_flags, spot_truth, window_centroid
+from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, _basis, _unit, spot_geometry_flags, spot_truth, sun_window_px, window_centroid
 from rigsim.render.backend import ensure_variant
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.plugins import register_sensors
@@ -227,14 +227,16 @@ class SunSensorScene:
     (true turntable angles; the sidecar records them as the truth).
     """
 
-    def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, *, window_px: int = 32, spp: int = 1024,
-                 spot_photons: float | None = None):
+    def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, *, window_px: int | None = None,
+                 spp: int = 1024, spot_photons: float | None = None):
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         self.analytic_camera = rig.sun_sensor.camera()
         self.camera = self.analytic_camera
         self.full_angle_rad = math.radians(rig.sun_simulator.collimation_full_angle_arcmin / 60.0)
         self.spot_photons = float(spot_photons) if spot_photons is not None else default_spot_photons(rig)
+        if window_px is None:  # from the geometry: the largest spot on this detector plus a margin
+            window_px = sun_window_px(self.camera, self.full_angle_rad)
         self.renderer = SunSpotRenderer(self.camera, full_angle_rad=self.full_angle_rad, window_px=window_px,
                                         spp=spp, spot_photons=self.spot_photons)
 
