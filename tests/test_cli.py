@@ -99,3 +99,16 @@ def test_render_sun_sensor_cli(tmp_path):
 def test_bad_render_arguments(args, expected):
     r = run(*args)
     assert r.returncode == 2 and expected in r.stderr and "Traceback" not in r.stderr
+
+
+def test_broken_pipe_ends_quietly():
+    """`rigsim rig list | head -1`: the reader closes the pipe; rigsim stops with the shell's SIGPIPE
+    status (141) and no traceback."""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-c", "import sys; from rigsim.cli import main; sys.exit(main(['rig', 'list']))"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()  # nobody reads: the first write fails with EPIPE
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141 and err == ""

@@ -4,7 +4,9 @@ commands (:mod:`rigsim.families`), datasets and the 3D view serve all of them.""
 from __future__ import annotations
 
 import argparse
+import errno
 import json
+import os
 import sys
 
 import rigsim
@@ -124,13 +126,33 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        rc = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return rc
     except RigsimError as exc:
         print(f"rigsim: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("rigsim: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (rigsim … | head): stop quietly, as the shell's SIGPIPE would
+        _silence_stdout()
+        return 141
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            print(f"rigsim: error: no space left on the device writing {exc.filename or 'the output'}; free some and "
+                  "run the command again", file=sys.stderr)
+            return 1
+        raise
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that Python's exit-time flush does not raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":
