@@ -37,11 +37,23 @@ Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
 def cmd_rig_check(args) -> int:
     from rigsim.rig.load import load_any_rig
 
+    from rigsim.reporting import safe_text
+    from rigsim.rig.cube_mirror import CubeMirrorRig
+    from rigsim.rig.load import resolve_rig_path
+
     rig = load_any_rig(args.rig)
     extra = ""
-    if hasattr(rig, "turntable") and hasattr(rig, "procedure"):
+    if isinstance(rig, CubeMirrorRig):
+        from rigsim.rig.geometry import check_geometry, geometry_summary
+
         extra = f", {rig.turntable.kind} turntable, method {rig.procedure.method}"
-    print(f"{args.rig}: OK — '{rig.name}' (seed {rig.seed_document}, family {family_of(rig).name}{extra})")
+        lines = geometry_summary(rig)
+        w = max(len(g.item) for g in lines)
+        for g in lines:
+            mark = {"ok": " ", "warning": "!", "error": "✗"}[g.status]
+            print(f"{mark} {g.item:{w}s}  {g.value}")
+        check_geometry(rig, resolve_rig_path(args.rig))
+    print(f"{args.rig}: OK — '{safe_text(rig.name)}' (seed {rig.seed_document}, family {family_of(rig).name}{extra})")
     return 0
 
 

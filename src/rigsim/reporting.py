@@ -82,3 +82,10 @@ def text_table(header, rows) -> str:
     out = [_fmt_row(header, widths), _fmt_row(["-" * w for w in widths], widths)]
     out += [_fmt_row(r, widths) for r in rows]
     return "\n".join(out)
+
+
+def safe_text(s: str, limit: int = 200) -> str:
+    """``s`` for a terminal: control characters escaped (\\x1b, \\n, …), at most ``limit`` characters."""
+    out = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in str(s))
+    return out if len(out) <= limit else out[: limit - 1] + "…"
+

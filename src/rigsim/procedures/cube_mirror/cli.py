@@ -95,6 +95,11 @@ def _print_truth_vs_recovered(res, labels) -> None:
 
 
 def cmd_run_cube_mirror(args) -> int:
+    from rigsim.rig import load_rig
+    from rigsim.rig.geometry import check_geometry
+    from rigsim.rig.load import resolve_rig_path
+
+    check_geometry(load_rig(args.rig), resolve_rig_path(args.rig))  # refuse what cannot work before rendering
     if args.trials is None:
         args.trials = 300 if args.analytic else 200
     if args.analytic:

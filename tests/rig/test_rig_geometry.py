@@ -1,0 +1,64 @@
+"""The rig's geometry summary: the default rigs pass, inconsistent geometry is refused naming the
+fields, and the sweep's landing count agrees with the truth layer's own projection."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rigsim.errors import RigError
+from rigsim.rig.geometry import check_geometry, geometry_summary, sweep_landing
+from rigsim.rig.load import load_rig
+
+
+def _custom(rig, **ss):
+    return rig.model_copy(update={"sun_sensor": rig.sun_sensor.model_copy(update=ss)})
+
+
+@pytest.mark.parametrize("name", ["sun_sensor_2axis_diaphragm", "sun_sensor_3axis_autocollimator"])
+def test_default_rigs_pass(name):
+    lines = check_geometry(load_rig(name))
+    assert all(g.status == "ok" for g in lines)
+
+
+def test_landing_count_agrees_with_the_truth_layer():
+    """An f = 20 mm, 5.5 µm, 2048² sensor (±15.8° field) under the ±60° sweep: the count from the
+    nominal rig equals the ideal realisation's projection (truth layer, a second code path)."""
+    from rigsim.estimation.sun_calibration import sweep_poses
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
+
+    rig = _custom(load_rig("sun_sensor_2axis_diaphragm"), resolution_px=[2048, 2048], pixel_pitch_um=5.5,
+                  focal_length_mm=20.0, principal_point_px=[1030.3, 1017.4])
+    landed, n = sweep_landing(rig)
+    real = realization_from_rig(rig, ideal=True)
+    cam = rig.sun_sensor.camera()
+    p = rig.procedure
+    poses = sweep_poses(p.sweep_axes, p.sweep_range_deg, p.sweep_step_deg)
+    count = 0
+    for i in range(n):
+        R = real.turntable.R_rot_from_mount({k: v[i] for k, v in poses.items()})
+        s = real.R_sun_from_mount @ (R.T @ real.d_sun_rot)
+        uv, ok = cam.project_valid(s[None] / np.linalg.norm(s))
+        count += bool(ok[0] and cam.on_detector(uv, margin_px=3.0)[0])
+    assert (landed, n) == (count, 625) and landed == 39
+    sweep = next(g for g in geometry_summary(rig) if g.item == "sweep")
+    assert sweep.status == "warning" and "39 of 625" in sweep.value and "±15.8°" in sweep.value
+
+
+def test_inconsistent_geometry_is_refused_naming_the_fields():
+    rig = load_rig("sun_sensor_2axis_diaphragm")
+    big = rig.model_copy(update={"diaphragm_screen": rig.diaphragm_screen.model_copy(update={"hole_diameter_mm": 30.0}),
+                                 "cube": rig.cube.model_copy(update={"edge_mm": 10.0})})
+    with pytest.raises(RigError, match=r"diaphragm_screen\.hole_diameter_mm, cube\.edge_mm: hole vs face: Ø 30 mm beam "
+                                       r"on a 10 mm face"):
+        check_geometry(big)
+    # a sweep that never reaches the detector: the calibration would have no point
+    narrow = _custom(rig, focal_length_mm=200.0)
+    narrow = narrow.model_copy(update={"procedure": narrow.procedure.model_copy(update={"sweep_step_deg": 20.0})})
+    with pytest.raises(RigError, match=r"procedure\.sweep_range_deg.*sweep: ±60° every 20° about X/Y: \d of 49 poses"):
+        check_geometry(narrow)
+    # the divergent return against the aiming camera's field: 2·650 mm·tan(16′) + hole = 8.6 mm more than the hole
+    ds = rig.diaphragm_screen
+    expected = ds.hole_diameter_mm + 4 * ds.distance_to_cube_mm * math.tan(math.radians(32 / 60) / 2)
+    ac = next(g for g in geometry_summary(rig) if g.item == "aiming camera")
+    assert f"Ø {expected:.1f} mm" in ac.value
