@@ -38,6 +38,15 @@ from rigsim.procedures.cube_mirror.files import (
     write_opencv_camera,
 )
 from rigsim.procedures.cube_mirror.pipeline import CubeMirrorEstimate, estimate, fit_sun_sensor
+from rigsim.procedures.star.files import (
+    attitude_log_columns,
+    calibrate_star_files,
+    read_attitude_log,
+    star_observations,
+    star_result_json,
+    stars_table,
+)
+from rigsim.procedures.star.pipeline import StarObservation, StarPipeline, calibrate_frames
 from rigsim.rig.load import load_any_rig, load_boresight_rig, load_rig, load_star_rig
 from rigsim.rig.turntable import TurntableModel, TurntableReading
 
@@ -55,4 +64,7 @@ __all__ = [
     "calibrate_sun_sensor_files", "fit_sun_sensor", "SunCalibration", "sun_calibration_json", "write_opencv_camera",
     "triad", "cube_from_rot_triad", "triad_with_covariance", "reading_sigma_rad", "read_nulls", "compose_rotations",
     "estimate", "CubeMirrorEstimate", "AXIS_ORDERS_2AXIS", "AXIS_ORDERS_3AXIS",
+    # star sensor (seed 004)
+    "read_attitude_log", "attitude_log_columns", "star_observations", "calibrate_star_files", "calibrate_frames",
+    "StarObservation", "StarPipeline", "star_result_json", "stars_table",
 ]

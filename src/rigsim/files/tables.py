@@ -20,8 +20,10 @@ from rigsim.errors import InputError
 
 from .atomic import atomic_write_bytes
 
-UNITS = {"deg": "degrees", "rad": "radians", "arcsec": "arcseconds", "px": "pixels", "um": "micrometres",
-         "mm": "millimetres", "m": "metres", "s": "seconds", "dn": "DN", "e": "electrons"}
+UNITS = {"deg": "degrees", "rad": "radians", "mrad": "milliradians", "urad": "microradians", "arcmin": "arcminutes",
+         "arcsec": "arcseconds", "mas": "milliarcseconds", "px": "pixels", "nm": "nanometres", "um": "micrometres",
+         "mm": "millimetres", "cm": "centimetres", "m": "metres", "km": "kilometres", "s": "seconds", "ms": "milliseconds",
+         "us": "microseconds", "ns": "nanoseconds", "min": "minutes", "h": "hours", "dn": "DN", "e": "electrons"}
 LINE = "__line__"  # key of the returned source line (CSV) or row (Parquet) numbers
 
 

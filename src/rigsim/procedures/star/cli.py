@@ -29,7 +29,25 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--renderer", default="analytic", help="frame renderer: analytic | mitsuba")
     p.add_argument("--mitsuba-spp", type=int, default=256, help="samples per pixel of the Mitsuba windows (power of 4)")
     p.add_argument("--out", default=None, help="report folder (default renders/star_calibration)")
+    p.add_argument("--export-frames", default=None, metavar="DIR", help="also write the frames as bare image files "
+                   "(no truth) with attitudes.csv (frame, time_s, qw..qz commanded), for `rigsim star calibrate`")
+    p.add_argument("--frame-format", default="fits", choices=["fits", "png", "tiff"], help="file type of --export-frames")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    st = groups["top"].add_parser("star", help="seed 004 stages on your own star frames")
+    sts = st.add_subparsers(dest="star_command", metavar="ACTION")
+    c = sts.add_parser(
+        "calibrate", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        help="extract, identify and calibrate (f, u0, v0, k1, k2) from star frames and an attitude log",
+        description="The seed-004 pipeline on your frames (PNG/TIFF 16-bit or FITS) with the nominal rig: star "
+                    "extraction, identification from the commanded attitude, AD/ADS EKFs and batch least squares "
+                    "of (f, u0, v0, k1, k2) with covariance. The attitude log has one row per frame: frame, time_s, "
+                    "qw, qx, qy, qz (the commanded R(cam<-ICRS), scalar first).")
+    c.add_argument("frames", nargs="+", metavar="FRAME", help="star frames of the rig's detector size")
+    c.add_argument("--rig", default="star_sensor", help="star-sensor rig file (nominal values only)")
+    c.add_argument("--attitudes", required=True, metavar="FILE", help="attitude log (.csv/.parquet)")
+    c.add_argument("--out", required=True, metavar="DIR", help="output folder: stars.csv and calibration.json")
+    c.add_argument("--ekf", default="both", choices=["ad", "ads", "both"], help="EKF measurement model(s) to report")
+    c.set_defaults(func=cmd_star_calibrate)
     p.set_defaults(func=cmd_run_star_calibration)
 
 
@@ -45,12 +63,42 @@ def _check(args) -> None:
         raise CliError(f"--mitsuba-spp = {spp}: must be a power of 4 between 1 and 65536 (e.g. 64, 256, 1024)")
 
 
+def cmd_star_calibrate(args) -> int:
+    from rigsim.files import write_json, write_table
+    from rigsim.procedures.star.files import calibrate_star_files, star_result_json, stars_table
+    from rigsim.rig.load import load_star_rig
+
+    rig = load_star_rig(args.rig)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"--out = {out}: exists and is not a folder")
+    t0 = time.perf_counter()
+    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig())
+    models = ("ad", "ads") if args.ekf == "both" else (args.ekf,)
+    data = star_result_json(res, names, models)
+    write_table(out / "stars.csv", stars_table(res, names))
+    write_json(out / "calibration.json", data)
+    st = res.ident_stats
+    print(f"{st['frames']} frames, {st['frames_identified']} identified; {st['usable']} usable stars, "
+          f"{st['identified']} identified")
+    b = res.batch
+    print("batch least squares: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in zip(b.names, b.x, b.sigma))
+          + f" (χ²/dof {b.chi2_reduced:.2f})")
+    for key, e in data["ekf"].items():
+        print(f"EKF {key}: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
+                                           zip(e["estimated"], e["state"], e["covariance"]["sigma"])))
+    print(f"→ {out / 'stars.csv'}, {out / 'calibration.json'} [{time.perf_counter() - t0:.2f} s]")
+    return 0
+
+
 def cmd_run_star_calibration(args) -> int:
     import os
 
     from tqdm import tqdm
 
     import rigsim
+    from rigsim.files import write_image, write_table
+    from rigsim.procedures.star.files import attitude_log_columns
     from rigsim.procedures.star.report import summary_lines, write_report
     from rigsim.procedures.star.run import run_pipeline
     from rigsim.procedures.star.study import CentroidNoise, run_study
@@ -71,7 +119,19 @@ def cmd_run_star_calibration(args) -> int:
         mitsuba = MitsubaStarRenderer(rig.sensor, spp=args.mitsuba_spp)
     with tqdm(total=rig.sequence.n_frames, desc="frames", unit="frame", disable=True if args.quiet else None,
               file=sys.stderr, dynamic_ncols=True) as bar:
-        res = run_pipeline(rig, seed=args.seed, renderer=args.renderer, mitsuba=mitsuba, progress=bar)
+        exported: list = []
+
+        def export(obs):
+            name = f"star_{obs.index:03d}.{ {'fits': 'fits', 'png': 'png', 'tiff': 'tif'}[args.frame_format]}"
+            write_image(Path(args.export_frames) / name, obs.dn)
+            exported.append((name, obs.time_s, obs.R_commanded))
+
+        res = run_pipeline(rig, seed=args.seed, renderer=args.renderer, mitsuba=mitsuba, progress=bar,
+                           on_frame=export if args.export_frames else None)
+    if args.export_frames:
+        write_table(Path(args.export_frames) / "attitudes.csv",
+                    attitude_log_columns(*zip(*exported)) if exported else {})
+        print(f"exported {len(exported)} frames to {args.export_frames}/ with attitudes.csv")
     study = None
     if not args.no_study:
         from rigsim.truth.star import StarSky

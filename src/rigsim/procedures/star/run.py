@@ -102,8 +102,9 @@ class PipelineResult:
 
 
 def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mitsuba=None, noiseless: bool = False,
-                 progress=None, sky: StarSky | None = None) -> PipelineResult:
-    """generate → pipeline → compare on the rig's sequence (module docstring)."""
+                 progress=None, sky: StarSky | None = None, on_frame=None) -> PipelineResult:
+    """generate → pipeline → compare on the rig's sequence (module docstring). ``on_frame(obs)``
+    sees every observation (e.g. to write it as a file)."""
     t0 = time.perf_counter()
     sky = sky if sky is not None else StarSky(rig)
     times = {"catalogue": time.perf_counter() - t0}
@@ -116,6 +117,8 @@ def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mit
         t_render += time.perf_counter() - tr0
         sample = sample if sample is not None else fr
         truths.append(truth)
+        if on_frame is not None:
+            on_frame(obs)
         pipe.add(obs)
         if progress is not None:
             progress.update(1)

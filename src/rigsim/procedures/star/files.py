@@ -1,0 +1,131 @@
+"""Seed 004 on a user's files: star frames (PNG, TIFF or FITS) and an attitude log go through the
+same :class:`~rigsim.procedures.star.pipeline.StarPipeline` as the in-process campaign (extraction,
+identification from the commanded attitude, AD/ADS EKFs, batch least squares of f, u0, v0, k1,
+k2), with the nominal rig only.
+
+The attitude log has one row per frame: ``frame`` (file name), ``time_s`` and the commanded
+attitude R(cam←ICRS) as a unit quaternion ``qw, qx, qy, qz`` (scalar first; the rotation that
+takes ICRS vectors into the camera frame, x right, y down, z along the boresight)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from rigsim.errors import InputError
+from rigsim.estimation.star_calibration import THETA_NAMES
+from rigsim.files import Column, covariance_block, read_image, read_table
+from rigsim.optics.sky import SkyCatalogue
+from rigsim.procedures.star.pipeline import PipelineOutput, StarObservation, calibrate_frames
+from rigsim.rig.star import NominalStarRig
+
+__all__ = [
+    "LOG_COLUMNS",
+    "attitude_log_columns",
+    "calibrate_star_files",
+    "read_attitude_log",
+    "star_observations",
+    "star_result_json",
+    "stars_table",
+]
+
+LOG_COLUMNS = [Column("frame", kind="str"), Column("time", "s"), Column("qw"), Column("qx"), Column("qy"), Column("qz")]
+THETA_UNITS = ("px", "px", "px", "1", "1")
+
+
+def attitude_log_columns(frames: Sequence[str], times_s, R_cam_from_icrs) -> dict:
+    """The attitude log's columns for frames, their times and commanded attitudes."""
+    q = Rotation.from_matrix(np.asarray(R_cam_from_icrs)).as_quat(scalar_first=True)
+    q = q * np.sign(q[:, :1] + (q[:, :1] == 0))  # qw ≥ 0: one of the two equal quaternions
+    return {"frame": list(frames), "time_s": np.asarray(times_s, float), "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2],
+            "qz": q[:, 3]}
+
+
+def read_attitude_log(path) -> dict[str, tuple[float, np.ndarray]]:
+    """frame name → (time in s, commanded R(cam←ICRS)); every quaternion must be of unit norm
+    (within 1e-6) and every frame named once."""
+    t = read_table(path, LOG_COLUMNS, what="attitude log")
+    out: dict[str, tuple[float, np.ndarray]] = {}
+    lines: dict[str, int] = {}
+    for i, line in enumerate(t["__line__"]):
+        q = np.array([t["qw"][i], t["qx"][i], t["qy"][i], t["qz"][i]])
+        n = float(np.linalg.norm(q))
+        if abs(n - 1.0) > 1e-6:
+            raise InputError(f"{path}: line {line}, columns qw..qz: |q| = {n:.9g}; expected a unit quaternion (R(cam←ICRS), "
+                             "scalar first)")
+        f = Path(str(t["frame"][i])).name
+        if f in out:
+            raise InputError(f"{path}: line {line}, column frame: {f!r} already on line {lines[f]}; one row per frame")
+        lines[f] = int(line)
+        out[f] = (float(t["time_s"][i]), Rotation.from_quat(q / n, scalar_first=True).as_matrix())
+    return out
+
+
+def star_observations(paths: Sequence, log_path, nominal: NominalStarRig) -> tuple[list[StarObservation], list[str]]:
+    """The frames as the pipeline takes them, in the order of their times, and their names; each
+    frame's size is checked against the rig's detector and each must have a row in the log."""
+    log = read_attitude_log(log_path)
+    W, H = nominal.sensor.resolution_px
+    rows = []
+    for p in paths:
+        name = Path(p).name
+        if name not in log:
+            raise InputError(f"{p}: frame {name!r} has no row in the attitude log {log_path}")
+        dn = read_image(p, shape=(H, W), what="star frame")
+        rows.append((log[name][0], name, dn, log[name][1]))
+    if not rows:
+        raise InputError(f"{log_path}: no frames given")
+    rows.sort(key=lambda r: r[0])
+    return [StarObservation(k, t, dn, R) for k, (t, _, dn, R) in enumerate(rows)], [r[1] for r in rows]
+
+
+def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig) -> tuple[PipelineOutput, list[str]]:
+    """The whole pipeline on files: (its output, the frame names in time order)."""
+    obs, names = star_observations(paths, log_path, nominal)
+    sky = SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year)
+    return calibrate_frames(obs, nominal, sky), names
+
+
+def stars_table(out: PipelineOutput, names: Sequence[str]) -> dict[str, list]:
+    """Every usable star of every frame: position, σ, flux, flags and its catalogue identity."""
+    cols: dict[str, list] = {k: [] for k in ("frame", "u_px", "v_px", "sigma_u_px", "sigma_v_px", "flux_dn", "flags",
+                                             "identified", "hip")}
+    for name, usable, ident in zip(names, out.usable, out.ident):
+        hip = dict(zip(ident.obs_index.tolist(), ident.hip.tolist())) if ident.ok else {}
+        for j in range(len(usable)):
+            cols["frame"].append(name)
+            cols["u_px"].append(usable.uv[j, 0])
+            cols["v_px"].append(usable.uv[j, 1])
+            cols["sigma_u_px"].append(usable.sigma_uv[j, 0])
+            cols["sigma_v_px"].append(usable.sigma_uv[j, 1])
+            cols["flux_dn"].append(usable.flux[j])
+            cols["flags"].append(int(usable.flags[j]))
+            cols["identified"].append(int(j in hip))
+            cols["hip"].append(int(hip.get(j, -1)))
+    return cols
+
+
+def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequence[str] = ("ad", "ads")) -> dict:
+    """The calibration as one JSON object: the batch (f, u0, v0, k1, k2) with its covariance and χ²,
+    each EKF's final state with its covariance, the identification statistics."""
+    b = out.batch
+    res = {"kind": "star-sensor calibration", "rig": out.nominal.name, "frames": list(names),
+           "theta_names": list(THETA_NAMES), "theta_units": list(THETA_UNITS),
+           "nominal_theta": list(out.nominal.sensor.theta),
+           "batch": {"theta": b.theta.tolist(), "estimated": list(b.names),
+                     "covariance": covariance_block(list(b.names), b.cov, [THETA_UNITS[THETA_NAMES.index(n)] for n in b.names]),
+                     "chi2_reduced": b.chi2_reduced, "n_equations": b.n_eq, "converged": bool(b.success)},
+           "ekf": {}, "identification": out.ident_stats}
+    for (case, model), e in out.ekf.items():
+        if model not in ekf_models:
+            continue
+        res["ekf"][f"{case}/{model}"] = {
+            "case": case, "model": model, "estimated": list(e.names), "state": e.x.tolist(), "theta": e.theta.tolist(),
+            "covariance": covariance_block(list(e.names), e.P, [THETA_UNITS[THETA_NAMES.index(n)] for n in e.names]),
+            "mean_nis": float(np.nanmean(e.nis)) if np.isfinite(e.nis).any() else None}
+    res["ekf_cases"] = {"f_nominal": "state (u0, v0), f fixed at the nominal value",
+                        "f_joint": "state (f, u0, v0)"}
+    return res

@@ -1,0 +1,92 @@
+"""Seed 004 on a user's files: the frames of the rendered campaign, copied out as bare renamed
+files with the commanded attitudes as a CSV, give the in-process batch (f, u0, v0, k1, k2) and
+every EKF state to 1e-9 relative through `rigsim star calibrate`; bad logs and frames are one line."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from rigsim.cli import main
+from rigsim.files import Column, read_table, write_image, write_table
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    d = tmp_path_factory.mktemp("star")
+    assert main(["run", "star-calibration", "--no-study", "--export-frames", str(d / "frames"), "--frame-format", "png",
+                 "--out", str(d / "report"), "--quiet"]) == 0
+    return d
+
+
+def _scale_qw(path, frame, factor):
+    lines = path.read_text().splitlines()
+    for i, ln in enumerate(lines):
+        if ln.startswith(frame + ","):
+            f = ln.split(",")
+            f[2] = repr(float(f[2]) * factor)
+            lines[i] = ",".join(f)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _bare(exported, dst):
+    """Renamed copies (reverse order, new names) and the log rewritten: no sidecars, no truth."""
+    dst.mkdir()
+    cols = [Column("frame", kind="str"), Column("time", "s"), Column("qw"), Column("qx"), Column("qy"), Column("qz")]
+    t = read_table(exported / "frames" / "attitudes.csv", cols)
+    names = {f: f"shot-{k:02d}.png" for k, f in enumerate(reversed(list(t["frame"])))}
+    for f, g in names.items():
+        shutil.copy(exported / "frames" / f, dst / g)
+    out = {k: v for k, v in t.items() if k != "__line__"}
+    out["frame"] = [names[f] for f in out["frame"]]
+    write_table(dst / "log.csv", out)
+    return dst
+
+
+def test_frames_round_trip_through_star_calibrate(exported, tmp_path, capsys):
+    d = _bare(exported, tmp_path / "bare")
+    assert main(["star", "calibrate", *sorted(str(p) for p in d.glob("shot-*.png")), "--attitudes", str(d / "log.csv"),
+                 "--out", str(d / "cal")]) == 0
+    got = json.loads((d / "cal" / "calibration.json").read_text())
+    ref = json.loads((exported / "report" / "star_calibration.json").read_text())
+    b, rb = np.array(got["batch"]["theta"]), np.array(ref["batch"]["theta"])
+    assert np.all(np.abs(b - rb) <= 1e-9 * np.abs(rb))
+    assert set(got["ekf"]) == {"f_nominal/ad", "f_nominal/ads", "f_joint/ad", "f_joint/ads"}
+    for k, e in got["ekf"].items():
+        r = np.array(ref["ekf"][k]["theta"])
+        assert np.all(np.abs(np.array(e["theta"]) - r) <= 1e-9 * np.abs(r)), k
+        assert np.allclose(e["covariance"]["sigma"], ref["ekf"][k]["sigma"][:len(e["estimated"])], rtol=1e-9)
+    # the covariance block is the batch's inverse normal matrix: its σ are the report's
+    assert np.allclose(got["batch"]["covariance"]["sigma"], ref["batch"]["sigma"], rtol=1e-9)
+    stars = read_table(d / "cal" / "stars.csv", [Column("frame", kind="str"), Column("u", "px"), Column("identified", kind="int")])
+    assert stars["identified"].sum() == got["identification"]["identified"] > 1900
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: (d / "log.csv").write_text((d / "log.csv").read_text().replace("time_s", "time_ms")),
+     r"log\.csv: column time_ms: expected time_s \(seconds\), got milliseconds"),
+    (lambda d: (d / "log.csv").write_text((d / "log.csv").read_text().replace("shot-03.png,", "shot-03.png,x")),
+     r"log\.csv: line \d+, column time_s: 'x[\d.]+' is not a number"),
+    (lambda d: _scale_qw(d / "log.csv", "shot-01.png", 1.01),
+     r"log\.csv: line \d+, columns qw\.\.qz: \|q\| = [\d.]+; expected a unit quaternion"),
+    (lambda d: (d / "shot-02.png").write_bytes(cv2.imencode(".png", np.zeros((1024, 1024, 3), np.uint8))[1].tobytes()),
+     r"shot-02\.png: 3-channel \(colour\) image; expected a single-channel grey star frame"),
+    (lambda d: write_image(d / "shot-02.png", np.zeros((512, 1024), np.uint16)),
+     r"shot-02\.png: 1024×512 px \(width×height\); expected 1024×1024 px, the rig's detector"),
+    (lambda d: (d / "log.csv").write_text("\n".join(ln for ln in (d / "log.csv").read_text().splitlines()
+                                                    if not ln.startswith("shot-04"))),
+     r"shot-04\.png: frame 'shot-04\.png' has no row in the attitude log"),
+])
+def test_bad_inputs_one_line(exported, tmp_path, capsys, edit, message):
+    import re
+
+    d = _bare(exported, tmp_path / "bare")
+    edit(d)
+    rc = main(["star", "calibrate", *sorted(str(p) for p in d.glob("shot-*.png")), "--attitudes", str(d / "log.csv"),
+               "--out", str(d / "cal")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and re.search(message, err), err
+    assert not (d / "cal").exists()
