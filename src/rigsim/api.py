@@ -23,6 +23,17 @@ from rigsim.files import Column, covariance_block, read_image, read_json, read_t
 from rigsim.imaging import Flag, NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
 from rigsim.optics.camera import PinholeBrown
+from rigsim.estimation.dvad import BoresightEstimate, DVADSolver
+from rigsim.optics.line_camera import CameraGeometry
+from rigsim.procedures.boresight.files import (
+    camera_geometry,
+    centroid_roi_files,
+    estimate_columns,
+    read_spot_rows,
+    reference_spots,
+    solve_rows,
+    streaming_solver,
+)
 from rigsim.procedures.centroid import DetectorSettings, centroid_files, detector_settings
 from rigsim.procedures.cube_mirror.files import (
     SunSensorInputs,
@@ -64,6 +75,9 @@ __all__ = [
     "calibrate_sun_sensor_files", "fit_sun_sensor", "SunCalibration", "sun_calibration_json", "write_opencv_camera",
     "triad", "cube_from_rot_triad", "triad_with_covariance", "reading_sigma_rad", "read_nulls", "compose_rotations",
     "estimate", "CubeMirrorEstimate", "AXIS_ORDERS_2AXIS", "AXIS_ORDERS_3AXIS",
+    # boresight (seed 003)
+    "CameraGeometry", "camera_geometry", "centroid_roi_files", "read_spot_rows", "reference_spots", "solve_rows",
+    "estimate_columns", "streaming_solver", "DVADSolver", "BoresightEstimate",
     # star sensor (seed 004)
     "read_attitude_log", "attitude_log_columns", "star_observations", "calibrate_star_files", "calibrate_frames",
     "StarObservation", "StarPipeline", "star_result_json", "stars_table",

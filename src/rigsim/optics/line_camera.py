@@ -187,6 +187,12 @@ class CameraGeometry:
         """Design reference spots A1, B1 in rigsim pixels, (2, 2)."""
         return self.xy_to_uv(np.array(self.reference_xy_px, float))
 
+    def roi_origin(self, detector: int, window_px: int) -> tuple[int, int]:
+        """Detector pixel of the nominal ROI's pixel (0, 0): the ``window_px`` window centred on the
+        design reference spot of ``detector`` (0 = M1, 1 = M2)."""
+        ref = self.reference_uv[detector]
+        return int(round(ref[0])) - window_px // 2, int(round(ref[1])) - window_px // 2
+
 
 def facet_normals_ota(geom: CameraGeometry) -> np.ndarray:
     """Unit normals (pointing back at the camera) of the two prism facets in the reference OTA

@@ -131,8 +131,8 @@ class LoopRenderer:
         Q = self.T_s - SENSOR_STANDOFF_MM * np.array([0, 0, 1.0])
         self.u_T, self.v_T = self._uv_of_world(Q)
         self.ref_uv = g.reference_uv[j]
-        if roi_origin is None:
-            roi_origin = (int(round(self.ref_uv[0])) - self.window_px // 2, int(round(self.ref_uv[1])) - self.window_px // 2)
+        if roi_origin is None:  # the nominal ROI: the window centred on the design reference spot
+            roi_origin = g.roi_origin(j, self.window_px)
         self.roi_origin = (int(roi_origin[0]), int(roi_origin[1]))
         # the render loop's elements: per frame the facet's normal and the lens (Δf) follow the
         # camera state, and the sensor's window moves to the ROI (rigsim.render.scene)

@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from rigsim.errors import CliError
 
 __all__ = ["add_cli", "cmd_run_boresight"]
@@ -35,9 +37,127 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--jitter-px", type=float, default=0.1,
                    help="also evaluate the orbit frames with this equivalent centroid error added (0: off)")
     p.add_argument("--json-out", default=None, metavar="FILE", help="also write the key numbers as JSON")
+    p.add_argument("--export-frames", default=None, metavar="DIR", help="also write the orbit's ROI frames as bare "
+                   "image files (ref_/meas_<camera>_m1|m2_<k>.png, no truth) for `rigsim boresight centroid`")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run_boresight)
+
+    b = groups["top"].add_parser("boresight", help="seed 003 stages on your own ROI frames and spot tables")
+    bs = b.add_subparsers(dest="boresight_command", metavar="ACTION")
+    c = bs.add_parser("centroid", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                      help="ROI frames of M1 and M2 → a spot table (one row per pair)",
+                      description="Centroid pairs of ROI frames (the i-th --m1 file with the i-th --m2 file) of one "
+                                  "camera. A ROI is the rig's nominal window (orbit.window_px, centred on the design "
+                                  "reference spot); positions are detector pixels.")
+    c.add_argument("--rig", default="dual_line_array_prism", help="seed-003 rig file or default name")
+    c.add_argument("--camera", required=True, help="the camera's name in the rig file")
+    c.add_argument("--m1", nargs="+", required=True, metavar="FRAME", help="ROI frames of detector M1")
+    c.add_argument("--m2", nargs="+", required=True, metavar="FRAME", help="ROI frames of detector M2, in the same order")
+    c.add_argument("--method", default="tcom", choices=["tcom", "wcom", "gauss"], help="centroider (seed 003: tcom)")
+    c.add_argument("--out", required=True, metavar="FILE", help="spot table (.csv or .parquet)")
+    c.set_defaults(func=cmd_boresight_centroid)
+    v = bs.add_parser("solve", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                      help="(Δf, α, β, γ) per row of a spot table against a reference",
+                      description="Solve every row (camera, u_m1_px, v_m1_px, u_m2_px, v_m2_px) against the reference "
+                                  "spots (the mean of each camera's rows in --reference). --stream reads rows on stdin "
+                                  "and writes each result row on stdout at once (a real-time loop).")
+    v.add_argument("--rig", default="dual_line_array_prism", help="seed-003 rig file or default name")
+    v.add_argument("--reference", nargs="+", required=True, metavar="FILE", help="reference spot table(s)")
+    v.add_argument("--measured", nargs="+", default=None, metavar="FILE", help="spot table(s) to solve")
+    v.add_argument("--out", default=None, metavar="FILE", help="result table (default: print)")
+    v.add_argument("--method", default="dvad", choices=["dvad", "simplified"], help="DVAD or the simplified eqs")
+    v.add_argument("--reading", default="consistent", choices=["consistent", "as_printed"], help="reading of the equations")
+    v.add_argument("--stream", action="store_true", help="rows on stdin (a header line first) → rows on stdout (DVAD)")
+    v.set_defaults(func=cmd_boresight_solve)
     return p
+
+
+def cmd_boresight_centroid(args) -> int:
+    from rigsim.files import write_table
+    from rigsim.procedures.boresight.files import centroid_roi_files
+    from rigsim.rig.load import load_boresight_rig
+
+    rig = load_boresight_rig(args.rig)
+    t0 = time.perf_counter()
+    cols = centroid_roi_files(rig, args.camera, args.m1, args.m2, method=args.method)
+    write_table(args.out, cols)
+    print(f"{len(cols['sample'])} M1/M2 pairs of camera {args.camera} → {args.out} [{time.perf_counter() - t0:.2f} s]")
+    return 0
+
+
+def _merged_rows(paths, rig, what):
+    from rigsim.procedures.boresight.files import read_spot_rows
+
+    samples, cams, uvs = [], [], []
+    for p in paths:
+        s, c, uv = read_spot_rows(p, rig, what=what)
+        samples += s
+        cams += c
+        uvs.append(uv)
+    return samples, cams, np.concatenate(uvs) if uvs else np.zeros((0, 2, 2))
+
+
+def cmd_boresight_solve(args) -> int:
+    from rigsim.files import write_table
+    from rigsim.procedures.boresight import files as F
+    from rigsim.rig.load import load_boresight_rig
+
+    rig = load_boresight_rig(args.rig)
+    _, rcams, ruv = _merged_rows(args.reference, rig, "reference table")
+    ref = {c: ruv[[k for k, x in enumerate(rcams) if x == c]].mean(axis=0) for c in dict.fromkeys(rcams)}
+    if args.stream:
+        if args.measured or args.method != "dvad" or args.reading != "consistent":
+            raise CliError("--stream solves rows from stdin with DVAD (consistent reading); drop --measured/--method/--reading")
+        return _stream(rig, ref)
+    if not args.measured:
+        raise CliError("--measured FILE... is required (or --stream)")
+    samples, cams, uv = _merged_rows(args.measured, rig, "spot table")
+    est = F.solve_rows(rig, ref, cams, uv, method=args.method, reading=args.reading)
+    cols = F.estimate_columns(samples, cams, est)
+    if args.out:
+        write_table(args.out, cols)
+        print(f"{len(samples)} rows solved ({args.method}, {args.reading}) → {args.out}")
+    else:
+        print(",".join(cols))
+        for row in zip(*cols.values()):
+            print(",".join(str(x) for x in row))
+    return 0
+
+
+def _stream(rig, ref) -> int:
+    """Rows on stdin → rows on stdout, one at a time: camera,u_m1_px,v_m1_px,u_m2_px,v_m2_px[,sample]."""
+    from rigsim.procedures.boresight.files import streaming_solver
+
+    solvers = streaming_solver(rig, ref)
+    need = ["camera", "u_m1_px", "v_m1_px", "u_m2_px", "v_m2_px"]
+    header = sys.stdin.readline().strip().split(",")
+    missing = [c for c in need if c not in header]
+    if missing:
+        raise CliError(f"stdin: line 1 (header): no column {missing[0]}; expected {','.join(need)}[,sample]")
+    idx = [header.index(c) for c in need]
+    si = header.index("sample") if "sample" in header else None
+    out = sys.stdout
+    out.write("sample,camera,delta_f_um,alpha_arcsec,beta_arcsec,gamma_arcsec\n")
+    out.flush()
+    uv = np.empty((2, 2))
+    for n, line in enumerate(sys.stdin, start=2):
+        f = line.rstrip("\n").split(",")
+        if len(f) != len(header):
+            raise CliError(f"stdin: line {n}: {len(f)} fields; expected {len(header)} like the header")
+        cam = f[idx[0]]
+        sol = solvers.get(cam)
+        if sol is None:
+            raise CliError(f"stdin: line {n}, column camera: {cam!r} has no reference")
+        try:
+            uv[0, 0], uv[0, 1], uv[1, 0], uv[1, 1] = (float(f[i]) for i in idx[1:])
+        except ValueError:
+            raise CliError(f"stdin: line {n}: {','.join(f[i] for i in idx[1:])!r}: expected four numbers (px)") from None
+        e = sol.solve(uv)
+        a = e.angles_arcsec
+        out.write(f"{f[si] if si is not None else n - 2},{cam},{float(e.delta_f_mm) * 1e3!r},{float(a[0])!r},"
+                  f"{float(a[1])!r},{float(a[2])!r}\n")
+        out.flush()
+    return 0
 
 
 def cmd_run_boresight(args) -> int:
@@ -76,6 +196,16 @@ def cmd_run_boresight(args) -> int:
             bar.update(n)
 
         orbit_kw = {"spp": args.spp, "measurements": args.measurements, "jitter_px": args.jitter_px}
+        if args.export_frames:
+            from rigsim.files import write_image
+
+            names = [c.name for c in rig.cameras]
+
+            def export(stage, c, j, k, fr):
+                pre = "ref" if stage == "reference" else "meas"
+                write_image(Path(args.export_frames) / f"{pre}_{names[c]}_m{j + 1}_{k:03d}.png", fr.dn)
+
+            orbit_kw["on_frame"] = export
         res = run_study(rig, seed=args.seed, runs=args.runs, reading=args.reading, orbit=not args.no_orbit,
                         progress=progress, orbit_kw=orbit_kw)
     cmd = "rigsim run boresight" + "".join(f" {a}" for a in sys.argv[3:]) if sys.argv[1:3] == ["run", "boresight"] else ""

@@ -183,14 +183,16 @@ def _orbit_estimates(geoms, ref_uv, meas, truth: OrbitTruth, o, reading) -> dict
 
 def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider: str = "tcom",
               reading: str = "consistent", spp: int | None = None, measurements: int | None = None,
-              jitter_px: float = 0.1) -> dict:
+              jitter_px: float = 0.1, on_frame=None) -> dict:
     """Render the four CMOS ROIs at every measurement of the orbit scenario, centroid, estimate
     per camera (DVAD, and the simplified method for comparison), form the relative angle and compare
     with truth. ``progress(n)`` is called after each rendered frame.
 
     ``jitter_px``: the same frames are also evaluated with Gaussian noise of this σ added to every
     measured centroid (an *equivalent* centroid error, the paper's 0.1 px: vibration, thermal
-    gradients, stray light — not modelled physically); key ``estimates_jitter``."""
+    gradients, stray light — not modelled physically); key ``estimates_jitter``.
+    ``on_frame(stage, camera, detector, k, frame)`` sees every rendered ROI (stage "reference" or
+    "measurement"), e.g. to write it as a file."""
     import warnings
 
     from rigsim.imaging import NoiseModel
@@ -227,6 +229,8 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
                 rois, origins = [], []
                 for k in range(o.reference_frames):
                     fr = r.render(None, 0.0, seed=seed * 1000 + 100 * c + 10 * j + k, with_truth=(k == 0))
+                    if on_frame is not None:
+                        on_frame("reference", c, j, k, fr)
                     if k == 0:
                         fidelity.append(float(np.abs(fr.photon_centroid() - np.array(fr.truth["pixel_centroid_uv"])).max()))
                     rois.append(fr.dn)
@@ -245,6 +249,8 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
                 for j in range(2):
                     r = rends[(c, j)]
                     fr = r.render(truth.E[c][k], truth.delta_f_mm[c][k], seed=seed * 7919 + 1000 * k + 10 * c + j)
+                    if on_frame is not None:
+                        on_frame("measurement", c, j, k, fr)
                     fidelity.append(float(np.abs(fr.photon_centroid() - np.array(fr.truth["pixel_centroid_uv"])).max()))
                     m = centroid_rois(fr.dn, [fr.origin_uv], method=centroider, noise=noise)
                     if not m.valid.all():
