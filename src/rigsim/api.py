@@ -48,6 +48,12 @@ from rigsim.procedures.cube_mirror.files import (
     triad_with_covariance,
     write_opencv_camera,
 )
+from rigsim.procedures.cube_mirror.null_files import (
+    autocollimator_optics,
+    measure_concentricity,
+    null_step,
+    read_autocollimator,
+)
 from rigsim.procedures.cube_mirror.pipeline import CubeMirrorEstimate, estimate, fit_sun_sensor
 from rigsim.procedures.star.files import (
     attitude_log_columns,
@@ -74,7 +80,8 @@ __all__ = [
     "read_angle_log", "read_spot_table", "SunSensorInputs", "sun_sensor_inputs", "calibrate_sun_sensor",
     "calibrate_sun_sensor_files", "fit_sun_sensor", "SunCalibration", "sun_calibration_json", "write_opencv_camera",
     "triad", "cube_from_rot_triad", "triad_with_covariance", "reading_sigma_rad", "read_nulls", "compose_rotations",
-    "estimate", "CubeMirrorEstimate", "AXIS_ORDERS_2AXIS", "AXIS_ORDERS_3AXIS",
+    "estimate", "CubeMirrorEstimate", "AXIS_ORDERS_2AXIS", "AXIS_ORDERS_3AXIS", "measure_concentricity", "null_step",
+    "read_autocollimator", "autocollimator_optics",
     # boresight (seed 003)
     "CameraGeometry", "camera_geometry", "centroid_roi_files", "read_spot_rows", "reference_spots", "solve_rows",
     "estimate_columns", "streaming_solver", "DVADSolver", "BoresightEstimate",

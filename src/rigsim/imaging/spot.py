@@ -33,6 +33,7 @@ class SpotMeasurement:
     peak_dn: float
     background_dn: float
     background_rms_dn: float
+    sigma_uv: np.ndarray | None = None  # 1σ of the centroid (px), from the pixel noise
 
     @property
     def ok(self) -> bool:
@@ -62,8 +63,8 @@ def measure_spot(dn: np.ndarray, detector, *, roi_px: int = ROI_PX, threshold_si
     rms = max(float(bg.rms), floor) if np.isfinite(bg.rms) else floor
     peak_all = float(a.max())
 
-    def out(uv, fl, problem, n=0):
-        return SpotMeasurement(uv, int(fl), problem, n, peak_all, level, rms)
+    def out(uv, fl, problem, n=0, sigma=None):
+        return SpotMeasurement(uv, int(fl), problem, n, peak_all, level, rms, sigma)
 
     det = detect(a, threshold_sigma=detect_sigma, saturation=max_dn, background=Background(level, rms, bg.flags))
     if len(det) == 0:
@@ -85,4 +86,4 @@ def measure_spot(dn: np.ndarray, detector, *, roi_px: int = ROI_PX, threshold_si
                              f"(its {roi_px} px centroid window leaves the detector): edge of the measuring range", n)
     if fl & (Flag.INVALID | Flag.EMPTY) or not np.all(np.isfinite([c.u, c.v])):
         return out(None, fl, "no usable centroid (empty or invalid spot window)", n)
-    return out(np.array([c.u, c.v]), fl, None, n)
+    return out(np.array([c.u, c.v]), fl, None, n, np.array([c.sigma_u, c.sigma_v]))

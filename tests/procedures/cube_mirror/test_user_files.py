@@ -47,6 +47,32 @@ def _file_route(d, rig, capsys):
     return {k: json.loads((d / f).read_text()) for k, f in (("sun", "sun.json"), ("cube", "cube.json"), ("cs", "cs.json"))}
 
 
+def _null_frames_round_trip(exp, tmp_path, rig, capsys):
+    """Every null-search frame, renamed, through `concentricity` / `autocollimator read`: the campaign's
+    measured offset (px) or reading (arcsec) to 1e-9 relative."""
+    t = read_table(exp / "null_frames.csv", [Column("frame", kind="str"), Column("kind", kind="str")])
+    assert len(t["frame"]) >= 4
+    d = tmp_path / "nulls"
+    d.mkdir()
+    for i, (f, kind) in enumerate(zip(t["frame"], t["kind"])):
+        shutil.copy(exp / f, d / f"n{i:03d}.png")
+    unit = "px" if "measured_x_px" in t else "arcsec"
+    want = np.column_stack([t[f"measured_x_{unit}"].astype(float), t[f"measured_y_{unit}"].astype(float)])
+    i = 0
+    while i < len(t["frame"]):
+        if t["kind"][i] == "aiming-hole":
+            assert main(["concentricity", str(d / f"n{i:03d}.png"), str(d / f"n{i + 1:03d}.png"), "--rig", rig,
+                         "--json", str(d / "r.json")]) == 0
+            got = json.loads((d / "r.json").read_text())["offset_px"]
+            i += 2
+        else:
+            assert main(["autocollimator", "read", str(d / f"n{i:03d}.png"), "--rig", rig, "--json", str(d / "r.json")]) == 0
+            got = json.loads((d / "r.json").read_text())["reading_arcsec"]
+            i += 1
+        _assert_rel(got, want[i - 1])
+    capsys.readouterr()
+
+
 def _round_trip(tmp_path, seed, capsys, extra=()):
     rig = RIGS[seed]
     exp, rep = tmp_path / "export", tmp_path / "report"
@@ -57,6 +83,7 @@ def _round_trip(tmp_path, seed, capsys, extra=()):
     _assert_rel(out["sun"]["R_sun_from_rot"]["matrix"], camp["R_sun_from_rot"])
     _assert_rel(out["cube"]["R_cube_from_rot"]["matrix"], camp["R_cube_from_rot"])
     _assert_rel(out["cs"]["R_cube_from_sun"]["matrix"], camp["R_cube_from_sun"])
+    _null_frames_round_trip(exp, tmp_path, RIGS[seed], capsys)
     i = out["sun"]["intrinsics"]
     _assert_rel([i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"]], [camp["intrinsics"][k] for k in ("fx", "fy", "cx", "cy")])
     # the propagated covariance: R(cube←sun)'s is the sum of the two inputs' (the rotation preserves the trace)
@@ -232,3 +259,60 @@ def test_triad_3axis_and_compose_covariance(tmp_path, capsys):
                                                                        "covariance": {"matrix": np.eye(3).tolist()}}}))
     assert main(["compose", "--cube-from-rot", str(tmp_path / "c.json"), "--sun-from-rot", str(tmp_path / "bad.json")]) == 2
     assert "R_sun_from_rot.matrix is not a rotation (det -1.000000)" in capsys.readouterr().err
+
+
+@pytest.mark.render
+def test_null_commands_equal_the_campaign_measurers(tmp_path, capsys):
+    """One aiming-camera pair and one autocollimator frame as the campaign's measurers render and
+    measure them (frames handed out by their hook), then measured again from bare files."""
+    from rigsim.files import write_image
+    from rigsim.procedures.cube_mirror.autocollimation import FaceReadingMeasurer
+    from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer
+    from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
+    from rigsim.rig.load import load_rig
+    from rigsim.rig.turntable import pose_deg_to_rad
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
+
+    got = []
+
+    def keep(kind, dn, info):
+        p = tmp_path / f"f{len(got)}.png"
+        write_image(p, dn)
+        got.append((kind, p, info))
+
+    rig = load_rig(RIGS["000"])
+    real = realization_from_rig(rig)
+    m = OffsetMeasurer(rig, real, 0, renderer=ConcentricityRenderer(rig, real, 0), seed=3, on_frame=keep)
+    m.last_reading = pose_deg_to_rad({"X": 181.398, "Y": 0.528})
+    meas, exact, _ = m(m.last_reading)
+    assert [g[0] for g in got] == ["aiming-hole", "aiming-spot"]
+    assert main(["concentricity", str(got[0][1]), str(got[1][1]), "--reading", "X=181.398,Y=0.528",
+                 "--json", str(tmp_path / "c.json")]) == 0
+    c = json.loads((tmp_path / "c.json").read_text())
+    _assert_rel(c["offset_px"], meas + m.bias_px)
+    _assert_rel(c["offset_px"], got[0][2]["measured_offset_px"])
+    assert np.hypot(*(np.array(c["offset_px"]) - exact)) < 0.2  # rendered vs exact, px
+    assert c["offset_um"] == pytest.approx([x * 15.0 for x in c["offset_px"]], rel=1e-12)
+
+    rig = load_rig(RIGS["001"])
+    real = realization_from_rig(rig)
+    from rigsim.rig.turntable import NOMINAL_D
+
+    f = FaceReadingMeasurer(rig, real, "+Z", NOMINAL_D, seed=5, spp=64, on_frame=keep)
+    pose = pose_deg_to_rad(rig.procedure.search_start[0])
+    reading, ex, _ = f(pose)
+    assert got[-1][0] == "autocollimator"
+    assert main(["autocollimator", "read", str(got[-1][1]), "--json", str(tmp_path / "a.json")]) == 0
+    a = json.loads((tmp_path / "a.json").read_text())
+    _assert_rel(a["reading_arcsec"], reading)
+    assert 0.001 < a["sigma_arcsec"][0] < 0.1 and np.all(np.abs(np.array(a["reading_arcsec"]) - ex) < 1.0)
+    capsys.readouterr()
+    # bad frames: one line each
+    write_image(tmp_path / "small.png", np.zeros((100, 100), np.uint16))
+    assert main(["autocollimator", "read", str(tmp_path / "small.png")]) == 2
+    assert "small.png: 100×100 px (width×height); expected 1280×1024 px" in capsys.readouterr().err
+    assert main(["concentricity", str(got[0][1]), str(got[1][1]), "--rig", RIGS["001"]]) == 2
+    assert "no aiming camera" in capsys.readouterr().err
+    assert main(["concentricity", str(got[0][1]), str(tmp_path / "nope.png")]) == 2
+    assert "nope.png: no such file" in capsys.readouterr().err
+

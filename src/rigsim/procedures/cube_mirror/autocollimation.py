@@ -46,6 +46,7 @@ from rigsim.errors import SearchError
 from rigsim.estimation.null_search import reading_model
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.imaging.spot import ROI_PX, SpotMeasurement, measure_spot
+from rigsim.procedures.cube_mirror.null_files import read_autocollimator
 from rigsim.optics.autocollimator import a_frame_basis, exact_reading_rad, normal_from_reading
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
 from rigsim.rig.cube_mirror import CubeMirrorRig
@@ -259,7 +260,7 @@ class FaceReadingMeasurer:
 
     def __init__(self, rig: CubeMirrorRig, real: Realization, face: str, axis_rot, *, rendered: bool = True,
                  reading_sigma_arcsec: float = 0.0, seed: int = 0, spp: int | None = None,
-                 noiseless: bool = False, optics=None, mesh_dir=None):
+                 noiseless: bool = False, optics=None, mesh_dir=None, on_frame=None):
         if rig.autocollimator is None:
             raise ValueError(f"rig {rig.name!r} has no autocollimator")
         if face not in real.face_normals_mount:
@@ -274,6 +275,8 @@ class FaceReadingMeasurer:
         self.seed = int(seed)
         self.noiseless = bool(noiseless)
         self.calls = 0
+        self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
+        self.last_reading: dict = {}
         self.half_range_rad = _range_half_rad(rig, ROI_PX / 2.0)
         self.renderer = None
         self.build_seconds = 0.0
@@ -316,15 +319,17 @@ class FaceReadingMeasurer:
         with warnings.catch_warnings(record=True) as wl:
             warnings.simplefilter("always")
             frame = self.renderer.render_frame(pose, seed=seed, noiseless=self.noiseless)
-        sm = measure_spot(frame.dn, self.rig.autocollimator.detector)
+        m, _sig, sm = read_autocollimator(self.rig, frame.dn, self.optics)  # the `rigsim autocollimator read` stage
         info.update(_frame_info(frame, sm, wl))
+        if self.on_frame is not None:
+            self.on_frame("autocollimator", frame.dn, {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
+                                                       "measured_arcsec": m.tolist(), "face": self.face})
         if not sm.ok:
             raise self._fail(sm.problem, pose, ex, ", ".join(info["truth_flags"]))
         if frame.sidecar["flags"].get("spot_exceeds_window"):
             # a limit of the simulator (the 32 px render window), not of the instrument
             raise self._fail("the spot is larger than the render window (simulator limit)", pose, ex,
                              ", ".join(info["truth_flags"]))
-        m = self.optics.reading(sm.uv) * ARCSEC_PER_RAD
         return m, ex * ARCSEC_PER_RAD, info
 
 
@@ -332,7 +337,7 @@ def autocollimator_face_search(rig: CubeMirrorRig, real: Realization, face_index
                                encoder_error_rad: Mapping[str, float] | None, *, rendered: bool = True,
                                seed: int = 0, reading_sigma_arcsec: float = 0.0, spp: int | None = None,
                                noiseless: bool = False, axis_order: str | None = None,
-                               progress: Callable[[int], None] | None = None) -> TracedSearch:
+                               progress: Callable[[int], None] | None = None, on_frame=None) -> TracedSearch:
     """Seed 001 step C for face ``rig.procedure.faces[face_index]``: null it on the
     autocollimator whose true axis is ``axis_rot`` by fine-tuning the middle (X′) and outer (Y′)
     axes (:func:`null_search`). Starts at ``procedure.search_start[face_index]`` (readings);
@@ -358,7 +363,8 @@ def autocollimator_face_search(rig: CubeMirrorRig, real: Realization, face_index
         return base(r)
 
     measure = FaceReadingMeasurer(rig, real, face, axis_rot, rendered=rendered,
-                                  reading_sigma_arcsec=reading_sigma_arcsec, seed=seed, spp=spp, noiseless=noiseless)
+                                  reading_sigma_arcsec=reading_sigma_arcsec, seed=seed, spp=spp, noiseless=noiseless,
+                                  on_frame=on_frame)
     model = reading_model(rig, face, start, axis_order)
     try:
         res = traced_search(measure, model, start, free, reading_to_true, face=face, unit="arcsec",

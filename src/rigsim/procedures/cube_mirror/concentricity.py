@@ -22,8 +22,8 @@ import numpy as np
 
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import offset_model, reflected_offset_mm
-from rigsim.imaging.screen import hole_spot_offset
 from rigsim.optics.aiming import nominal_screen_homography
+from rigsim.procedures.cube_mirror.null_files import measure_concentricity
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableReading, pose_deg_to_rad
@@ -54,7 +54,7 @@ class OffsetMeasurer:
 
     def __init__(self, rig: CubeMirrorRig, real: Realization, face_index: int, *, renderer=None, seed: int = 0,
                  sigma_px: float = 0.0, rng: np.random.Generator | None = None, noiseless: bool = False,
-                 keep_frames: bool = False):
+                 keep_frames: bool = False, on_frame=None):
         from rigsim.truth.cube_mirror.placement import diaphragm_layout
 
         self.rig, self.real, self.face_index = rig, real, int(face_index)
@@ -72,6 +72,8 @@ class OffsetMeasurer:
         self._geom = None
         self.keep_frames = keep_frames
         self.frames: list = []
+        self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
+        self.last_reading: dict = {}
 
     def _in_view(self, offset_px: np.ndarray) -> bool:
         """Does the divergent spot (radius hole + path·tan(α/2)) lie inside the camera's field?"""
@@ -117,9 +119,12 @@ class OffsetMeasurer:
             raise SearchError(
                 f"face {self.face}: cannot measure the hole/spot offset at true pose {pose_txt}: {', '.join(bad)}. "
                 "Start the search closer to the null (procedure.search_start_deg) or widen the aiming camera's field.")
-        m = hole_spot_offset(fr.hole.dn, fr.spot.dn, self.H_screen_to_uv,
-                             object_pixel_mm=self.rig.aiming_camera.object_pixel_mm,
-                             offset_dn=self.renderer.detector.offset_dn)
+        m = measure_concentricity(self.rig, fr.hole.dn, fr.spot.dn)  # the `rigsim concentricity` stage
+        if self.on_frame is not None:
+            info = {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
+                    "measured_offset_px": np.asarray(m["offset_px"]).tolist(), "face": self.face}
+            self.on_frame("aiming-hole", fr.hole.dn, info)
+            self.on_frame("aiming-spot", fr.spot.dn, info)
         if not np.all(np.isfinite(m["offset_px"])):
             raise SearchError(f"face {self.face}: no spot found in the aiming-camera frame at true pose {pose_txt}")
         exact = np.asarray(fr.truth.offset_mm, float) / self.rig.aiming_camera.object_pixel_mm

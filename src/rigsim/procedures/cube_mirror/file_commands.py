@@ -19,6 +19,9 @@ FACES = ["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
 
 
 def add_cli(groups: dict) -> None:
+    from rigsim.procedures.cube_mirror import null_files
+
+    null_files.add_cli(groups)
     sub = groups["top"]
     cal = sub.add_parser("calibrate", help="calibrate a sensor from a user's logs and centroid tables")
     cs = cal.add_subparsers(dest="sensor", metavar="SENSOR")

@@ -63,6 +63,8 @@ def traced_search(measure_true: Callable[[TruePose], tuple[np.ndarray, np.ndarra
     exact: list = []
 
     def measure(reading: TurntableReading):
+        if hasattr(measure_true, "last_reading"):  # a measurer that records its frames with their readings
+            measure_true.last_reading = dict(reading)
         m, ex, flags = measure_true(reading_to_true(reading))
         exact.append(ex)
         return m, flags

@@ -147,7 +147,8 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
             renderer = ConcentricityRenderer(rig, real, fi)
             times[f"aiming-camera scene build, face {face}"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            meas = OffsetMeasurer(rig, real, fi, renderer=renderer, seed=search_seed + fi, noiseless=noiseless)
+            meas = OffsetMeasurer(rig, real, fi, renderer=renderer, seed=search_seed + fi, noiseless=noiseless,
+                                  on_frame=None if frames is None else frames.null_frame)
             res = concentricity_search(rig, real, fi, meas, _encoder_errors(rig, noise, rng), axis_order=order,
                                        threshold_px=threshold, progress=pb.update)
             times[f"concentricity search, face {face}"] = time.perf_counter() - t0
@@ -184,7 +185,8 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
             t0 = time.perf_counter()
             res = autocollimator_face_search(rig_c, real, fi, step_a.axis_rot, _encoder_errors(rig, noise, rng),
                                              rendered=True, seed=search_seed + fi, noiseless=noiseless,
-                                             axis_order=order, progress=pb.update)
+                                             axis_order=order, progress=pb.update,
+                                             on_frame=None if frames is None else frames.null_frame)
             times[f"step C search, face {face}"] = time.perf_counter() - t0
             searches.append(res)
             resid += [s.measured - s.true for s in res.steps]

@@ -64,7 +64,6 @@ class CampaignFrames:
     user_uv: list = field(default_factory=list)
     exact_uv: list = field(default_factory=list)
     null_rows: list[dict] = field(default_factory=list)
-    face: str = ""
 
     def _full(self, fr) -> np.ndarray:
         from rigsim.render.frame import full_detector_frame
@@ -97,8 +96,11 @@ class CampaignFrames:
         name = f"{kind}_{len(self.null_rows):03d}{self.suffix}"
         if self.out_dir is not None:
             write_image(self.out_dir / name, np.asarray(dn))
-        row = {"frame": name, "kind": kind, "face": self.face}
+        row = {"frame": name, "kind": kind, "face": info.get("face", "")}
         row.update({f"{a.lower()}_deg": float(v) for a, v in info.get("reading_deg", {}).items()})
+        m = info.get("measured_offset_px", info.get("measured_arcsec"))
+        unit = "px" if "measured_offset_px" in info else "arcsec"
+        row.update({f"measured_x_{unit}": m[0], f"measured_y_{unit}": m[1]} if m is not None else {})
         self.null_rows.append(row)
 
     def write_logs(self, null_readings: list[TurntableReading], faces) -> dict[str, Path]:

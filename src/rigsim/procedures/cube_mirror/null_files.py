@@ -1,0 +1,200 @@
+"""The null measurements of seeds 000/001 on a user's frames, the same functions the campaign's
+measurers call: the hole/spot offset of two aiming-camera frames with the turntable step that
+nulls it (``rigsim concentricity``), and the autocollimator's reading of one frame with its σ
+(``rigsim autocollimator read``). Nominal rig only."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from rigsim.errors import CliError, InputError
+from rigsim.estimation.null_search import numerical_jacobian, offset_model
+from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.imaging.screen import hole_spot_offset
+from rigsim.imaging.spot import SpotMeasurement, measure_spot
+from rigsim.optics.aiming import nominal_screen_homography
+from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.load import DEFAULT_RIG
+from rigsim.rig.turntable import TurntableReading
+
+__all__ = ["measure_concentricity", "null_step", "read_autocollimator", "autocollimator_optics", "add_cli"]
+
+FREE_AXES = ("X", "Y")
+
+
+def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray) -> dict:
+    """Hole and spot centres on the screen (mm) and their offset (mm and aiming-camera px, spot −
+    hole) from a hole frame (the spot blocked) and a spot frame, with the nominal screen homography."""
+    ac = rig.aiming_camera
+    if rig.procedure.method != "diaphragm" or ac is None:
+        raise InputError(f"rig {rig.name!r} has no diaphragm screen and aiming camera (seed 000's method)")
+    return hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
+                            offset_dn=ac.detector.offset_dn)
+
+
+def null_step(rig: CubeMirrorRig, reading_rad: Mapping[str, float], offset_px, axis_order: str | None = None) -> dict:
+    """The operator's next move (seed 000 Table 1, by hand): the Newton step of the free axes that
+    cancels ``offset_px`` under the nominal offset model, and the command it gives (rounded to the
+    rig's command resolution). Angles in degrees."""
+    r = dict(reading_rad)
+    free = [a for a in FREE_AXES if a in r]
+    model = offset_model(rig, r, axis_order)
+    J = numerical_jacobian(model, r, free)
+    dx, *_ = np.linalg.lstsq(J, -np.asarray(offset_px, float), rcond=None)
+    q = rig.procedure.command_resolution_deg
+    step = {a: math.degrees(float(d)) for a, d in zip(free, dx)}
+    nxt = {a: math.degrees(v) for a, v in r.items()}
+    for a, d in step.items():
+        x = nxt[a] + d
+        nxt[a] = round(x / q) * q if q > 0 else x
+    return {"step_deg": step, "next_reading_deg": nxt, "px_per_deg": (J * math.pi / 180.0).tolist(),
+            "command_resolution_deg": q}
+
+
+def autocollimator_optics(rig: CubeMirrorRig):
+    """The autocollimator's nominal optics (its calibration: spot position → reading)."""
+    from rigsim.optics.autocollimator import AutocollimatorOptics
+
+    if rig.autocollimator is None:
+        raise InputError(f"rig {rig.name!r} has no autocollimator (seed 001's method)")
+    return AutocollimatorOptics(rig.autocollimator)
+
+
+def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None) -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
+    """The autocollimator's reading (θx, θy) in arcsec of one frame, its 1σ (the centroid's noise
+    through the calibration), and the spot measurement. The reading is NaN when the spot is not
+    measurable (``SpotMeasurement.problem`` says why)."""
+    optics = optics if optics is not None else autocollimator_optics(rig)
+    sm = measure_spot(dn, rig.autocollimator.detector)
+    if not sm.ok:
+        return np.full(2, np.nan), np.full(2, np.nan), sm
+    m = optics.reading(sm.uv) * ARCSEC_PER_RAD
+    J = np.empty((2, 2))
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = 0.01
+        J[:, k] = (optics.reading(sm.uv + d) - optics.reading(sm.uv - d)) * ARCSEC_PER_RAD / 0.02
+    sig = np.sqrt(np.diag(J @ np.diag(sm.sigma_uv**2) @ J.T)) if sm.sigma_uv is not None else np.full(2, np.nan)
+    return m, sig, sm
+
+
+# ------------------------------------------------------------------------------ commands
+
+def _reading(text: str | None, rig: CubeMirrorRig, face_index: int) -> dict[str, float]:
+    if not text:
+        return {k: math.radians(v) for k, v in rig.procedure.search_start[face_index].items()}
+    labels = {a.label for a in rig.turntable.axes}
+    out = {}
+    for part in text.split(","):
+        k, sep, v = (x.strip() for x in part.partition("="))
+        if not sep or k not in labels:
+            raise CliError(f"--reading = {text!r}: expected LABEL=DEGREES for the axes {', '.join(sorted(labels))}")
+        try:
+            x = float(v)
+        except ValueError:
+            raise CliError(f"--reading = {text!r}: {v!r} is not a number of degrees") from None
+        if not (math.isfinite(x) and -360.0 <= x <= 360.0):
+            raise CliError(f"--reading = {text!r}: {k} = {v}: allowed -360 to 360 degrees")
+        out[k] = math.radians(x)
+    for a in labels - set(out):
+        out[a] = 0.0
+    return out
+
+
+def add_cli(groups: dict) -> None:
+    sub = groups["top"]
+    c = sub.add_parser(
+        "concentricity", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        help="hole and returned-spot centres on the diaphragm screen and the turntable step to the null (seed 000)",
+        description="Seed 000's Table 1 loop by hand: from the aiming camera's hole frame (the returned spot "
+                    "blocked) and spot frame, the hole and spot centres (px and mm on the screen), their offset in "
+                    "aiming-camera px and µm on the screen, and the step of the X'/Y' axes that nulls it under the "
+                    "nominal geometry.")
+    c.add_argument("hole", metavar="HOLE", help="aiming-camera frame of the lit hole, the return blocked")
+    c.add_argument("spot", metavar="SPOT", help="aiming-camera frame with the returned spot")
+    c.add_argument("--rig", default=DEFAULT_RIG, help="rig file or default name (nominal values only)")
+    c.add_argument("--face", default=None, help="the face being nulled (default the procedure's first)")
+    c.add_argument("--reading", default=None, help="turntable reading of the frames, e.g. X=181.4,Y=0.55 (degrees; "
+                   "default the face's search start)")
+    c.add_argument("--axis-order", default=None, help="nesting reading of the nominal model (default the rig's)")
+    c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
+    c.set_defaults(func=cmd_concentricity)
+    a = sub.add_parser("autocollimator", help="the autocollimator's reading of a frame (seed 001)")
+    acs = a.add_subparsers(dest="autocollimator_command", metavar="ACTION")
+    r = acs.add_parser("read", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                       help="the reading (θx, θy) in arcsec of one autocollimator frame, with its σ",
+                       description="Find and centroid the return spot of an autocollimator frame and convert it to "
+                                   "the instrument's reading with its nominal calibration.")
+    r.add_argument("frame", metavar="FRAME", help="autocollimator frame (PNG/TIFF/FITS)")
+    r.add_argument("--rig", default="sun_sensor_3axis_autocollimator", help="rig file or default name")
+    r.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
+    r.set_defaults(func=cmd_autocollimator_read)
+
+
+def _write_json(path, obj) -> None:
+    from rigsim.files import write_json
+
+    write_json(path, obj)
+
+
+def cmd_concentricity(args) -> int:
+    from rigsim.files import read_image
+    from rigsim.rig.load import load_rig
+
+    rig = load_rig(args.rig)
+    if rig.aiming_camera is None:
+        raise CliError(f"--rig {args.rig}: no aiming camera (seed 000's method); this rig uses {rig.procedure.method}")
+    faces = list(rig.procedure.faces)
+    face = args.face or faces[0]
+    if face not in faces:
+        raise CliError(f"--face = {face!r}: the procedure's faces are {', '.join(faces)}")
+    shape = tuple(rig.aiming_camera.resolution_px[::-1])
+    hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
+    spot = read_image(args.spot, shape=shape, what="aiming-camera frame")
+    m = measure_concentricity(rig, hole, spot)
+    if not np.all(np.isfinite(m["offset_px"])):
+        raise InputError(f"{args.spot}: no returned spot above 10 % of its peak outside the hole's glow")
+    reading = _reading(args.reading, rig, faces.index(face))
+    st = null_step(rig, reading, m["offset_px"], args.axis_order)
+    px_um = rig.aiming_camera.object_pixel_mm * 1000.0
+    print(f"hole centre {m['hole_mm'][0]:+.4f}, {m['hole_mm'][1]:+.4f} mm; spot centre {m['spot_mm'][0]:+.4f}, "
+          f"{m['spot_mm'][1]:+.4f} mm (screen axes)")
+    print(f"offset spot − hole: x {m['offset_px'][0]:+.3f} px, y {m['offset_px'][1]:+.3f} px "
+          f"({m['offset_mm'][0] * 1000:+.1f}, {m['offset_mm'][1] * 1000:+.1f} µm on the screen; 1 px = {px_um:.1f} µm)")
+    print("step to the null: " + ", ".join(f"{k} {v:+.5f}°" for k, v in st["step_deg"].items())
+          + "; next command " + ", ".join(f"{k}={v:.4f}°" for k, v in st["next_reading_deg"].items())
+          + (f" (rounded to {st['command_resolution_deg']:g}°)" if st["command_resolution_deg"] else ""))
+    res = {"kind": "concentricity", "rig": rig.name, "face": face, "hole_mm": m["hole_mm"], "spot_mm": m["spot_mm"],
+           "offset_mm": m["offset_mm"], "offset_um": np.asarray(m["offset_mm"]) * 1000.0, "offset_px": m["offset_px"],
+           "hole_pixels": m["hole_pixels"], "spot_pixels": m["spot_pixels"],
+           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, **st}
+    if args.json:
+        _write_json(args.json, res)
+    return 0
+
+
+def cmd_autocollimator_read(args) -> int:
+    from rigsim.files import read_image
+    from rigsim.rig.load import load_rig
+
+    rig = load_rig(args.rig)
+    if rig.autocollimator is None:
+        raise CliError(f"--rig {args.rig}: no autocollimator (seed 001's method); this rig uses {rig.procedure.method}")
+    dn = read_image(args.frame, shape=tuple(rig.autocollimator.resolution_px[::-1]), what="autocollimator frame")
+    m, sig, sm = read_autocollimator(rig, dn)
+    if not sm.ok:
+        raise InputError(f"{args.frame}: {sm.problem}")
+    print(f"reading θx {m[0]:+.4f}″ ± {sig[0]:.4f}″, θy {m[1]:+.4f}″ ± {sig[1]:.4f}″ (spot at u {sm.uv[0]:.3f}, "
+          f"v {sm.uv[1]:.3f} px)")
+    res = {"kind": "autocollimator reading", "rig": rig.name, "reading_arcsec": m, "sigma_arcsec": sig,
+           "spot_uv_px": sm.uv, "spot_sigma_uv_px": sm.sigma_uv, "peak_dn": sm.peak_dn,
+           "background_dn": sm.background_dn}
+    if args.json:
+        _write_json(args.json, res)
+    print(json.dumps({"reading_arcsec": m.tolist(), "sigma_arcsec": sig.tolist()}))
+    return 0
