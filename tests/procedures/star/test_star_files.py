@@ -90,3 +90,20 @@ def test_bad_inputs_one_line(exported, tmp_path, capsys, edit, message):
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and re.search(message, err), err
     assert not (d / "cal").exists()
+
+
+def test_lost_in_space_needs_no_attitude(exported, tmp_path, capsys):
+    """With no attitude in the log (frame, time_s only), lost-in-space identification finds the same
+    stars in every frame: the same calibration as with the commanded prior."""
+    d = _bare(exported, tmp_path / "bare")
+    t = read_table(d / "log.csv", [Column("frame", kind="str"), Column("time", "s")])
+    write_table(d / "times.csv", {"frame": list(t["frame"]), "time_s": t["time_s"]})
+    frames = sorted(str(p) for p in d.glob("shot-*.png"))
+    assert main(["star", "calibrate", *frames, "--attitudes", str(d / "times.csv"), "--identify", "lost-in-space",
+                 "--out", str(d / "lis")]) == 0
+    got = json.loads((d / "lis" / "calibration.json").read_text())
+    ref = json.loads((exported / "report" / "star_calibration.json").read_text())
+    assert got["identification"]["frames_identified"] == 20
+    assert np.allclose(got["batch"]["theta"], ref["batch"]["theta"], rtol=1e-9, atol=0)
+    assert main(["star", "calibrate", *frames, "--attitudes", str(d / "times.csv"), "--out", str(d / "x")]) == 2
+    assert "times.csv: no column qw" in capsys.readouterr().err

@@ -47,6 +47,9 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--attitudes", required=True, metavar="FILE", help="attitude log (.csv/.parquet)")
     c.add_argument("--out", required=True, metavar="DIR", help="output folder: stars.csv and calibration.json")
     c.add_argument("--ekf", default="both", choices=["ad", "ads", "both"], help="EKF measurement model(s) to report")
+    c.add_argument("--identify", default="commanded", choices=["commanded", "lost-in-space"],
+                   help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
+                        "frame and time_s)")
     c.set_defaults(func=cmd_star_calibrate)
     p.set_defaults(func=cmd_run_star_calibration)
 
@@ -73,7 +76,7 @@ def cmd_star_calibrate(args) -> int:
     if out.exists() and not out.is_dir():
         raise CliError(f"--out = {out}: exists and is not a folder")
     t0 = time.perf_counter()
-    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig())
+    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=args.identify)
     models = ("ad", "ads") if args.ekf == "both" else (args.ekf,)
     data = star_result_json(res, names, models)
     write_table(out / "stars.csv", stars_table(res, names))

@@ -33,6 +33,7 @@ __all__ = [
 ]
 
 LOG_COLUMNS = [Column("frame", kind="str"), Column("time", "s"), Column("qw"), Column("qx"), Column("qy"), Column("qz")]
+LIS_LOG_COLUMNS = [Column("frame", kind="str"), Column("time", "s")]  # lost in space: no attitude needed
 THETA_UNITS = ("px", "px", "px", "1", "1")
 
 
@@ -44,30 +45,35 @@ def attitude_log_columns(frames: Sequence[str], times_s, R_cam_from_icrs) -> dic
             "qz": q[:, 3]}
 
 
-def read_attitude_log(path) -> dict[str, tuple[float, np.ndarray]]:
+def read_attitude_log(path, *, attitude: bool = True) -> dict[str, tuple[float, np.ndarray | None]]:
     """frame name → (time in s, commanded R(cam←ICRS)); every quaternion must be of unit norm
-    (within 1e-6) and every frame named once."""
-    t = read_table(path, LOG_COLUMNS, what="attitude log")
+    (within 1e-6) and every frame named once. ``attitude=False``: only frame and time_s are needed
+    (lost-in-space identification); the attitude is None."""
+    t = read_table(path, LOG_COLUMNS if attitude else LIS_LOG_COLUMNS, what="attitude log")
     out: dict[str, tuple[float, np.ndarray]] = {}
     lines: dict[str, int] = {}
     for i, line in enumerate(t["__line__"]):
+        f = Path(str(t["frame"][i])).name
+        if f in out:
+            raise InputError(f"{path}: line {line}, column frame: {f!r} already on line {lines[f]}; one row per frame")
+        lines[f] = int(line)
+        if not attitude:
+            out[f] = (float(t["time_s"][i]), None)
+            continue
         q = np.array([t["qw"][i], t["qx"][i], t["qy"][i], t["qz"][i]])
         n = float(np.linalg.norm(q))
         if abs(n - 1.0) > 1e-6:
             raise InputError(f"{path}: line {line}, columns qw..qz: |q| = {n:.9g}; expected a unit quaternion (R(cam←ICRS), "
                              "scalar first)")
-        f = Path(str(t["frame"][i])).name
-        if f in out:
-            raise InputError(f"{path}: line {line}, column frame: {f!r} already on line {lines[f]}; one row per frame")
-        lines[f] = int(line)
         out[f] = (float(t["time_s"][i]), Rotation.from_quat(q / n, scalar_first=True).as_matrix())
     return out
 
 
-def star_observations(paths: Sequence, log_path, nominal: NominalStarRig) -> tuple[list[StarObservation], list[str]]:
+def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, attitude: bool = True
+                      ) -> tuple[list[StarObservation], list[str]]:
     """The frames as the pipeline takes them, in the order of their times, and their names; each
     frame's size is checked against the rig's detector and each must have a row in the log."""
-    log = read_attitude_log(log_path)
+    log = read_attitude_log(log_path, attitude=attitude)
     W, H = nominal.sensor.resolution_px
     rows = []
     for p in paths:
@@ -82,11 +88,14 @@ def star_observations(paths: Sequence, log_path, nominal: NominalStarRig) -> tup
     return [StarObservation(k, t, dn, R) for k, (t, _, dn, R) in enumerate(rows)], [r[1] for r in rows]
 
 
-def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig) -> tuple[PipelineOutput, list[str]]:
-    """The whole pipeline on files: (its output, the frame names in time order)."""
-    obs, names = star_observations(paths, log_path, nominal)
+def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, identification: str = "commanded"
+                         ) -> tuple[PipelineOutput, list[str]]:
+    """The whole pipeline on files: (its output, the frame names in time order). ``identification``:
+    ``"commanded"`` (the log's attitude is the prior) or ``"lost-in-space"`` (no prior; the log
+    needs only frame and time_s)."""
+    obs, names = star_observations(paths, log_path, nominal, attitude=identification == "commanded")
     sky = SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year)
-    return calibrate_frames(obs, nominal, sky), names
+    return calibrate_frames(obs, nominal, sky, identification=identification), names
 
 
 def stars_table(out: PipelineOutput, names: Sequence[str]) -> dict[str, list]:

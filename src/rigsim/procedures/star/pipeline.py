@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -18,12 +18,16 @@ from scipy.spatial.transform import Rotation
 from rigsim.estimation.observability import observability
 from rigsim.estimation.star_calibration import MODELS, FrameObs, batch_lsq, run_ekf
 from rigsim.estimation.star_id import IdentResult, identify
+from rigsim.estimation.star_lis import identify_lost_in_space
 from rigsim.imaging.stars import Observations, extract_stars
 from rigsim.optics.sky import SkyCatalogue
 from rigsim.rig.star import NominalStarRig
 
-__all__ = ["PIPELINE_CASES", "StarObservation", "StarPipeline", "PipelineOutput", "calibrate_frames",
+__all__ = ["IDENTIFICATION", "PIPELINE_CASES", "StarObservation", "StarPipeline", "PipelineOutput", "calibrate_frames",
            "pipeline_case_setup", "per_star_residuals"]
+
+IDENTIFICATION = ("commanded", "lost-in-space")
+"""How stars are identified: from the commanded attitude (the prior), or with no prior at all."""
 
 PIPELINE_CASES = ("f_nominal", "f_joint")
 """EKF cases a user can run: state (u0, v0) with f fixed at its nominal value, or (f, u0, v0)."""
@@ -35,7 +39,8 @@ OBSERVABILITY_STATES = (("u0,v0", ("u0", "v0")), ("f,u0,v0", ("f", "u0", "v0")),
 @dataclass(frozen=True)
 class StarObservation:
     """One frame as the sensor delivers it: the DN image, its time, and the commanded attitude
-    (``R_cam_from_icrs`` the spacecraft was told to hold: the identification prior)."""
+    (``R_cam_from_icrs`` the spacecraft was told to hold: the identification prior; None for a
+    lost-in-space identification)."""
 
     index: int
     time_s: float
@@ -78,10 +83,13 @@ class StarPipeline:
     """The seed-004 pipeline, frame by frame: :meth:`add` extracts and identifies one
     :class:`StarObservation`; :meth:`calibrate` runs the estimators over all frames added."""
 
-    def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue):
+    def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue, *, identification: str = "commanded"):
         if not isinstance(nominal, NominalStarRig):
             raise TypeError("the pipeline takes the nominal rig (StarRig.nominal_rig()), not the rig with its truth")
+        if identification not in IDENTIFICATION:
+            raise ValueError(f"identification = {identification!r}: allowed {', '.join(IDENTIFICATION)}")
         self.nominal, self.sky = nominal, sky
+        self.identification = identification
         self.camera = nominal.sensor.camera()
         self.usable: list[Observations] = []
         self.ident: list[IdentResult] = []
@@ -95,8 +103,15 @@ class StarPipeline:
         found = extract_stars(obs.dn, s.detector, s.psf_sigma_px, method=self.nominal.calibration.centroid_method)
         usable = found.subset(np.flatnonzero(found.usable))
         t1 = time.perf_counter()
-        ident = identify(usable.uv, self.sky, obs.R_commanded, self.camera, search_radius_px=idc.search_radius_px,
-                         match_tolerance_px=idc.match_tolerance_px, min_matches=idc.min_matches)
+        kw = {"search_radius_px": idc.search_radius_px, "match_tolerance_px": idc.match_tolerance_px,
+              "min_matches": idc.min_matches}
+        if self.identification == "lost-in-space":  # no prior: geometric voting of the brightest stars
+            order = np.argsort(-usable.flux, kind="stable")
+            ident = identify_lost_in_space(usable.uv[order], self.sky, self.camera, **kw)
+            if ident.ok:
+                ident = replace(ident, obs_index=order[ident.obs_index])
+        else:
+            ident = identify(usable.uv, self.sky, obs.R_commanded, self.camera, **kw)
         self.times["extract"] += t1 - t0
         self.times["identify"] += time.perf_counter() - t1
         self.counts["detected"] += len(found)
@@ -138,9 +153,10 @@ class StarPipeline:
         return out
 
 
-def calibrate_frames(frames: Iterable[StarObservation], nominal: NominalStarRig, sky: SkyCatalogue) -> PipelineOutput:
+def calibrate_frames(frames: Iterable[StarObservation], nominal: NominalStarRig, sky: SkyCatalogue, *,
+                     identification: str = "commanded") -> PipelineOutput:
     """The whole pipeline on a sequence of observations (a user's own frames welcome)."""
-    pipe = StarPipeline(nominal, sky)
+    pipe = StarPipeline(nominal, sky, identification=identification)
     for fr in frames:
         pipe.add(fr)
     return pipe.calibrate()
