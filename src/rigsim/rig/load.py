@@ -19,7 +19,7 @@ from rigsim.rig.boresight import BoresightRig
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.star import StarRig
 
-SCENES_DIR = Path(str(importlib.resources.files("rigsim") / "scenes"))
+SCENES_DIR = Path(str(importlib.resources.files("rigsim") / "scenes")).resolve()
 """The default rigs shipped with the package (in the repository: the top-level scenes/ folder)."""
 
 
