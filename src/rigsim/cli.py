@@ -25,7 +25,10 @@ examples:
   rigsim run boresight                          seed 003: dual line-array camera, DVAD vs simplified
   rigsim run star-calibration                   seed 004: star-sensor calibration, AD vs ADS
   rigsim triad 181.398 0.528 91.386 -0.048      R(pm<-rot) from Table 1's final angles
-  rigsim rig check scenes/my_rig.toml           validate a rig file
+  rigsim centroid frames/*.png --rig sun_sensor_2axis_diaphragm --out centroids.csv    your own frames
+  rigsim calibrate sun-sensor --angles angles.csv --centroids centroids.csv --out sun.json
+  rigsim star calibrate frames/*.fits --attitudes attitudes.csv --out cal                docs/user-data.md
+  rigsim rig check scenes/my_rig.toml           validate a rig file (and print its geometry)
   rigsim doctor                                 versions, libLLVM and Mitsuba variant
 
 Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
