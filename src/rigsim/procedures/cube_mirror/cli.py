@@ -13,7 +13,7 @@ import numpy as np
 
 import rigsim
 from rigsim.errors import CliError
-from rigsim.procedures.cube_mirror import file_commands
+from rigsim.procedures.cube_mirror import file_commands, render_commands
 from rigsim.reporting import text_table
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -24,6 +24,7 @@ def add_cli(groups: dict) -> None:
     """Add the family's commands to the parser groups {"top", "run", "render"} of ``rigsim``."""
     sub, rs, rds = groups["top"], groups["run"], groups["render"]
     file_commands.add_cli(groups)
+    render_commands.add_cli(groups)
 
     cmr = rs.add_parser("cube-mirror", help="seeds 000/001: sun sensor ↔ mirror cube calibration campaign",
                         description="Run the cube-mirror campaign on a rig and compare with truth; then the Monte-Carlo error budget.",
