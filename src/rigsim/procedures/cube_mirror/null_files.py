@@ -22,7 +22,7 @@ from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.load import DEFAULT_RIG
 from rigsim.rig.turntable import TurntableReading
 
-__all__ = ["measure_concentricity", "null_step", "read_autocollimator", "autocollimator_optics", "add_cli"]
+__all__ = ["measure_concentricity", "null_step", "parse_reading", "read_autocollimator", "autocollimator_optics", "add_cli"]
 
 FREE_AXES = ("X", "Y")
 
@@ -85,7 +85,9 @@ def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None) -> tupl
 
 # ------------------------------------------------------------------------------ commands
 
-def _reading(text: str | None, rig: CubeMirrorRig, face_index: int) -> dict[str, float]:
+def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option: str = "--reading") -> dict[str, float]:
+    """``"X=181.4,Y=0.55"`` (degrees) → {axis: rad} for every axis of the rig (unnamed axes at 0);
+    empty: the search start of the face ``face_index``."""
     if not text:
         return {k: math.radians(v) for k, v in rig.procedure.search_start[face_index].items()}
     labels = {a.label for a in rig.turntable.axes}
@@ -93,13 +95,13 @@ def _reading(text: str | None, rig: CubeMirrorRig, face_index: int) -> dict[str,
     for part in text.split(","):
         k, sep, v = (x.strip() for x in part.partition("="))
         if not sep or k not in labels:
-            raise CliError(f"--reading = {text!r}: expected LABEL=DEGREES for the axes {', '.join(sorted(labels))}")
+            raise CliError(f"{option} = {text!r}: expected LABEL=DEGREES for the axes {', '.join(sorted(labels))}")
         try:
             x = float(v)
         except ValueError:
-            raise CliError(f"--reading = {text!r}: {v!r} is not a number of degrees") from None
+            raise CliError(f"{option} = {text!r}: {v!r} is not a number of degrees") from None
         if not (math.isfinite(x) and -360.0 <= x <= 360.0):
-            raise CliError(f"--reading = {text!r}: {k} = {v}: allowed -360 to 360 degrees")
+            raise CliError(f"{option} = {text!r}: {k} = {v}: allowed -360 to 360 degrees")
         out[k] = math.radians(x)
     for a in labels - set(out):
         out[a] = 0.0
@@ -159,7 +161,7 @@ def cmd_concentricity(args) -> int:
     m = measure_concentricity(rig, hole, spot)
     if not np.all(np.isfinite(m["offset_px"])):
         raise InputError(f"{args.spot}: no returned spot above 10 % of its peak outside the hole's glow")
-    reading = _reading(args.reading, rig, faces.index(face))
+    reading = parse_reading(args.reading, rig, faces.index(face))
     st = null_step(rig, reading, m["offset_px"], args.axis_order)
     px_um = rig.aiming_camera.object_pixel_mm * 1000.0
     print(f"hole centre {m['hole_mm'][0]:+.4f}, {m['hole_mm'][1]:+.4f} mm; spot centre {m['spot_mm'][0]:+.4f}, "

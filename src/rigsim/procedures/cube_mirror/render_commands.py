@@ -52,7 +52,7 @@ def add_cli(groups: dict) -> None:
 
 
 def _setup(args, method: str):
-    from rigsim.procedures.cube_mirror.cli import _parse_pose
+    from rigsim.procedures.cube_mirror.null_files import parse_reading
     from rigsim.rig import load_rig
     from rigsim.truth.cube_mirror.realization import realization_from_rig
 
@@ -68,8 +68,7 @@ def _setup(args, method: str):
         raise CliError(f"--seed = {args.seed}: allowed 0 to 2^63 - 1")
     if not 1 <= args.spp <= 65536:
         raise CliError(f"--spp = {args.spp}: allowed 1 to 65536")
-    pose = _parse_pose(args.pose, rig) or dict(rig.procedure.search_start[faces.index(face)])
-    pose_rad = {a.label: math.radians(pose.get(a.label, 0.0)) for a in rig.turntable.axes}
+    pose_rad = parse_reading(args.pose, rig, faces.index(face), "--pose")
     return rig, realization_from_rig(rig, ideal=args.ideal), faces.index(face), face, pose_rad
 
 
@@ -105,7 +104,7 @@ def cmd_render_autocollimator(args) -> int:
     from rigsim.procedures.cube_mirror.null_files import read_autocollimator
     from rigsim.rig.turntable import NOMINAL_D
 
-    rig, real, fi, face, pose = _setup(args, "autocollimator")
+    rig, real, _, face, pose = _setup(args, "autocollimator")
     t0 = time.perf_counter()
     f = FaceReadingMeasurer(rig, real, face, NOMINAL_D, spp=args.spp)
     with warnings.catch_warnings():
