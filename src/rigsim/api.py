@@ -23,6 +23,18 @@ from rigsim.files import Column, covariance_block, read_image, read_json, read_t
 from rigsim.imaging import Flag, NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
 from rigsim.optics.camera import PinholeBrown
+from rigsim.optics.targets import (
+    PlanarTarget,
+    chessboard,
+    circle_grid,
+    image_target,
+    parse_target,
+    project_target,
+    read_poses,
+    spread_poses,
+    target_to_camera,
+    write_poses,
+)
 from rigsim.estimation.dvad import BoresightEstimate, DVADSolver
 from rigsim.optics.line_camera import CameraGeometry
 from rigsim.procedures.boresight.files import (
@@ -73,6 +85,9 @@ __all__ = [
     # rigs (nominal values)
     "load_rig", "load_any_rig", "load_boresight_rig", "load_star_rig", "TurntableReading", "TurntableModel",
     "PinholeBrown",
+    # calibration targets (exact projection through a camera model)
+    "PlanarTarget", "parse_target", "chessboard", "circle_grid", "image_target", "read_poses", "write_poses",
+    "spread_poses", "project_target", "target_to_camera",
     # centroid
     "FRAME_METHODS", "measure_frame", "single_spot", "Flag", "NoiseModel", "DetectorSettings", "detector_settings",
     "centroid_files",

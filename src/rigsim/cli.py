@@ -14,6 +14,7 @@ from rigsim.dataset import cli as dataset_cli
 from rigsim.errors import RigsimError
 from rigsim.families import FAMILIES, family_of
 from rigsim.procedures import centroid as centroid_stage
+from rigsim.procedures import target_commands
 from rigsim.view import cli as view_cli
 
 EPILOG = """\
@@ -28,6 +29,7 @@ examples:
   rigsim centroid frames/*.png --rig sun_sensor_2axis_diaphragm --out centroids.csv    your own frames
   rigsim calibrate sun-sensor --angles angles.csv --centroids centroids.csv --out sun.json
   rigsim star calibrate frames/*.fits --attitudes attitudes.csv --out cal                docs/user-data.md
+  rigsim render target --target chessboard:10x7:20 --poses poses.csv --out board   a target through the true camera
   rigsim rig check scenes/my_rig.toml           validate a rig file (and print its geometry)
   rigsim doctor                                 versions, libLLVM and Mitsuba variant
 
@@ -129,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     for fam in FAMILIES:
         fam.add_cli(groups)
     centroid_stage.add_cli(groups)
+    target_commands.add_cli(groups)
     dataset_cli.add_cli(groups)
     view_cli.add_cli(groups)
     return p
