@@ -72,6 +72,9 @@ def add_cli(groups: dict) -> None:
     sce.add_argument("--xml", required=True, metavar="DIR", help="output folder (XML + meshes/)")
     sce.add_argument("--pose", default=None, help="turntable angles in degrees, e.g. X=180,Y=0")
     sce.add_argument("--spp", type=int, default=64, help="samples per pixel written into the XML")
+    sce.add_argument("--beam", choices=("divergent", "collimated"), default="divergent",
+                     help="diaphragm screen: the sun simulator's divergent beam as the campaign renders it (default), "
+                          "or one collimated pencil")
     sce.set_defaults(func=cmd_scene_export)
 
 
@@ -343,7 +346,7 @@ def cmd_scene_export(args) -> int:
 
     rig = load_rig(args.rig)
     pose = _parse_pose(args.pose, rig)
-    for p in export_rig(rig, Path(args.xml), pose, spp=args.spp):
+    for p in export_rig(rig, Path(args.xml), pose, spp=args.spp, beam=args.beam):
         print(f"wrote {p}")
     print(f"render one with: mitsuba -o out.exr {Path(args.xml) / 'sun_sensor.xml'}")
     return 0

@@ -514,32 +514,48 @@ DEMO_TILT_ARCSEC = {"X": -260.0, "Y": 330.0}
 
 
 def export_diaphragm(rig: CubeMirrorRig, real: Realization | None = None, pose_rad: dict | None = None, *,
-                     spp: int = 64, face_index: int = 0, mesh_dir=None):
+                     spp: int = 64, face_index: int = 0, mesh_dir=None, beam: str = "divergent",
+                     divergence_directions: int = 64):
     """(scene dict, XML comments) for ``rigsim scene export``: beam, cube, screen and hole glow at
     ``pose_rad`` (default: the face's exact null pose + :data:`DEMO_TILT_ARCSEC`, so that the
-    spot lies beside the hole). ``None`` if the rig has no diaphragm screen."""
+    spot lies beside the hole). ``None`` if the rig has no diaphragm screen.
+
+    ``beam="divergent"`` (default) is what the campaign renders: the sun simulator's full angle as
+    ``divergence_directions`` pencils through the real hole, light returning into the hole lost
+    (:class:`~rigsim.render.cube_mirror.aiming.ConcentricityRenderer` renders the same light field as
+    a convolution of one pencil). ``"collimated"`` is the single parallel pencil."""
     if rig.diaphragm_screen is None or rig.aiming_camera is None:
         return None
+    if beam not in ("divergent", "collimated"):
+        raise ValueError(f"beam = {beam!r}: allowed divergent, collimated")
     real = real if real is not None else realization_from_rig(rig)
-    geom = diaphragm_geometry(rig, real, face_index)
+    geom = diaphragm_geometry(rig, real, face_index, beam=beam)
     demo = pose_rad is None
     if demo:
         pose_rad = dict(geom.layout.null_pose_rad)
         for k, v in DEMO_TILT_ARCSEC.items():
             pose_rad[k] = pose_rad.get(k, 0.0) + math.radians(v / 3600.0)
-    d = build_diaphragm_scene_dict(rig, real, pose_rad, face_index, spp=spp, content="both",
-                                   sampler="multijitter", mesh_dir=mesh_dir, geometry=geom)
+    d = build_diaphragm_scene_dict(rig, real, pose_rad, face_index, spp=spp, content="both", beam=beam,
+                                   divergence_directions=divergence_directions, sampler="multijitter",
+                                   mesh_dir=mesh_dir, geometry=geom)
     tr = geom.trace(pose_rad)
     pose_txt = ", ".join(f"{k} = {math.degrees(v):.6f} deg" for k, v in pose_rad.items())
+    n_dir = 2 * ((int(divergence_directions) + 1) // 2)
+    beam_txt = (f"beam: divergent, the sun simulator's full angle {rig.sun_simulator.collimation_full_angle_arcmin} "
+                f"arcmin as {n_dir} parallel pencils through the hole (sunflower quadrature); light returning into "
+                "the hole is lost - the campaign's aiming-camera frames are this light field"
+                if beam == "divergent" else
+                "beam: collimated, one parallel pencil (at the null its return falls back into the hole and vanishes)")
     notes = [
         f"rigsim diaphragm screen (seed 000), face {geom.face}; millimetres; origin = the face centre at "
         f"its exact null pose (lab point {np.round(geom.shift_mm, 6).tolist()} mm)",
         f"turntable pose (true angles) {pose_txt}" + (" = null pose + demo tilt "
                                                        f"{DEMO_TILT_ARCSEC} arcsec" if demo else ""),
+        beam_txt,
         f"exact trace: spot offset from the hole {np.round(1e3 * tr.offset_mm, 4).tolist()} um (lab X', Y'); "
         f"hole at pixel {np.round(tr.hole_uv, 4).tolist()}, spot at {np.round(tr.spot_uv, 4).tolist()}",
         "integrator ptracer: the beam -> mirror -> screen path is a caustic (path tracing returns zero)",
         "sensor: the aiming camera (pinhole, no distortion); pixel values are screen radiance; the spot's "
-        "radiance is reflectance * irradiance / pi, the hole glow's the same (paper: equally bright)",
+        "radiance is reflectance * irradiance / pi, the hole glow's the same as a collimated spot's (paper: equally bright)",
     ]
     return d, notes
