@@ -24,7 +24,7 @@ def _gen(args) -> int:
 
     r = generate(args.rig, args.out, frames=args.frames, sweep=args.sweep, seed=args.seed, generator=args.generator,
                  workers=args.workers, scheduler=args.scheduler, spp=args.spp, retries=args.retries,
-                 progress=not args.quiet)
+                 progress=not args.quiet, renderer=args.renderer)
     print(f"dataset {r.root}: {r.n_frames} frames ({r.n_resumed} already complete, {r.n_rendered} rendered"
           + (f", {r.retries} retried tasks" if r.retries else "") + f") in {r.seconds:.1f} s"
           + (f", {r.frames_per_second:.2f} frames/s" if r.n_rendered else ""))
@@ -90,7 +90,11 @@ def add_cli(groups: dict) -> None:
     g.add_argument("--generator", default=None, choices=sorted(GENERATORS), help="frame kind (default: the rig's)")
     g.add_argument("--workers", type=int, default=None, help="local worker processes (default: the CPU count)")
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="run on a Dask distributed cluster")
-    g.add_argument("--spp", type=int, default=1024, help="Mitsuba samples per pixel")
+    g.add_argument("--spp", type=int, default=None, help="Mitsuba samples per pixel (default: the generator's: "
+                   + ", ".join(f"{k} {c.default_spp}" for k, c in sorted(GENERATORS.items())) + ")")
+    g.add_argument("--renderer", default=None, choices=("analytic", "mitsuba"),
+                   help="star-field only: the analytic pixel-integrated PSF (default) or Mitsuba through the "
+                        "distorted pinhole (--spp honoured)")
     g.add_argument("--retries", type=int, default=2, help="retries of a failed task")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=_gen)

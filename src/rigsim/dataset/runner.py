@@ -111,7 +111,8 @@ def _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, params) ->
 
 def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = None, seed: int = 0,
              generator: str | None = None, workers: int | None = None, scheduler: str | None = None,
-             spp: int = 1024, retries: int = 2, chunk: int = 4, progress: bool = True) -> GenerateResult:
+             spp: int | None = None, retries: int = 2, chunk: int = 4, progress: bool = True,
+             renderer: str | None = None) -> GenerateResult:
     from rigsim.rig.load import resolve_rig_path
 
     t0 = time.perf_counter()
@@ -126,8 +127,20 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
         raise DatasetError("give exactly one of --frames N or --sweep SPEC")
     if frames is not None and not (1 <= frames <= 10_000_000):
         raise DatasetError(f"--frames = {frames}: allowed range is 1 to 10000000")
+    import tomllib
+
+    sd = str(tomllib.loads(rig_text).get("seed_document", "000"))
+    if sd not in GENERATORS[kind].seeds:
+        fits = [k for k, c in GENERATORS.items() if sd in c.seeds]
+        raise DatasetError(f"--generator {kind}: renders seed-{'/'.join(GENERATORS[kind].seeds)} rigs; {rig_path} is a "
+                           f"seed-{sd} rig (its generators: {', '.join(fits) or 'none'})")
+    spp = GENERATORS[kind].default_spp if spp is None else spp
     if not (1 <= spp <= 65536):
         raise DatasetError(f"--spp = {spp}: allowed range is 1 to 65536")
+    if renderer is not None and renderer not in getattr(GENERATORS[kind], "renderers", ()):
+        allowed = getattr(GENERATORS[kind], "renderers", ())
+        raise DatasetError(f"--renderer = {renderer!r}: generator {kind} " + (f"allows {', '.join(allowed)}" if allowed
+                                                                             else "has one renderer (no --renderer)"))
     if workers is not None and not (1 <= workers <= 512):
         raise DatasetError(f"--workers = {workers}: allowed range is 1 to 512")
     if not (0 <= retries <= 20):
@@ -135,6 +148,8 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
     opts = {"spp": int(spp)}
+    if renderer is not None:
+        opts["renderer"] = renderer
     gen = make_generator(kind, rig_text, str(rig_path), **opts)
     fmt = gen.image_format
     plan_path = root / "plan.json"

@@ -151,6 +151,11 @@ def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centr
         if truth_ref not in TRUTH_REFS:
             raise DatasetError(f"--truth-ref {truth_ref!r}: allowed {', '.join(TRUTH_REFS)}")
         cu, cv = TRUTH_REFS[truth_ref]
+        if cu not in t and truth_ref == "centre" and "spot_u_px" in t:
+            # aiming-camera and autocollimator kinds: units in the column names; aiming pairs score the spot frames
+            cu, cv = "spot_u_px", "spot_v_px"
+            if "image" in t:
+                valid = valid & (t["image"] == "spot")
         if cu not in t:
             raise DatasetError(f"{ds.root}: truth has no '{cu}' column (generator {ds.manifest['generator']})")
         truth = np.stack([t[cu], t[cv]], axis=1)

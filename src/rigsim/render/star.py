@@ -125,8 +125,11 @@ def render_stars(uv, photons, shape_hw: tuple[int, int], sigma_px: float, *, bac
 
 # ------------------------------------------------------------------------------------------ (from render_mitsuba.py)
 class MitsubaStarRenderer:
-    def __init__(self, sensor, *, oversample: int = 2, window_px: int = 16, spp: int = 256,
-                 mode: str = "windows", distance_mm: float = 1000.0, margin_px: int = 12):
+    def __init__(self, sensor, *, oversample: int = 2, window_px: int | None = None, spp: int = 256,
+                 mode: str = "windows", distance_mm: float = 1000.0, margin_px: int | None = None):
+        """``window_px`` (each star's rendered window) defaults to the PSF's: 2·⌈5σ⌉ + 4, at least 16;
+        ``margin_px`` (sky texture beyond the detector, for the wings of stars just off it) to ⌈5σ⌉ + 2,
+        at least 12."""
         from rigsim.render.backend import ensure_variant
         from rigsim.render.plugins import register_sensors
 
@@ -136,10 +139,13 @@ class MitsubaStarRenderer:
             raise ValueError(f"oversample = {oversample!r}: allowed integers 1..8")
         if spp < 1 or (spp & (spp - 1)) or (spp.bit_length() - 1) % 2:
             raise ValueError(f"spp = {spp!r}: must be a power of 4 (ldsampler), e.g. 64, 256, 1024")
-        if not 8 <= window_px <= 256:
-            raise ValueError(f"window_px = {window_px!r}: allowed 8..256")
         self.sensor = sensor
         self.sigma_px = sensor.psf_sigma_px
+        need = 2 * math.ceil(5 * self.sigma_px) + 4
+        window_px = max(16, need) if window_px is None else window_px
+        margin_px = max(12, math.ceil(5 * self.sigma_px) + 2) if margin_px is None else margin_px
+        if not 8 <= window_px <= 256:
+            raise ValueError(f"window_px = {window_px!r}: allowed 8..256 (a PSF of σ = {self.sigma_px:.2f} px needs {need})")
         if window_px < 2 * math.ceil(5 * self.sigma_px) + 4:
             raise ValueError(f"window_px = {window_px} is too small for a PSF of σ = {self.sigma_px:.2f} px "
                              f"(need ≥ {2 * math.ceil(5 * self.sigma_px) + 4})")

@@ -9,6 +9,8 @@ restarts. docs/datasets.md describes each kind.
 
 from __future__ import annotations
 
+from rigsim.dataset.generators.aiming import AimingCameraGenerator
+from rigsim.dataset.generators.autocollimator import AutocollimatorGenerator
 from rigsim.dataset.generators.boresight import BoresightRoiGenerator
 from rigsim.dataset.generators.cube_mirror import SunSensorGenerator
 from rigsim.dataset.generators.star import StarFieldGenerator
@@ -16,12 +18,14 @@ from rigsim.errors import DatasetError
 
 __all__ = ["GENERATORS", "generator_for_rig", "make_generator", "worker_generator"]
 
-GENERATORS: dict[str, type] = {g.kind: g for g in (SunSensorGenerator, StarFieldGenerator, BoresightRoiGenerator)}
+GENERATORS: dict[str, type] = {g.kind: g for g in (SunSensorGenerator, AimingCameraGenerator, AutocollimatorGenerator,
+                                                   StarFieldGenerator, BoresightRoiGenerator)}
 """``--generator`` name → generator class. Each class names the seed documents it renders (``seeds``)."""
 
 
 def generator_for_rig(rig_text: str) -> str:
-    """The default generator of a rig file (by its seed_document; none: a cube-mirror rig)."""
+    """The default generator of a rig file (by its seed_document; none: a cube-mirror rig): the first
+    generator naming that seed, i.e. ``sun-sensor`` for both cube-mirror seeds."""
     import tomllib
 
     sd = str(tomllib.loads(rig_text).get("seed_document", "000"))

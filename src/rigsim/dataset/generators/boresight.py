@@ -22,6 +22,7 @@ class BoresightRoiGenerator:
     kind = "boresight-roi"
     seeds = ("003",)
     image_format = "png"
+    default_spp = 1024
     description = "seed-003 CMOS ROIs of the laser spots at random camera states"
     RANGE_ARCSEC = 60.0
     DF_RANGE_UM = 20.0

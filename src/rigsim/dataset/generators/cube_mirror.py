@@ -14,6 +14,7 @@ class SunSensorGenerator:
     kind = "sun-sensor"
     seeds = ("000", "001")
     image_format = "png"
+    default_spp = 1024
     description = "full sun-sensor frames at random (or swept) turntable poses, rig errors drawn per frame"
 
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 1024, threads: int | None = None):

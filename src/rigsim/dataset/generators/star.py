@@ -21,15 +21,25 @@ class StarFieldGenerator:
     seeds = ("004",)
     image_format = "fits"
     description = "star-sensor frames (FITS) at random or swept attitudes; one truth row per star"
+    renderers = ("analytic", "mitsuba")
+    default_spp = 256
 
-    def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 1024, threads: int | None = None):
+    def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 256, threads: int | None = None,
+                 renderer: str = "analytic"):
         import tomllib
 
         from rigsim.rig.load import parse_star_rig
 
+        if renderer not in self.renderers:
+            raise DatasetError(f"--renderer = {renderer!r}: allowed {', '.join(self.renderers)}")
         self.rig = parse_star_rig(tomllib.loads(rig_text), rig_source)
-        self.spp = int(spp)  # the analytic renderer has no samples; kept for a uniform interface
+        self.renderer = renderer
+        self.spp = int(spp)  # Mitsuba's samples per pixel (a power of 4); the analytic PSF has none
+        if renderer == "mitsuba" and (self.spp & (self.spp - 1) or (self.spp.bit_length() - 1) % 2):
+            raise DatasetError(f"--spp = {spp}: the Mitsuba star renderer needs a power of 4 (16, 64, 256, 1024)")
+        self.threads = threads
         self._sky = None
+        self._mitsuba = None
 
     def sweepable(self) -> list[str]:
         return ["ra", "dec", "roll"]
@@ -79,8 +89,17 @@ class StarFieldGenerator:
             from rigsim.truth.star import StarSky
 
             self._sky = StarSky(self.rig)
+        if self.renderer == "mitsuba" and self._mitsuba is None:
+            if self.threads:
+                from rigsim.render.backend import set_thread_count
+
+                set_thread_count(int(self.threads))
+            from rigsim.render.star import MitsubaStarRenderer
+
+            self._mitsuba = MitsubaStarRenderer(self.rig.sensor, spp=self.spp)
         R = self.attitude_matrix(params["attitude"])
-        fr = render_frame(self._sky, R, seed=int(params["seed"]), index=int(index), renderer="analytic")
+        fr = render_frame(self._sky, R, seed=int(params["seed"]), index=int(index), renderer=self.renderer,
+                          mitsuba=self._mitsuba)
         tr = fr.truth
         q = Rotation.from_matrix(R).as_quat()
         ra, dec = boresight_radec(R)
@@ -108,4 +127,6 @@ class StarFieldGenerator:
         return fr.dn, sc, rows
 
     def settings(self) -> dict:
+        if self.renderer == "mitsuba":
+            return {"renderer": "mitsuba (distorted pinhole, PSF texture per star window)", "spp": self.spp}
         return {"renderer": "analytic pixel-integrated PSF"}

@@ -151,10 +151,11 @@ class ConcentricityRenderer:
         return self.truth_geometry.trace(pose_rad)
 
     def render(self, pose_rad: dict, seed: int = 0, *, hole_seed: int = 0, noiseless: bool = False,
-               warn: bool = True) -> DiaphragmFrames:
+               warn: bool = True, spot: bool = True) -> DiaphragmFrames:
         """Hole frame (glow; detector noise from ``seed``) and spot frame at ``pose_rad`` (true
         angles). Geometry problems are flags (and warnings when ``warn``); nothing is rendered
-        when the spot does not come back to the screen."""
+        when the spot does not come back to the screen. ``spot=False`` skips the spot's render
+        (only the hole frame is wanted: the spot frame then shows the hole alone)."""
         if int(seed) != seed or seed < 0:
             raise ValueError(f"seed = {seed!r}: must be an integer >= 0")
         sec = {}
@@ -168,7 +169,7 @@ class ConcentricityRenderer:
         hole = self.hole_photons(hole_seed)
         sec["hole_render"] = time.perf_counter() - t0
         t1 = time.perf_counter()
-        if flags.get("spot_not_returned") or flags.get("beam_misses_face"):
+        if not spot or flags.get("spot_not_returned") or flags.get("beam_misses_face"):
             spot = np.zeros_like(hole)
         else:
             spot = self.spot_photons(pose_rad, seed)
