@@ -13,7 +13,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rigsim.dataset.generators import BoresightRoiGenerator, StarFieldGenerator, SunSensorGenerator
+from rigsim.dataset.generators import (
+    AimingCameraGenerator,
+    AutocollimatorGenerator,
+    BoresightRoiGenerator,
+    StarFieldGenerator,
+    SunSensorGenerator,
+)
 from rigsim.procedures.boresight import cli as boresight_cli
 from rigsim.procedures.cube_mirror import cli as cube_mirror_cli
 from rigsim.procedures.star import cli as star_cli
@@ -43,7 +49,8 @@ class Family:
 
 FAMILIES: tuple[Family, ...] = (
     Family("cube_mirror", ("000", "001"), "sun sensor and mirror cube on a turntable (diaphragm screen or autocollimator)",
-           CubeMirrorRig, DEFAULT_RIG, cube_mirror_cli.add_cli, (SunSensorGenerator,)),
+           CubeMirrorRig, DEFAULT_RIG, cube_mirror_cli.add_cli,
+           (SunSensorGenerator, AimingCameraGenerator, AutocollimatorGenerator)),
     Family("boresight", ("003",), "boresight of a dual line-array camera with a central prism",
            BoresightRig, DEFAULT_BORESIGHT_RIG, boresight_cli.add_cli, (BoresightRoiGenerator,)),
     Family("star", ("004",), "on-orbit calibration of a star sensor",

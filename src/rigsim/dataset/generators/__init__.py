@@ -16,7 +16,16 @@ from rigsim.dataset.generators.cube_mirror import SunSensorGenerator
 from rigsim.dataset.generators.star import StarFieldGenerator
 from rigsim.errors import DatasetError
 
-__all__ = ["GENERATORS", "generator_for_rig", "make_generator", "worker_generator"]
+__all__ = [
+    "AimingCameraGenerator",
+    "AutocollimatorGenerator",
+    "BoresightRoiGenerator",
+    "StarFieldGenerator",
+    "SunSensorGenerator",
+    "generator_for_rig",
+    "make_generator",
+    "worker_generator",
+]
 
 GENERATORS: dict[str, type] = {g.kind: g for g in (SunSensorGenerator, AimingCameraGenerator, AutocollimatorGenerator,
                                                    StarFieldGenerator, BoresightRoiGenerator)}

@@ -41,6 +41,9 @@ def add_cli(groups: dict) -> None:
                    "image files (ref_/meas_<camera>_m1|m2_<k>.png, no truth) for `rigsim boresight centroid`")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run_boresight)
+    from rigsim.procedures.boresight import render_commands
+
+    render_commands.add_cli(groups)
 
     b = groups["top"].add_parser("boresight", help="seed 003 stages on your own ROI frames and spot tables")
     bs = b.add_subparsers(dest="boresight_command", metavar="ACTION")

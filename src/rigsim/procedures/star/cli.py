@@ -52,6 +52,9 @@ def add_cli(groups: dict) -> None:
                         "frame and time_s)")
     c.set_defaults(func=cmd_star_calibrate)
     p.set_defaults(func=cmd_run_star_calibration)
+    from rigsim.procedures.star import render_commands
+
+    render_commands.add_cli(groups)
 
 
 def _check(args) -> None:
