@@ -42,7 +42,7 @@ def test_landing_count_agrees_with_the_truth_layer():
         count += bool(ok[0] and cam.on_detector(uv, margin_px=3.0)[0])
     assert (landed, n) == (count, 625) and landed == 39
     sweep = next(g for g in geometry_summary(rig) if g.item == "sweep")
-    assert sweep.status == "warning" and "39 of 625" in sweep.value and "±15.8°" in sweep.value
+    assert sweep.status == "error" and "39 of 625" in sweep.value and "±15.8°" in sweep.value
 
 
 def test_inconsistent_geometry_is_refused_naming_the_fields():

@@ -70,10 +70,11 @@ def geometry_summary(rig: CubeMirrorRig) -> list[GeometryLine]:
     landed, n = sweep_landing(rig)
     fields = ("procedure.sweep_range_deg", "procedure.sweep_step_deg", "sun_sensor.focal_length_mm",
               "sun_sensor.resolution_px", "sun_sensor.pixel_pitch_um")
-    status = "error" if landed < MIN_SWEEP_POSES else ("warning" if landed < 0.5 * n else "ok")
+    # a sweep mostly off the detector is a sweep range meant for another sensor: refuse it
+    status = "error" if landed < max(MIN_SWEEP_POSES, 0.25 * n) else ("warning" if landed < 0.5 * n else "ok")
     out.append(GeometryLine("sweep", f"±{proc.sweep_range_deg:g}° every {proc.sweep_step_deg:g}° about "
                             f"{'/'.join(proc.sweep_axes)}: {landed} of {n} poses put the sun on the detector"
-                            + ("" if status == "ok" else f" (the field is ±{max(fu, fv):.1f}°)"), status, fields))
+                            + ("" if status == "ok" else f" (the field is ±{fu:.1f}° × ±{fv:.1f}°: sweep within it)"), status, fields))
     out.append(GeometryLine("cube", f"{cube.edge_mm:g} mm faces, centre {cube.centre_in_mount_mm} mm in the mount; "
                             f"faces {' and '.join(proc.faces)}"))
     if proc.method == "diaphragm":
@@ -100,6 +101,10 @@ def geometry_summary(rig: CubeMirrorRig) -> list[GeometryLine]:
         out.append(GeometryLine("autocollimator", f"f = {a.focal_length_mm:g} mm, {a.resolution_px[0]}×{a.resolution_px[1]} px "
                                 f"of {a.pixel_pitch_um:g} µm: measures face tilts up to ±{half * 3600:.0f}″; "
                                 f"aperture Ø {a.aperture_mm:g} mm at {a.distance_mm:g} mm"))
+        fno = a.focal_length_mm / a.aperture_mm
+        out.append(GeometryLine("objective", f"f/{fno:.2f} plano-convex singlet" + (
+            "" if fno >= 1.5 else ": faster than f/1.5, beyond the singlet rigsim models"), "ok" if fno >= 1.5 else "error",
+            ("autocollimator.focal_length_mm", "autocollimator.aperture_mm")))
         face_fill = min(a.aperture_mm, cube.edge_mm)
         out.append(GeometryLine("beam vs face", f"Ø {a.aperture_mm:g} mm beam, {cube.edge_mm:g} mm face: "
                                 f"{face_fill:g} mm of it returns; plane mirror Ø {pm.diameter_mm:g} mm"))
