@@ -11,12 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
+from random_rigs import build, rig_dicts
 
 from rigsim.procedures.cube_mirror import campaign as cm
 from rigsim.rig.geometry import check_geometry
 from rigsim.truth.cube_mirror.realization import realization_from_rig
-
-from random_rigs import build, rig_dicts
 
 SEEN: set[str] = set()
 def draw(n: int):
