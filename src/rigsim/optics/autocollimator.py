@@ -67,6 +67,14 @@ __all__ = [
     "retilt",
     "cone_directions",
     "a_frame_basis",
+    "SpotExtent",
+    "spot_extent_px",
+    "centroid_roi_px",
+    "render_window_px",
+    "diffraction_half_px",
+    "peak_over_noise",
+    "MIN_ROI_PX",
+    "MIN_RENDER_WINDOW_PX",
 ]
 
 SCHOTT_N_BK7 = ((1.03961212, 0.00600069867), (0.231792344, 0.0200179144), (1.01046945, 103.560653))
@@ -297,6 +305,142 @@ class SpotTruth:
         return d
 
 
+# ------------------------------------------------------------------------------ spot size
+MIN_ROI_PX = 15
+"""Smallest centroid window (px): a few pixels of background around the smallest spot."""
+
+MIN_RENDER_WINDOW_PX = 32
+"""Smallest render window (px). Mitsuba's ``spp`` counts samples per film pixel, so the light paths
+of a frame are spp × window²: 1024 spp over 32² px is the 1.05 M paths (0.0046 px rms centroid
+noise) the rendering budget is measured at (docs/render_autocollimator.md). A smaller window would
+trace fewer paths and give noisier frames at the same spp."""
+
+_AIRY_FIRST_ZERO = 1.2196698912665045  # first zero of 2·J1(πx)/(πx), in units of λf/D
+
+
+@dataclass(frozen=True)
+class SpotExtent:
+    """How far the return spot reaches on the detector, from :func:`spot_extent_px` (pixels).
+
+    ``aperture`` is the return beam's limiting aperture: ``"square"`` (a cube face smaller than the
+    beam: a sinc² cross) or ``"circle"`` (the stop, or a disk mirror: an Airy pattern);
+    ``aperture_mm`` its side or diameter. ``first_zero_px`` is the first zero of the cross, λf/a,
+    or the first dark ring, 1.22·λf/D. ``diffraction_px`` is the distance from the centre out to
+    which the pattern of a point stays above ``k_sigma`` × the background noise when its peak is
+    ``peak_over_noise`` × that noise (never less than the first zero). ``geometric_px`` is the full
+    width of the ray-optics image of the reticle (the reticle's image and the objective's
+    aberrations). ``radius_px`` = ``geometric_px``/2 + ``diffraction_px``: the pattern spread over
+    the geometric image.
+    """
+
+    aperture: str
+    aperture_mm: float
+    first_zero_px: float
+    diffraction_px: float
+    geometric_px: float
+    k_sigma: float
+    peak_over_noise: float
+
+    @property
+    def radius_px(self) -> float:
+        return 0.5 * self.geometric_px + self.diffraction_px
+
+    def as_dict(self) -> dict:
+        return {"aperture": self.aperture, "aperture_mm": self.aperture_mm, "first_zero_px": self.first_zero_px,
+                "diffraction_px": self.diffraction_px, "geometric_px": self.geometric_px, "radius_px": self.radius_px,
+                "k_sigma": self.k_sigma, "peak_over_noise": self.peak_over_noise}
+
+
+def spot_extent_px(*, wavelength_nm: float, focal_length_mm: float, pixel_pitch_um: float, beam_diameter_mm: float,
+                   mirror_shape: str, mirror_size_mm: float, peak_over_noise: float, k_sigma: float = 3.0,
+                   geometric_px: float = 0.0) -> SpotExtent:
+    """The return spot's extent in pixels, from the instrument's physics (pure, closed form).
+
+    The limiting aperture is the smaller of the beam (a circle of ``beam_diameter_mm``) and the
+    mirror (``mirror_shape`` ``"square"``: a cube face of side ``mirror_size_mm``; ``"disk"``: a
+    mirror of that diameter). With s = λ·f/(a·pitch) px:
+
+    * square face, side a: I/I0 = sinc²(x/s)·sinc²(y/s); first zero at s; along the cross's arms
+      the lobes follow the envelope (s/(π·x))², so the arms stay above k·σ out to
+      x = (s/π)·√(P/k), P = ``peak_over_noise`` (peak over the background noise σ);
+    * circle, diameter D: I/I0 = (2·J1(v)/v)², v = π·r/s; first dark ring at 1.22·s; the rings
+      follow the envelope 8/(π·v³), above k·σ out to r = (s/π)·(8·P/(π·k))^(1/3).
+
+    A face whose side is at least the beam's diameter is limited by the beam (circle). The square
+    bound is conservative for a face between D/√2 and D (its pupil is the square clipped by the
+    circle, whose straight edges are shorter). ``geometric_px`` (the ray-optics image's width,
+    e.g. from :meth:`AutocollimatorOptics.spot_extent`) is carried into ``radius_px``.
+    """
+    vals = (wavelength_nm, focal_length_mm, pixel_pitch_um, beam_diameter_mm, mirror_size_mm, peak_over_noise, k_sigma)
+    if not all(math.isfinite(float(v)) and v > 0 for v in vals):
+        raise ValueError("wavelength, focal length, pitch, beam and mirror sizes, peak_over_noise and k_sigma "
+                         f"must be finite and > 0, got {vals}")
+    if mirror_shape not in ("square", "disk"):
+        raise ValueError(f"mirror_shape = {mirror_shape!r}: must be 'square' or 'disk'")
+    if not (math.isfinite(geometric_px) and geometric_px >= 0):
+        raise ValueError(f"geometric_px = {geometric_px!r}: must be finite and >= 0")
+    if mirror_shape == "square" and mirror_size_mm < beam_diameter_mm:
+        aperture, size = "square", float(mirror_size_mm)
+    else:
+        aperture, size = "circle", float(min(mirror_size_mm, beam_diameter_mm))
+    s = wavelength_nm * 1e-6 * focal_length_mm / (size * pixel_pitch_um * 1e-3)
+    ratio = peak_over_noise / k_sigma  # the peak in units of the threshold
+    if aperture == "square":
+        zero = s
+        reach = s / math.pi * math.sqrt(ratio)
+    else:
+        zero = _AIRY_FIRST_ZERO * s
+        reach = s / math.pi * (8.0 * ratio / math.pi) ** (1.0 / 3.0)
+    return SpotExtent(aperture, size, float(zero), float(max(zero, reach)), float(geometric_px), float(k_sigma),
+                      float(peak_over_noise))
+
+
+def centroid_roi_px(extent: SpotExtent, margin_px: float = 0.5, minimum: int = MIN_ROI_PX) -> int:
+    """Odd side of the centroid window. The window is centred on the brightest pixel, which may lie
+    anywhere on the geometric image (on a cube face the singlet's image is a ring with its peak on
+    the rim: 3.9 px off the centre for the default rig), and it must hold every pixel above k·σ,
+    ``extent.radius_px`` from the centre: half side = geometric/2 + radius + ``margin_px`` (pixels
+    are not points) = geometric + diffraction + margin; side 2·⌈…⌉ + 1, at least ``minimum``."""
+    side = 2 * math.ceil(0.5 * extent.geometric_px + extent.radius_px + margin_px) + 1
+    return int(max(side, int(minimum) | 1))
+
+
+def render_window_px(geometric_px: float, margin_px: float = 3.0, growth: float = 0.05,
+                     minimum: int = MIN_RENDER_WINDOW_PX) -> int:
+    """Even side of the render window (Mitsuba's ray-optics image, before the diffraction blur),
+    centred on the spot's rounded mean: half of it holds half the geometric spot grown by
+    ``growth`` (the spot's width changes by < 2 % across the measuring range, and it is up to
+    0.65 px lopsided about its mean) plus ``margin_px`` (rounding of the centre and the 1 px margin
+    of the ``spot_exceeds_window`` flag): 2·⌈(1 + growth)·geometric/2 + margin⌉, at least
+    ``minimum`` (:data:`MIN_RENDER_WINDOW_PX`)."""
+    if not (math.isfinite(geometric_px) and geometric_px >= 0):
+        raise ValueError(f"geometric_px = {geometric_px!r}: must be finite and >= 0")
+    side = 2 * math.ceil(0.5 * (1.0 + growth) * geometric_px + margin_px)
+    return int(max(side, int(minimum) + int(minimum) % 2))
+
+
+def diffraction_half_px(extent: SpotExtent, margin_px: float = 0.5) -> int:
+    """Half side of the diffraction kernel the render window is convolved with. Give it an extent
+    for k = 1: the pattern, spread over the geometric image, is then below the background noise
+    beyond ``extent.radius_px``, so the light the kernel leaves out is ≲ 1σ per pixel (measured on
+    the exact model: 1.0σ for the default rig's cube face, 0.4σ for its plane mirror). Half side
+    ⌈radius + ``margin_px``⌉ (pixel integration)."""
+    return math.ceil(extent.radius_px + margin_px)
+
+
+def peak_over_noise(detector, peak_fraction: float = 0.5) -> float:
+    """Brightest pixel over the background noise of a frame whose peak is ``peak_fraction`` of the
+    full well (the renderer's brightness setting): ``detector`` has the fields of
+    :class:`rigsim.detector.DetectorConfig`. Noise of a dark pixel in electrons: read noise, dark
+    shot noise, DSNU and the ADC's quantisation √(1/12) DN."""
+    if not (0.0 < peak_fraction <= 1.0):
+        raise ValueError(f"peak_fraction = {peak_fraction!r}: must be in (0, 1]")
+    k = float(detector.gain_dn_per_e)
+    sigma_e = math.sqrt(detector.read_noise_e ** 2 + detector.dark_current_e_per_s * detector.exposure_s
+                        + detector.dsnu_e ** 2 + 1.0 / (12.0 * k * k))
+    return float(peak_fraction * detector.full_well_e / sigma_e)
+
+
 class AutocollimatorOptics:
     """Exact model of one autocollimator (numpy, float64). See the module docstring.
 
@@ -308,7 +452,7 @@ class AutocollimatorOptics:
     the reticle's cone reaches the stop plane at ``overfill`` × the stop radius.
     """
 
-    def __init__(self, ac, *, wavelength_nm: float = 587.56, center_thickness_mm: float = 5.0,
+    def __init__(self, ac, *, wavelength_nm: float = 587.56, center_thickness_mm: float | None = None,
                  focus: str = "collimated", source_offset_mm: float = 0.005, overfill: float = 1.01):
         if focus not in ("collimated", "paraxial"):
             raise ValueError(f"focus = {focus!r}: must be 'collimated' or 'paraxial'")
@@ -317,6 +461,9 @@ class AutocollimatorOptics:
         if not (1.0 <= overfill <= 1.2):
             raise ValueError(f"overfill = {overfill!r}: must be in [1, 1.2]")
         self.ac = ac
+        if center_thickness_mm is None:  # 5 mm, or thick enough for the sag of a fast lens (1 mm edge left)
+            probe = PlanoConvexObjective(ac.focal_length_mm, ac.aperture_mm, 1e6, wavelength_nm)
+            center_thickness_mm = max(5.0, math.ceil(probe.sag(probe.lens_radius_mm) + 1.0))
         self.objective = PlanoConvexObjective(ac.focal_length_mm, ac.aperture_mm, center_thickness_mm, wavelength_nm)
         self.focus = focus
         self.source_offset_mm = float(source_offset_mm)
@@ -577,6 +724,40 @@ class AutocollimatorOptics:
         np.add.at(img, (j[keep], i[keep]), bundle.weight[keep])
         return img
 
+    # -- spot size ---------------------------------------------------------------------------
+    def centred_mirror(self, shape: str, size_mm: float) -> MirrorTarget:
+        """A mirror of outline ``shape`` (``"square"``: a cube face of side ``size_mm``; ``"disk"``:
+        diameter ``size_mm``) at ``distance_mm`` from the convex vertex, centred on the axis and
+        square to it (at its null): the nominal target of the instrument."""
+        if shape not in ("square", "disk"):
+            raise ValueError(f"shape = {shape!r}: must be 'square' or 'disk'")
+        if not (size_mm > 0 and math.isfinite(size_mm)):
+            raise ValueError(f"size_mm = {size_mm!r}: must be finite and > 0")
+        m = flat_mirror(self.distance_mm + self.objective.z_vertex, (0.0, 0.0), 0.5 * float(size_mm))
+        if shape == "square":
+            m = replace(m, shape="square", e1=np.array([1.0, 0.0, 0.0]), e2=np.array([0.0, -1.0, 0.0]), name="face")
+        return m
+
+    def geometric_spot_px(self, mirror: MirrorTarget, n_rays: int = 20_000) -> float:
+        """Width (px, the larger of u and v) of the ray-optics image of the reticle off ``mirror`` as
+        it is placed and tilted: the exact trace of ``n_rays`` rays. The reticle is a point, so this
+        is the objective's aberration and focus blur over the part of the pupil the mirror returns
+        (8.94 px on the default rig's 25 mm face, 14.3 px on its Ø50 mm plane mirror). 0 when no
+        light comes back."""
+        sp = self.spot(mirror, n_rays=n_rays)
+        return float(np.max(np.ptp(sp.extent_uv, axis=0))) if sp.valid and sp.extent_uv is not None else 0.0
+
+    def spot_extent(self, mirror: MirrorTarget, *, peak_over_noise: float, k_sigma: float = 3.0,
+                    n_rays: int = 20_000) -> SpotExtent:
+        """:func:`spot_extent_px` for ``mirror`` (as it is placed and tilted) seen by this
+        instrument: the geometric width from :meth:`geometric_spot_px`, the diffraction of the
+        smaller of the stop and the mirror's outline."""
+        geo = self.geometric_spot_px(mirror, n_rays)
+        return spot_extent_px(wavelength_nm=self.objective.wavelength_nm, focal_length_mm=self.efl_mm,
+                              pixel_pitch_um=self.pitch_mm * 1e3, beam_diameter_mm=self.objective.clear_aperture_mm,
+                              mirror_shape=mirror.shape, mirror_size_mm=2.0 * mirror.half_size_mm,
+                              peak_over_noise=peak_over_noise, k_sigma=k_sigma, geometric_px=geo)
+
     @staticmethod
     def window_for(center_uv, window_px: int) -> tuple[int, int, int, int]:
         """Window (u0, v0, w, h) of ``window_px`` square centred on the rounded ``center_uv``."""
@@ -604,12 +785,29 @@ class AutocollimatorOptics:
             & (np.hypot(mp[:, 0], mp[:, 1]) <= ob.stop_radius_mm)
         return lit.reshape(X.shape), c
 
-    def diffraction_kernel(self, mirror: MirrorTarget, half_px: int = 32, samples_per_px: int = 2,
-                           n_fft: int = 512) -> np.ndarray:
+    def kernel_sampling(self, half_px: int) -> tuple[int, int]:
+        """(samples_per_px, n_fft) of :meth:`diffraction_kernel`: the pupil grid (stop + 0.5 mm)
+        fills at most half the FFT (|FT|² without aliasing), so the PSF is sampled at
+        ``samples_per_px`` ≥ 2·(pupil width)·pitch/(λ·f) per pixel, at least 2; the FFT spans
+        at least 4·half_px + 2 px (the periodic copies of the PSF stay 3 kernel radii away), in a
+        power of two of at least 512 samples (the pupil then spans ≥ 128 of them)."""
+        lam = self.objective.wavelength_nm * 1e-6
+        width = 2.0 * (self.objective.stop_radius_mm + 0.5)
+        s = max(2, math.ceil(2.0 * width * self.pitch_mm / (lam * self.efl_mm)))
+        need = s * (4 * int(half_px) + 2)
+        return s, max(512, 1 << (need - 1).bit_length())
+
+    def diffraction_kernel(self, mirror: MirrorTarget, half_px: int = 32, samples_per_px: int | None = None,
+                           n_fft: int | None = None) -> np.ndarray:
         """Pixel-integrated Fraunhofer PSF of the return pupil (uniform amplitude, no aberration),
         ``(2·half_px + 1)²`` kernel normalised to 1, ``K[j, i]`` = offset (i − half_px,
         j − half_px) px. Centrosymmetric (|FT|² of a real pupil), so convolving with it keeps
-        an image's centroid. Scale: λ at ``wavelength_nm``, angles → detector with the EFL."""
+        an image's centroid. Scale: λ at ``wavelength_nm``, angles → detector with the EFL.
+        ``samples_per_px`` and ``n_fft`` default to :meth:`kernel_sampling` (2 and 512 for the
+        default rig)."""
+        s0, n0 = self.kernel_sampling(half_px)
+        samples_per_px = s0 if samples_per_px is None else int(samples_per_px)
+        n_fft = n0 if n_fft is None else int(n_fft)
         lam = self.objective.wavelength_nm * 1e-6
         dp = lam * self.efl_mm * samples_per_px / (n_fft * self.pitch_mm)
         mask, c = self.return_pupil(mirror, dp)
