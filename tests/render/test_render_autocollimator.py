@@ -60,9 +60,20 @@ def _check(r, pose, seed, allowed=()):
     assert w.rendered and not any(v for k, v in w.flags.items() if k not in allowed), w.flags
     # like with like: Mitsuba's ray-optics window against the pixel-binned exact trace
     err = w.centroid_geometric() - tr.pixel_centroid_uv
-    # the diffraction blur (a centrosymmetric kernel) moves neither the centroid nor the flux
-    np.testing.assert_allclose(w.centroid(), w.centroid_geometric(), atol=1e-6)
-    assert w.image.sum() == pytest.approx(w.image_geometric.sum(), rel=1e-9)
+    # the diffraction blur (a centrosymmetric kernel) moves neither the centroid nor the flux ...
+    u0, v0 = w.origin_uv
+    h, wd = w.image.shape
+    if u0 >= 0 and v0 >= 0 and u0 + wd <= r.optics.width and v0 + h <= r.optics.height:
+        np.testing.assert_allclose(w.centroid(), w.centroid_geometric(), atol=1e-6)
+        assert w.image.sum() == pytest.approx(w.image_geometric.sum(), rel=1e-9)
+    else:
+        # ... unless its faint tail crosses the detector's edge, where the light is lost (at 7.8′
+        # along v the spot is 42 px from the edge; its kernel reaches 16 + 39 px: 1.6e-5 of the
+        # flux is lost, the centroid moves 0.0007 px): the move is at most the lost fraction times
+        # the lever, the window's size
+        lost = 1.0 - w.image.sum() / w.image_geometric.sum()
+        assert 0.0 <= lost < 1e-4, lost
+        assert np.max(np.abs(w.centroid() - w.centroid_geometric())) <= lost * max(h, wd) + 1e-6
     return w, err
 
 

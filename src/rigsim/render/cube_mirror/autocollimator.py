@@ -17,7 +17,8 @@ Scene (millimetres, world frame = the autocollimator frame A of
 * ``detector``   -- a Lambertian (reflectance 1) rectangle covering exactly the detector area,
   in the detector plane; what lands on it is the image;
 * ``sensor``     -- a built-in ``perspective`` camera ``CAMERA_STANDOFF_MM`` in front of the
-  detector plane, looking at it square-on, whose field is exactly ``window_px`` detector pixels.
+  detector plane, looking at it square-on, whose field is exactly ``window_px`` detector pixels
+  (by default derived from the geometric spot: :func:`~rigsim.optics.autocollimator.render_window_px`).
   The render window is moved by moving this camera (``sensor.to_world``), never the film crop.
   The camera sees the detector from the lens side, so the film is mirrored in u: window pixel
   (i, j) is ``film[j, window_px - 1 - i]``;
@@ -48,7 +49,14 @@ import trimesh
 
 from rigsim.errors import GeometryWarning
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.optics.autocollimator import AutocollimatorOptics, MirrorTarget, SpotTruth
+from rigsim.optics.autocollimator import (
+    AutocollimatorOptics,
+    MirrorTarget,
+    SpotTruth,
+    peak_over_noise,
+    render_window_px,
+)
+from rigsim.optics.autocollimator import diffraction_half_px as _kernel_half_px
 from rigsim.optics.meshes import lens_mesh, stop_mesh
 from rigsim.render.backend import ensure_variant
 from rigsim.render.frame import Frame, digitise, write_frame
@@ -65,7 +73,6 @@ from rigsim.truth.cube_mirror.realization import Realization, realization_from_r
 
 __all__ = [
     "CAMERA_STANDOFF_MM",
-    "DEFAULT_WINDOW_PX",
     "DEFAULT_SOURCE_PHOTONS",
     "AutocollimatorScene",
     "AutocollimatorWindow",
@@ -79,7 +86,6 @@ __all__ = [
 ]
 
 CAMERA_STANDOFF_MM = 50.0
-DEFAULT_WINDOW_PX = 32
 DEFAULT_SOURCE_PHOTONS = 1.8e6
 """Photons the reticle emits per exposure (scene dicts). With the seed-001 rig (50 mm beam on a
 25 mm cube face, the rig's default detector) the brightest pixel of the nulled *geometric* spot
@@ -126,7 +132,7 @@ def _fov_deg(optics: AutocollimatorOptics, window_px: int) -> float:
 
 def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad: dict, target: str = "face",
                          face: str | None = None, *, spp: int, mesh_dir=None,
-                         window_px: int = DEFAULT_WINDOW_PX, window_origin=None,
+                         window_px: int | None = None, window_origin=None,
                          optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
                          source_photons: float = DEFAULT_SOURCE_PHOTONS, sampler: str = "stratified",
                          lens_ghosts: bool = False, max_depth: int | None = None,
@@ -134,6 +140,9 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
                          plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
                          world_origin: str = "objective") -> AutocollimatorScene:
     """Build the scene (see the module docstring) and return it with its interpretation.
+
+    ``window_px`` defaults to :func:`~rigsim.optics.autocollimator.render_window_px` of the
+    target's geometric spot at ``pose_rad`` (32 px for the default rig).
 
     ``world_origin="mirror"`` shifts the whole scene so that the target's centre is the world
     origin (the objective then sits ~500 mm away). It exists to measure why the default is the
@@ -144,7 +153,7 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     if rig.autocollimator is None:
         raise ValueError("this rig has no autocollimator")
     _check_sampler(spp, sampler)
-    if int(window_px) != window_px or not (8 <= window_px <= 4096):
+    if window_px is not None and (int(window_px) != window_px or not (8 <= window_px <= 4096)):
         raise ValueError(f"window_px = {window_px!r}: must be an integer in [8, 4096]")
     if not (source_photons > 0 and math.isfinite(source_photons)):
         raise ValueError(f"source_photons = {source_photons!r}: must be a finite number > 0")
@@ -157,6 +166,8 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     obj = optics.objective
     T = mi.ScalarTransform4f
     mirror = mirror_target(rig, real, layout, pose_rad, mirror_reflectance)
+    if window_px is None:
+        window_px = render_window_px(optics.geometric_spot_px(mirror))
     if window_origin is None:
         window = optics.window_for(optics.paraxial_uv(mirror), window_px)
     else:
@@ -297,16 +308,24 @@ class AutocollimatorRenderer:
     vertex positions and the camera pose through ``mi.traverse`` (no rebuild, no recompile) and
     renders a fixed ``window_px`` window centred on the exact spot. Exact truth (numpy) for every
     frame comes from :class:`~rigsim.optics.autocollimator.AutocollimatorOptics`.
+
+    ``window_px`` and ``diffraction_half_px`` default to values derived from the target's spot at
+    the reference pose (``kernel_extent``: :meth:`AutocollimatorOptics.spot_extent` with k = 1 at
+    the brightness ``peak_fraction``): the window holds the ray-optics image
+    (:func:`~rigsim.optics.autocollimator.render_window_px`, at least 32 px), the kernel the
+    diffraction pattern down to the background noise
+    (:func:`~rigsim.optics.autocollimator.diffraction_half_px`). Default rig: 32 px and ±39 px on
+    a cube face, 32 px and ±15 px on the plane mirror.
     """
 
     def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, target: str = "face", face: str | None = None, *,
-                 spp: int = 1024, window_px: int = DEFAULT_WINDOW_PX, source_photons: float | None = None,
+                 spp: int = 1024, window_px: int | None = None, source_photons: float | None = None,
                  peak_fraction: float = 0.5, sampler: str = "stratified", truth_rays: int = 400_000, mesh_dir=None,
                  lens_ghosts: bool = False,
                  optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
                  mirror_reflectance: float = 1.0, plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
                  max_depth: int | None = None, world_origin: str = "objective", diffraction: bool = True,
-                 diffraction_half_px: int = 32):
+                 diffraction_half_px: int | None = None):
         import mitsuba as _mi  # noqa: F401  (ensure_variant happens in autocollimator_scene)
 
         self.rig = rig
@@ -320,20 +339,27 @@ class AutocollimatorRenderer:
         self.truth_rays = int(truth_rays)
         _check_sampler(spp, sampler)
         self.spp = int(spp)
-        self.window_px = int(window_px)
         self.sampler = sampler
         self.mirror_reflectance = float(mirror_reflectance)
-
+        # the window and the diffraction kernel from the spot at the reference pose (the null):
+        # docs/autocollimation.md, "Spot size"
+        m_ref = mirror_target(rig, self.real, self.layout, self.layout.reference_pose_rad, self.mirror_reflectance)
+        self.kernel_extent = self.optics.spot_extent(m_ref, k_sigma=1.0, peak_over_noise=peak_over_noise(
+            rig.autocollimator.detector, peak_fraction))
+        self.window_px = int(render_window_px(self.kernel_extent.geometric_px) if window_px is None else window_px)
         self.lens_ghosts = bool(lens_ghosts)
         self.world_origin = world_origin
         self.diffraction = bool(diffraction)
-        self.diffraction_half_px = int(diffraction_half_px)
+        self.diffraction_half_px = int(_kernel_half_px(self.kernel_extent) if diffraction_half_px is None
+                                       else diffraction_half_px)
+        if self.diffraction_half_px < 1:
+            raise ValueError(f"diffraction_half_px = {diffraction_half_px!r}: must be >= 1")
         if source_photons is None:
             source_photons = self.auto_source_photons(peak_fraction)
         self.source_photons = float(source_photons)
         self.variant = ensure_variant()
         sc = autocollimator_scene(rig, self.real, self.layout.reference_pose_rad, self.layout.target, self.layout.face,
-                                  spp=spp, mesh_dir=mesh_dir, window_px=window_px, optics=self.optics,
+                                  spp=spp, mesh_dir=mesh_dir, window_px=self.window_px, optics=self.optics,
                                   layout=self.layout, source_photons=self.source_photons, sampler=sampler,
                                   lens_ghosts=lens_ghosts, max_depth=max_depth, mirror_reflectance=mirror_reflectance,
                                   world_origin=world_origin)
