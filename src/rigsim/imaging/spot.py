@@ -11,12 +11,6 @@ import numpy as np
 
 from rigsim.imaging import Background, Flag, centroid_tcom, detect, estimate_background, extract_rois
 
-ROI_PX = 49
-"""Side of the centroid window. The diffraction cross of a square face stays above 3σ of the
-background out to ~20 px from the centre; a 31 px window cuts it asymmetrically (0.05 px bias
-with a plain centre of mass, measured), 49 px holds it."""
-
-
 THRESHOLD_SIGMA = 3.0
 """Thresholded centre of mass: pixels above background + 3σ count (their excess over it)."""
 
@@ -40,7 +34,7 @@ class SpotMeasurement:
         return self.problem is None
 
 
-def measure_spot(dn: np.ndarray, detector, *, roi_px: int = ROI_PX, threshold_sigma: float = THRESHOLD_SIGMA,
+def measure_spot(dn: np.ndarray, detector, *, roi_px: int, threshold_sigma: float = THRESHOLD_SIGMA,
                  detect_sigma: float = 5.0) -> SpotMeasurement:
     """Find and centroid the autocollimator's return spot on a full DN frame.
 
@@ -49,10 +43,17 @@ def measure_spot(dn: np.ndarray, detector, *, roi_px: int = ROI_PX, threshold_si
     ``detect_sigma`` above it; the brightest peak is the spot (the diffraction cross of a square
     face or the Airy rings may be detected as separate faint sources: they are ignored). Centroid:
     thresholded centre of mass (``centroid_tcom``, background + ``threshold_sigma``·rms,
-    subtract mode) over a ``roi_px`` window on the brightest pixel. The centroid is refused
+    subtract mode) over a ``roi_px`` window on the brightest pixel. ``roi_px`` (odd) must hold
+    every pixel of the spot above the threshold, diffraction pattern included, or the window cuts
+    it asymmetrically and biases the centroid: it depends on the instrument, so it has no default
+    (an autocollimator's comes from its geometry,
+    :func:`rigsim.optics.autocollimator.centroid_roi_px`). The centroid is refused
     (``problem`` set) if nothing is detected, if any pixel of the window is saturated (ADC
     maximum), or if the window leaves the detector (the spot is at the edge of the measuring
     range)."""
+    if int(roi_px) != roi_px or roi_px < 3 or int(roi_px) % 2 == 0:
+        raise ValueError(f"roi_px = {roi_px!r}: must be an odd integer >= 3 (a window centred on a pixel)")
+    roi_px = int(roi_px)
     a = np.asarray(dn)
     if a.ndim != 2:
         raise ValueError(f"dn must be a 2-D frame, got shape {a.shape}")

@@ -45,8 +45,8 @@ import numpy as np
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import reading_model
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
-from rigsim.imaging.spot import ROI_PX, SpotMeasurement, measure_spot
-from rigsim.procedures.cube_mirror.null_files import read_autocollimator
+from rigsim.imaging.spot import SpotMeasurement, measure_spot
+from rigsim.procedures.cube_mirror.null_files import autocollimator_roi_px, read_autocollimator
 from rigsim.optics.autocollimator import a_frame_basis, exact_reading_rad, normal_from_reading
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
 from rigsim.rig.cube_mirror import CubeMirrorRig
@@ -71,7 +71,8 @@ def _derived_seed(seed: int, k: int) -> int:
 
 def _range_half_rad(rig: CubeMirrorRig, margin_px: float) -> np.ndarray:
     """Half measuring range (θx, θy) keeping the spot centre ``margin_px`` inside the detector
-    (paraxial: offset = f·tan(2θ)), as the frame pipeline needs it."""
+    (paraxial: offset = f·tan(2θ)), as the frame pipeline needs it (half its centroid window,
+    :func:`autocollimator_roi_px`)."""
     ac = rig.autocollimator
     pitch = ac.pixel_pitch_um * 1e-3
     W, H = ac.resolution_px
@@ -166,7 +167,8 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
     pose = reference_pose_rad(rig, real)
     pm = real.turntable.R_rot_from_mount(pose) @ real.plane_mirror_normal_mount
     pm /= np.linalg.norm(pm)
-    half = _range_half_rad(rig, ROI_PX / 2.0)
+    roi_px = autocollimator_roi_px(rig)
+    half = _range_half_rad(rig, roi_px / 2.0)
     axes, meas, exact, secs, builds, info = [], [], [], [], [], []
     converged = False
     message = ""
@@ -194,7 +196,7 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
                 with warnings.catch_warnings(record=True) as wl:
                     warnings.simplefilter("always")
                     frame = r.render_frame(pose, seed=fi["seed"], noiseless=noiseless)
-                sm = measure_spot(frame.dn, ac.detector)
+                sm = measure_spot(frame.dn, ac.detector, roi_px=roi_px)
                 fi.update(_frame_info(frame, sm, wl))
                 if not sm.ok:
                     raise SearchError(
@@ -277,7 +279,8 @@ class FaceReadingMeasurer:
         self.calls = 0
         self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
         self.last_reading: dict = {}
-        self.half_range_rad = _range_half_rad(rig, ROI_PX / 2.0)
+        self.roi_px = autocollimator_roi_px(rig)
+        self.half_range_rad = _range_half_rad(rig, self.roi_px / 2.0)
         self.renderer = None
         self.build_seconds = 0.0
         if self.rendered:
@@ -327,9 +330,10 @@ class FaceReadingMeasurer:
         if not sm.ok:
             raise self._fail(sm.problem, pose, ex, ", ".join(info["truth_flags"]))
         if frame.sidecar["flags"].get("spot_exceeds_window"):
-            # a limit of the simulator (the 32 px render window), not of the instrument
-            raise self._fail("the spot is larger than the render window (simulator limit)", pose, ex,
-                             ", ".join(info["truth_flags"]))
+            # a limit of the simulator (its render window, derived from the geometric spot at the
+            # reference pose), not of the instrument
+            raise self._fail(f"the spot is larger than the {self.renderer.window_px} px render window (simulator limit)",
+                             pose, ex, ", ".join(info["truth_flags"]))
         return m, ex * ARCSEC_PER_RAD, info
 
 
