@@ -98,18 +98,25 @@ def _render_every_kind(rig) -> dict:
         from rigsim.procedures.cube_mirror.null_files import read_autocollimator
         from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
 
-        r = AutocollimatorRenderer(rig, real, "face", rig.procedure.faces[0], spp=16)
+        r = AutocollimatorRenderer(rig, real, "face", rig.procedure.faces[0], spp=16, truth_rays=20_000)
         p = dict(r.layout.reference_pose_rad)
         first = next(iter(p))
         p[first] += math.radians(20.0 / 3600.0)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             af = r.render_frame(p, seed=1)
-        m, _s, sm = read_autocollimator(rig, af.dn)
-        assert sm.ok, sm.problem
-        ins = np.asarray(af.sidecar["truth"]["reading_arcsec"])
-        out["autocollimator"] = float(np.max(np.abs(m - ins)))
-        assert out["autocollimator"] < 0.5, (m, ins)
+        m, _s, sm = read_autocollimator(rig, af.dn, r.optics)  # the same instrument: its calibration is reused
+        tr, flags = af.sidecar["truth"], af.sidecar["flags"]
+        if any(flags.get(k) for k in ("return_vignetted", "beam_partly_misses_face", "beam_misses_face")):
+            # the truth warns that the beam is cut (a fast or small objective, a small face): the spot is not
+            # the instrument's calibrated one, only "no traceback" is asked of the stage
+            out["autocollimator"] = float("nan")
+        else:
+            assert sm.ok, sm.problem
+            # Monte-Carlo noise of the centroid grows with the spot (aberrated fast singlets: up to 30 px rms)
+            tol = 0.05 + 0.005 * tr["spot_rms_radius_px"]
+            out["autocollimator"] = float(np.hypot(*(sm.uv - np.asarray(tr["spot_pixel_centroid_uv"]))))
+            assert out["autocollimator"] < tol, (sm.uv, tr["spot_pixel_centroid_uv"], tol)
     assert out["sun-sensor"] < 0.5, out
     return out
 
@@ -120,7 +127,8 @@ def _render_every_kind(rig) -> dict:
 def test_random_rig_renders_a_frame_of_every_kind(d):
     """Sun sensor (4 spp), a chessboard (1 spp), and the aiming camera's pair (divergent beam) or the
     autocollimator's frame: no traceback, and each file stage finds the rendered truth (centroid within
-    0.5 px; the concentricity offset within 0.5 px plus the hole's pull; the reading within 0.5″)."""
+    0.5 px; the concentricity offset within 0.5 px plus the hole's pull; the autocollimator's centroid within
+    0.05 px + 0.5 % of the spot's rms radius of the exact one, unless the truth flags a cut beam)."""
     _render_every_kind(build(d))
 
 

@@ -373,6 +373,15 @@ def cmd_render_sun_sensor(args) -> int:
     if t.get("valid"):
         print(f"true spot: centre {np.round(t['center_uv'], 4).tolist()} px, pixel-binned centroid "
               f"{np.round(t['pixel_centroid_uv'], 4).tolist()} px")
+        from rigsim.imaging.frame_spots import measure_frame, single_spot
+        from rigsim.procedures.centroid import detector_settings
+
+        det = detector_settings(rig, "sun-sensor")
+        sp = measure_frame(fr.dn, det.noise, saturation_dn=det.saturation_dn)
+        k = single_spot(sp)
+        if k is not None:
+            e = np.hypot(sp.u[k] - t["center_uv"][0], sp.v[k] - t["center_uv"][1])
+            print(f"measured (rigsim centroid, scurve): [{sp.u[k]:.4f}, {sp.v[k]:.4f}] px, {e:.4f} px from the true centre")
     if flags:
         print(f"flags: {flags}")
     if args.preview:
