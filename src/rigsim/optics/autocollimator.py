@@ -789,13 +789,14 @@ class AutocollimatorOptics:
         """(samples_per_px, n_fft) of :meth:`diffraction_kernel`: the pupil grid (stop + 0.5 mm)
         fills at most half the FFT (|FT|² without aliasing), so the PSF is sampled at
         ``samples_per_px`` ≥ 2·(pupil width)·pitch/(λ·f) per pixel, at least 2; the FFT spans
-        at least 4·half_px + 2 px (the periodic copies of the PSF stay 3 kernel radii away), in a
-        power of two of at least 512 samples (the pupil then spans ≥ 128 of them)."""
+        at least 3·half_px + 1 px (the periodic copies of the PSF stay two kernel radii away, where
+        the pattern is ≤ 1/4 of its level at the kernel's edge), in at least 512 samples (the pupil
+        then spans ≥ 128 of them) and a length with factors 2, 3 and 5 only (fast FFT). The
+        default rig gets (2, 512)."""
         lam = self.objective.wavelength_nm * 1e-6
         width = 2.0 * (self.objective.stop_radius_mm + 0.5)
         s = max(2, math.ceil(2.0 * width * self.pitch_mm / (lam * self.efl_mm)))
-        need = s * (4 * int(half_px) + 2)
-        return s, max(512, 1 << (need - 1).bit_length())
+        return s, _fast_len(max(512, s * (3 * int(half_px) + 1)))
 
     def diffraction_kernel(self, mirror: MirrorTarget, half_px: int = 32, samples_per_px: int | None = None,
                            n_fft: int | None = None) -> np.ndarray:
@@ -886,6 +887,22 @@ class AutocollimatorOptics:
             if np.max(np.abs(step)) < tol_rad:
                 break
         return t
+
+
+def _fast_len(n: int) -> int:
+    """Smallest 2^a·3^b·5^c ≥ n."""
+    best = 1 << max(int(n) - 1, 0).bit_length()
+    p5 = 1
+    while p5 < best:
+        p35 = p5
+        while p35 < best:
+            m = p35
+            while m < n:
+                m *= 2
+            best = min(best, m)
+            p35 *= 3
+        p5 *= 5
+    return best
 
 
 def flat_mirror(z_mm: float, tilt_rad, radius_mm: float, centre_xy=(0.0, 0.0), reflectance: float = 1.0) -> MirrorTarget:
