@@ -180,7 +180,7 @@ def test_out_of_range_start_raises_naming_face_and_pose():
 def test_default_rig_search_starts_put_the_spot_on_the_detector():
     """procedure.search_start_deg: within the measuring range and ≤ 0.025° per axis of the null."""
     d = reference_axis_rot(RIG, REAL)
-    half = ac._range_half_rad(RIG, ac.autocollimator_roi_px(RIG) / 2) * ARCSEC_PER_RAD
+    half = ac._range_half_rad(RIG, ac.autocollimator_roi_px(RIG, "face") / 2) * ARCSEC_PER_RAD
     for i, face in enumerate(RIG.procedure.faces):
         start = pose_deg_to_rad(RIG.procedure.search_start[i])
         true = {k: v - REAL.encoder_bias_rad.get(k, 0.0) if k in "XY" else v for k, v in start.items()}
@@ -199,6 +199,7 @@ def _frame(u=640.3, v=500.7, flux=2e5, sigma=3.0, shape=(1024, 1280)):
 def test_measure_spot_centroid_and_refusals():
     det = RIG.autocollimator.detector
     roi = ac.autocollimator_roi_px(RIG)  # 59 px for this rig (docs/autocollimation.md, "Spot size")
+    assert roi == ac.autocollimator_roi_px(RIG, "face") == 59 and ac.autocollimator_roi_px(RIG, "plane_mirror") == 41
     img = np.floor(_frame() + 0.5).astype(np.uint16)
     sm = ac.measure_spot(img, det, roi_px=roi)
     assert sm.ok and np.max(np.abs(sm.uv - [640.3, 500.7])) < 0.02
@@ -351,7 +352,7 @@ def test_rendered_reading_error_statistics(optics):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 f = r.render_frame(pose0, seed=100 + k, noiseless=noiseless)
-            sm = ac.measure_spot(f.dn, RIG.autocollimator.detector, roi_px=ac.autocollimator_roi_px(RIG))
+            sm = ac.measure_spot(f.dn, RIG.autocollimator.detector, roi_px=ac.autocollimator_roi_px(RIG, "plane_mirror"))
             assert sm.ok
             e.append((optics.reading(sm.uv) - ac.exact_reading_rad(ac.a_frame_basis(axis), pm)) * ARCSEC_PER_RAD)
         rows.append(("plane mirror", noiseless, np.array(e)))

@@ -167,7 +167,7 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
     pose = reference_pose_rad(rig, real)
     pm = real.turntable.R_rot_from_mount(pose) @ real.plane_mirror_normal_mount
     pm /= np.linalg.norm(pm)
-    roi_px = autocollimator_roi_px(rig)
+    roi_px = autocollimator_roi_px(rig, "plane_mirror")
     half = _range_half_rad(rig, roi_px / 2.0)
     axes, meas, exact, secs, builds, info = [], [], [], [], [], []
     converged = False
@@ -279,7 +279,7 @@ class FaceReadingMeasurer:
         self.calls = 0
         self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
         self.last_reading: dict = {}
-        self.roi_px = autocollimator_roi_px(rig)
+        self.roi_px = autocollimator_roi_px(rig, "face")
         self.half_range_rad = _range_half_rad(rig, self.roi_px / 2.0)
         self.renderer = None
         self.build_seconds = 0.0
@@ -322,7 +322,7 @@ class FaceReadingMeasurer:
         with warnings.catch_warnings(record=True) as wl:
             warnings.simplefilter("always")
             frame = self.renderer.render_frame(pose, seed=seed, noiseless=self.noiseless)
-        m, _sig, sm = read_autocollimator(self.rig, frame.dn, self.optics)  # the `rigsim autocollimator read` stage
+        m, _sig, sm = read_autocollimator(self.rig, frame.dn, self.optics, "face")  # the `rigsim autocollimator read` stage
         info.update(_frame_info(frame, sm, wl))
         if self.on_frame is not None:
             self.on_frame("autocollimator", frame.dn, {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},

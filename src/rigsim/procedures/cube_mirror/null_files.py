@@ -88,25 +88,33 @@ def _roi_px(ac_json: str, targets: tuple) -> int:
                for _, (shape, size) in targets)
 
 
-def autocollimator_roi_px(rig: CubeMirrorRig) -> int:
-    """Side (odd, px) of the centroid window on this rig's autocollimator frames, derived from its
-    geometry (:func:`rigsim.optics.autocollimator.centroid_roi_px`, docs/autocollimation.md): the
-    largest over its targets (:func:`autocollimator_targets`, each centred at its null) of the
-    return spot — ray-optics image plus the diffraction pattern above ``THRESHOLD_SIGMA`` of the
-    background — at the renderer's brightness setting (peak at half the full well). 59 px for the
-    default rig. Cached per autocollimator and targets (the first call traces ~0.4 s)."""
+def autocollimator_roi_px(rig: CubeMirrorRig, target: str | None = None) -> int:
+    """Side (odd, px) of the centroid window on this rig's autocollimator frames of ``target``
+    (``"face"`` or ``"plane_mirror"``), derived from its geometry
+    (:func:`rigsim.optics.autocollimator.centroid_roi_px`, docs/autocollimation.md): the return
+    spot of the mirror centred at its null — ray-optics image plus the diffraction pattern above
+    ``THRESHOLD_SIGMA`` of the background — at the renderer's brightness setting (peak at half the
+    full well). ``target=None`` (a frame whose mirror is not known): the largest over the rig's
+    targets (:func:`autocollimator_targets`). Default rig: 59 px on a face (and for ``None``),
+    41 px on the plane mirror. Cached per autocollimator and target (the first call traces ~0.3 s)."""
     if rig.autocollimator is None:
         raise InputError(f"rig {rig.name!r} has no autocollimator (seed 001's method)")
-    return _roi_px(rig.autocollimator.model_dump_json(), tuple(sorted(autocollimator_targets(rig).items())))
+    targets = autocollimator_targets(rig)
+    if target is not None:
+        if target not in targets:
+            raise InputError(f"target = {target!r}: rig {rig.name!r} has {', '.join(targets)}")
+        targets = {target: targets[target]}
+    return _roi_px(rig.autocollimator.model_dump_json(), tuple(sorted(targets.items())))
 
 
-def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None) -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
+def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
+                        target: str | None = None) -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
     """The autocollimator's reading (θx, θy) in arcsec of one frame, its 1σ (the centroid's noise
     through the calibration), and the spot measurement (centroid window
-    :func:`autocollimator_roi_px`). The reading is NaN when the spot is not measurable
-    (``SpotMeasurement.problem`` says why)."""
+    :func:`autocollimator_roi_px` of ``target``, the frame's mirror if known). The reading is NaN
+    when the spot is not measurable (``SpotMeasurement.problem`` says why)."""
     optics = optics if optics is not None else autocollimator_optics(rig)
-    sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig))
+    sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig, target))
     if not sm.ok:
         return np.full(2, np.nan), np.full(2, np.nan), sm
     m = optics.reading(sm.uv) * ARCSEC_PER_RAD
