@@ -124,3 +124,14 @@ def test_writes_are_atomic_and_never_follow_a_planted_symlink(tmp_path):
     assert outside.read_text() == "keep" and json.loads((out / "r.json").read_text()) == {"a": 1}
     assert sorted(p.name for p in out.iterdir() if p.name.startswith(".r.json.") and p.is_file()
                   and not p.is_symlink()) == []
+
+
+def test_written_files_take_the_umask_like_any_other_file(tmp_path):
+    """Not mkstemp's private 0o600: a result shared with a group is readable by it."""
+    old = os.umask(0o027)
+    try:
+        write_json(tmp_path / "r.json", {"a": 1})
+        write_image(tmp_path / "f.png", np.zeros((4, 4), np.uint16))
+    finally:
+        os.umask(old)
+    assert {(p.name, p.stat().st_mode & 0o777) for p in tmp_path.iterdir()} == {("r.json", 0o640), ("f.png", 0o640)}

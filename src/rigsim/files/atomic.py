@@ -10,6 +10,14 @@ from pathlib import Path
 from rigsim.errors import InputError
 
 
+def _file_mode() -> int:
+    """The mode an ordinary ``open(path, "w")`` would give (0o666 less the umask): mkstemp's 0o600
+    would leave a user's outputs unreadable to their group."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; the folder is created if missing. Returns the path."""
     path = Path(path)
@@ -21,6 +29,7 @@ def atomic_write_bytes(path, data: bytes) -> Path:
         raise InputError(f"{path}: is a folder; expected a file name")
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, _file_mode())
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
