@@ -169,14 +169,16 @@ class ConcentricityRenderer:
         hole = self.hole_photons(hole_seed)
         sec["hole_render"] = time.perf_counter() - t0
         t1 = time.perf_counter()
-        if not spot or flags.get("spot_not_returned") or flags.get("beam_misses_face"):
+        rendered = bool(spot) and not (flags.get("spot_not_returned") or flags.get("beam_misses_face"))
+        if not rendered:
             spot = np.zeros_like(hole)
         else:
             spot = self.spot_photons(pose_rad, seed)
         sec["spot_render"] = time.perf_counter() - t1
         t2 = time.perf_counter()
+        render = {**self.settings(), "noiseless": bool(noiseless), "spot_rendered": rendered}
         frames = {name: digitise(photons, self.detector, seed=_derived_seed(seed, stream), noiseless=noiseless,
-                                 frame_seed=int(seed), truth={**tr.as_dict(), "frame": name}, truth_object=tr,
+                                 frame_seed=int(seed), truth={**tr.as_dict(), "frame": name}, truth_object=tr, render=render,
                                  geometry_flags=flags, pose={"true_angles_rad": dict(pose_rad), "face": self.geometry.face},
                                  sidecar_extra={"hole_seed": int(hole_seed), "detector_seed": _derived_seed(seed, stream)})
                   for name, photons, stream in (("hole", hole, 3), ("spot", spot + hole, 4))}
