@@ -39,7 +39,8 @@ def add_cli(groups: dict) -> None:
         help="the star sensor's frame at an inertial attitude (seed 004)",
         description="Render the star sensor's whole detector at an attitude through the true sensor (focal "
                     "length, principal point, distortion, PSF, detector): NAME.png (16-bit) + NAME.json (truth) and "
-                    "NAME_stars.csv (hip, mag, photons, u_px, v_px of every star on the detector).")
+                    "NAME_stars.csv (hip, mag, photons, u_px, v_px of every star whose light reaches the detector: a star just "
+                    "beyond the edge is listed too).")
     p.add_argument("--rig", default="star_sensor", help="star-sensor rig file (path or default name)")
     p.add_argument("--attitude", default="ra=83.8,dec=-5.4,roll=0",
                    help="boresight right ascension and declination and roll (ICRS, degrees)")
@@ -90,7 +91,7 @@ def cmd_render_star_field(args) -> int:
     print(f"wrote {', '.join(str(p) for p in written)} in {seconds:.2f} s ({args.renderer}"
           + (f", {spp} spp" if args.renderer == "mitsuba" else "") + f"; boresight ra {ra:g}°, dec {dec:g}°, roll {roll:g}°)")
     on = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
-    print(f"{int(on.sum())} stars on the detector (truth: {stars.name})")
+    print(f"{int(on.sum())} star centres on the detector ({len(uv)} stars whose light reaches it in {stars.name})")
     # what `rigsim centroid` finds on the isolated stars (none within 8 px), matched to the exact positions
     iso = on.copy()
     if len(uv) > 1:
