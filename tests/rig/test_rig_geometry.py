@@ -62,3 +62,20 @@ def test_inconsistent_geometry_is_refused_naming_the_fields():
     expected = ds.hole_diameter_mm + 4 * ds.distance_to_cube_mm * math.tan(math.radians(32 / 60) / 2)
     ac = next(g for g in geometry_summary(rig) if g.item == "aiming camera")
     assert f"Ø {expected:.1f} mm" in ac.value
+
+
+def test_a_sun_image_under_two_pixels_is_refused():
+    """A 576² sensor of 4 µm with ±60° of field (f = 0.6567 mm) images the 21′ sun into
+    2·tan(10.5′)·656.7 µm / 4 µm = 1.00 px: the frame stage cannot find it (≥ 3 connected pixels)."""
+    rig = load_rig("sun_sensor_2axis_diaphragm")
+    rig = rig.model_copy(update={"sun_simulator": rig.sun_simulator.model_copy(update={"collimation_full_angle_arcmin": 21.0})})
+    wide = _custom(rig, resolution_px=[576, 576], pixel_pitch_um=4.0, focal_length_mm=0.6567,
+                   principal_point_px=[287.5, 287.5])
+    expected = 2 * math.tan(math.radians(21 / 60) / 2) * 656.7 / 4.0
+    line = next(g for g in geometry_summary(wide) if g.item == "sun image")
+    assert line.status == "error" and f"Ø {expected:.2f} px on axis" in line.value and expected == pytest.approx(1.003, abs=1e-3)
+    with pytest.raises(RigError, match=r"sun_sensor\.focal_length_mm.*sun image: Ø 1\.00 px on axis.*at least 2 px"):
+        check_geometry(wide)
+    # twice the focal length: 2.0 px, accepted by this line
+    ok = _custom(wide, focal_length_mm=2 * 0.6567 * 1.001)
+    assert next(g for g in geometry_summary(ok) if g.item == "sun image").status == "ok"

@@ -16,6 +16,7 @@ from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TurntableModel
 
 MIN_SWEEP_POSES = 8  # the sun-sensor least squares needs at least this many points
+MIN_SUN_IMAGE_PX = 2.0  # a sun image narrower than this lights fewer than the 3 connected pixels a frame spot needs
 
 
 @dataclass(frozen=True)
@@ -65,8 +66,13 @@ def geometry_summary(rig: CubeMirrorRig) -> list[GeometryLine]:
                         f"({ss.fx_px:.1f} px); half field ±{fu:.1f}° × ±{fv:.1f}°, corner {fd:.1f}°")]
     on_axis = 2 * math.tan(full / 2) * ss.fx_px
     ext = max_spot_extent_px(cam, full)
+    small = on_axis < MIN_SUN_IMAGE_PX
     out.append(GeometryLine("sun image", f"Ø {on_axis:.2f} px on axis, up to {ext:.1f} px across the field; "
-                            f"render window {sun_window_px(cam, full)} px"))
+                            f"render window {sun_window_px(cam, full)} px"
+                            + (f" (the centroid needs at least {MIN_SUN_IMAGE_PX:g} px: a longer focal length or smaller "
+                               "pixels)" if small else ""), "error" if small else "ok",
+                            ("sun_sensor.focal_length_mm", "sun_sensor.pixel_pitch_um",
+                             "sun_simulator.collimation_full_angle_arcmin")))
     landed, n = sweep_landing(rig)
     fields = ("procedure.sweep_range_deg", "procedure.sweep_step_deg", "sun_sensor.focal_length_mm",
               "sun_sensor.resolution_px", "sun_sensor.pixel_pitch_um")
