@@ -66,10 +66,9 @@ def markdown_to_html(md_path, html_path=None, *, title: str | None = None) -> Pa
         title = m.group(1) if m else md_path.stem
     page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
             f"<style>{CSS}</style><script>{SCRIPT}</script></head><body>\n{body}\n</body></html>\n")
-    tmp = html_path.with_name(f".{html_path.name}.tmp")
-    tmp.write_text(page)
-    tmp.replace(html_path)
-    return html_path
+    from rigsim.files.atomic import atomic_write_bytes
+
+    return atomic_write_bytes(html_path, page.encode())
 
 
 def _fmt_row(cells, widths):

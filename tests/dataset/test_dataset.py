@@ -87,7 +87,7 @@ def test_sigkill_then_rerun_resumes_without_loss_duplicate_or_corruption(clean, 
     assert f"{N} frames (" in r.stdout and "already complete" in r.stdout
     assert verify(tmp_path) == []
     files = sorted(x.name for x in (tmp_path / "frames").iterdir())
-    assert len(files) == 2 * N and not any(".tmp-" in f for f in files)  # no duplicates, no leftovers
+    assert len(files) == 2 * N and not any(f.startswith(".") for f in files)  # no duplicates, no leftovers
     assert _pngs(tmp_path) == _pngs(root)  # every frame identical to the uninterrupted run
 
 
@@ -96,7 +96,7 @@ def test_a_crashing_task_is_retried_and_its_frame_is_whole(clean, tmp_path, monk
     root, _ = clean
     monkeypatch.setenv(FAIL_ENV, f"{fault}:2")
     r = generate(RIG, tmp_path, frames=4, seed=11, spp=SPP, workers=2, progress=False, chunk=1)
-    assert r.retries >= 1 and (tmp_path / ".fault-injected-2").exists()
+    assert r.retries >= 1
     assert verify(tmp_path) == []
     assert {k: v for k, v in _pngs(tmp_path).items()} == {k: v for k, v in _pngs(root).items() if int(k[13:19]) < 4}
 

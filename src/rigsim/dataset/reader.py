@@ -27,9 +27,11 @@ class Dataset:
         if not self.root.is_dir():
             raise DatasetError(f"{self.root}: no such dataset directory")
         self.manifest = read_json(self.root / "manifest.json", "the dataset's manifest; was generation finished?")
-        for k in ("n_frames", "image_format", "files_sha256"):
-            if k not in self.manifest:
-                raise DatasetError(f"{self.root / 'manifest.json'}: corrupt (no '{k}')")
+        from rigsim.dataset.runner import _manifest_shape
+
+        bad = _manifest_shape(self.manifest)
+        if bad:
+            raise DatasetError(f"{self.root}/{bad[0]}")
         self.n = int(self.manifest["n_frames"])
         self.fmt = self.manifest["image_format"]
         tp = self.root / "truth.parquet"

@@ -6,8 +6,12 @@ their order, retries and restarts therefore cannot change a frame.
 
 Resume: a rerun of the same command reads ``plan.json``, checks that it describes the same
 dataset (rig file checksum, generator, seed, frames/sweep, options), and renders only the frames
-that are not complete. A frame is complete when its sidecar exists and holds the SHA-256 of its
-image (store.frame_complete). Both files are written atomically, image first.
+that are not complete. A frame is complete when its sidecar is intact (its own checksum), belongs to
+this frame's plan entry and holds the SHA-256 of its image (store.frame_complete); anything else is
+rendered again. Both files are written atomically, image first (rigsim.files.atomic).
+
+Ownership: a run holds the folder's lock (dataset.lock) from the plan to the manifest; a second run
+on the same folder stops with one line naming the holder.
 
 Faults: a task that raises, or a worker process that dies, is resubmitted (``retries`` times per
 chunk; a broken process pool is rebuilt). A half-done chunk resumes at its first incomplete frame.
@@ -24,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rigsim.dataset.generators import GENERATORS, make_generator, worker_generator
+from rigsim.dataset.ownership import dataset_lock, remove_stale_temporaries
 from rigsim.dataset.store import (
     FORMAT,
     atomic_write_json,
@@ -31,9 +36,11 @@ from rigsim.dataset.store import (
     frame_files,
     read_json,
     sha256_file,
+    sidecar_problem,
     write_frame_atomic,
 )
 from rigsim.errors import DatasetError
+from rigsim.files.atomic import atomic_write_bytes
 
 PLAN_KEYS = ("generator", "rig_sha256", "seed", "frames", "sweep", "options")
 FAIL_ENV = "RIGSIM_DATASET_INJECT_FAULT"  # tests: "crash:INDEX" or "raise:INDEX" (once per dataset)
@@ -59,7 +66,11 @@ def _maybe_inject_fault(root: Path, index: int) -> None:
     mode, idx = spec.split(":")
     if int(idx) != index:
         return
-    marker = root / f".fault-injected-{index}"
+    import hashlib
+    import tempfile
+
+    tag = hashlib.sha256(str(root.resolve()).encode()).hexdigest()[:16]
+    marker = Path(tempfile.gettempdir()) / f"rigsim-fault-injected-{tag}-{index}"  # outside the dataset
     if marker.exists():
         return
     marker.write_text(mode)
@@ -75,7 +86,7 @@ def render_chunk(kind: str, rig_text: str, rig_source: str, opts: dict, root: st
     gen = worker_generator(kind, rig_text, rig_source, opts)
     done = []
     for index, params in items:
-        if frame_complete(root_p, index, fmt):
+        if frame_complete(root_p, index, fmt, params=params):
             ip, _ = frame_files(root_p, index, fmt)
             done.append((index, sha256_file(ip)))
             continue
@@ -83,7 +94,7 @@ def render_chunk(kind: str, rig_text: str, rig_source: str, opts: dict, root: st
         img, sidecar, row = gen.render(index, params)
         sidecar = dict(sidecar)
         sidecar.setdefault("dataset", {})["truth_row"] = row
-        done.append((index, write_frame_atomic(root_p, index, img, sidecar, fmt)))
+        done.append((index, write_frame_atomic(root_p, index, img, sidecar, fmt, params=params)))
     return done
 
 
@@ -146,7 +157,22 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
     if not (0 <= retries <= 20):
         raise DatasetError(f"--retries = {retries}: allowed range is 0 to 20")
     root = Path(out)
-    root.mkdir(parents=True, exist_ok=True)
+    if root.exists() and not root.is_dir():
+        raise DatasetError(f"--out {root}: is a file; expected a folder (new or a dataset's)")
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise DatasetError(f"--out {root}: cannot create the folder ({e.strerror or e})") from None
+    with dataset_lock(root, "rigsim dataset generate"):
+        return _generate_locked(root, t0, kind, rig_path, rig_text, frames, sweep, seed, spp, renderer, workers, scheduler,
+                                retries, chunk, progress)
+
+
+def _generate_locked(root, t0, kind, rig_path, rig_text, frames, sweep, seed, spp, renderer, workers, scheduler, retries,
+                     chunk, progress) -> GenerateResult:
+    for sub in ("frames", "plan.json", "manifest.json", "truth.csv", "truth.parquet"):
+        if (root / sub).is_symlink():
+            raise DatasetError(f"{root / sub}: is a symbolic link; rigsim writes only inside --out (remove the link)")
     opts = {"spp": int(spp)}
     if renderer is not None:
         opts["renderer"] = renderer
@@ -155,6 +181,8 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
     plan_path = root / "plan.json"
     if plan_path.exists():
         plan = read_json(plan_path, "the dataset's plan")
+        if not isinstance(plan, dict) or not isinstance(plan.get("frame_params"), list):
+            raise DatasetError(f"{plan_path}: not a rigsim dataset plan; choose another --out")
         new = {"generator": kind, "rig_sha256": _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, [])["rig_sha256"],
                "seed": int(seed), "frames": frames, "sweep": sweep, "options": opts}
         diff = [k for k in PLAN_KEYS if plan.get(k) != new[k]]
@@ -168,10 +196,12 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
         if not params:
             raise DatasetError("the plan has no frame whose spot lands on the detector (check --sweep)")
         atomic_write_json(plan_path, _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, params))
+        params = read_json(plan_path, "the dataset's plan")["frame_params"]  # as the workers and resumes see it
+    if not isinstance(params, list) or not all(isinstance(p, dict) for p in params):
+        raise DatasetError(f"{plan_path}: frame_params is not a list of frames; choose another --out")
     n = len(params)
-    for stale in (root / "frames").glob(".*.tmp-*") if (root / "frames").exists() else []:
-        stale.unlink(missing_ok=True)  # temporary files of a killed run (never under a final name)
-    todo = [i for i in range(n) if not frame_complete(root, i, fmt)]
+    remove_stale_temporaries(root)
+    todo = [i for i in range(n) if not frame_complete(root, i, fmt, params=params[i])]
     n_resumed = n - len(todo)
     chunks = [[(i, params[i]) for i in todo[k:k + chunk]] for k in range(0, len(todo), chunk)]
     from tqdm import tqdm
@@ -189,7 +219,8 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
     finally:
         bar.close()
     dt_render = time.perf_counter() - t_render
-    missing = [i for i in range(n) if not frame_complete(root, i, fmt)]
+    remove_stale_temporaries(root)  # of workers killed in this run (every worker has stopped)
+    missing = [i for i in range(n) if not frame_complete(root, i, fmt, params=params[i])]
     if missing:
         raise DatasetError(f"{len(missing)} frames could not be generated after {retries} retries "
                            f"(first: {missing[:5]}); rerun the same command to resume")
@@ -255,7 +286,7 @@ def _run_pool(workers, kind, rig_text, rig_source, opts, root, fmt, chunks, retr
                 attempts[k] += 1
                 if attempts[k] > retries + 1:
                     raise DatasetError(f"worker processes keep dying (frames {[i for i, _ in chunks[k]]})")
-            chunks = [[(i, p) for i, p in c if not frame_complete(root, i, fmt)] for c in chunks]
+            chunks = [[(i, p) for i, p in c if not frame_complete(root, i, fmt, params=p)] for c in chunks]
             pending = {k for k in pending if chunks[k]}
             bar.n = bar.total - sum(len(chunks[k]) for k in pending)
             bar.refresh()
@@ -320,12 +351,12 @@ def write_truth_table(root: Path, rows: list[dict]) -> tuple[Path, Path]:
                 cols.append(k)
     table = pa.table({c: [r.get(c) for r in rows] for c in cols})
     pq_path, csv_path = root / "truth.parquet", root / "truth.csv"
-    tmp = root / f".truth.parquet.tmp-{os.getpid()}"
-    pq.write_table(table, tmp)
-    os.replace(tmp, pq_path)
-    tmp = root / f".truth.csv.tmp-{os.getpid()}"
-    pcsv.write_csv(table, tmp)
-    os.replace(tmp, csv_path)
+    buf = pa.BufferOutputStream()
+    pq.write_table(table, buf)
+    atomic_write_bytes(pq_path, buf.getvalue().to_pybytes())
+    buf = pa.BufferOutputStream()
+    pcsv.write_csv(table, buf)
+    atomic_write_bytes(csv_path, buf.getvalue().to_pybytes())
     return pq_path, csv_path
 
 
@@ -351,16 +382,72 @@ def finish(root) -> dict:
 
 
 def verify(root) -> list[str]:
-    """Problems found (empty: every file present with its manifest checksum)."""
+    """Problems found (empty: the dataset is whole). The manifest's shape is checked; every planned frame,
+    sidecar and table must be listed and match its checksum; every sidecar must be intact and belong to its
+    plan entry; a listed path that leaves the folder is refused (never read); files the manifest does not
+    list are reported as extra."""
     root = Path(root)
     man = read_json(root / "manifest.json", "the dataset's manifest")
-    bad = []
-    for rel, want in man.get("files_sha256", {}).items():
+    plan = read_json(root / "plan.json", "the dataset's plan")
+    bad = _manifest_shape(man)
+    if bad:
+        return bad
+    if not isinstance(plan, dict) or not isinstance(plan.get("frame_params"), list) or plan.get("n_frames") != man["n_frames"]:
+        return [f"plan.json: does not describe the manifest's {man['n_frames']} frames"]
+    n, fmt, files = man["n_frames"], man["image_format"], man["files_sha256"]
+    resolved_root = root.resolve()
+    listed = set()
+    for rel, want in files.items():
         p = root / rel
-        if not p.exists():
+        if Path(rel).is_absolute() or ".." in Path(rel).parts or not p.resolve().is_relative_to(resolved_root):
+            bad.append(f"{rel}: path leaves the dataset folder (not read)")
+            continue
+        listed.add(Path(rel).as_posix())
+        if p.is_symlink():
+            bad.append(f"{rel}: is a symbolic link (not read)")
+        elif not p.is_file():
             bad.append(f"{rel}: missing")
         elif sha256_file(p) != want:
             bad.append(f"{rel}: checksum mismatch (corrupt or modified)")
+    planned = ["plan.json", "truth.parquet", "truth.csv"] + [q.relative_to(root).as_posix() for i in range(n)
+                                                             for q in frame_files(root, i, fmt)]
+    bad += [f"{rel}: planned but not in the manifest" for rel in planned if rel not in listed]
+    for i in range(n):
+        _, jp = frame_files(root, i, fmt)
+        if jp.is_file() and not jp.is_symlink():
+            why = sidecar_problem(jp, i, plan["frame_params"][i])
+            if why:
+                bad.append(f"{jp.relative_to(root).as_posix()}: {why}")
+    from rigsim.dataset.ownership import BOOKKEEPING
+
+    for dirpath, dirnames, filenames in os.walk(root):  # symlinked folders are not followed
+        for f in filenames:
+            rel = (Path(dirpath) / f).relative_to(root).as_posix()
+            if rel not in listed and rel != "manifest.json" and rel not in BOOKKEEPING:
+                bad.append(f"{rel}: extra file (not in the manifest)")
+    return bad
+
+
+def _manifest_shape(man) -> list[str]:
+    """The manifest's schema, one line per violation."""
+    if not isinstance(man, dict):
+        return [f"manifest.json: a JSON object expected, found {type(man).__name__}"]
+    bad = []
+    if man.get("format") != FORMAT:
+        bad.append(f"manifest.json: format = {man.get('format')!r}, expected {FORMAT!r}")
+    n = man.get("n_frames")
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        bad.append(f"manifest.json: n_frames = {n!r}, expected an integer >= 1")
+    if man.get("image_format") not in ("png", "fits"):
+        bad.append(f"manifest.json: image_format = {man.get('image_format')!r}, expected 'png' or 'fits'")
+    files = man.get("files_sha256")
+    if not isinstance(files, dict) or not files:
+        bad.append("manifest.json: files_sha256 must be an object of path: SHA-256, found "
+                   + (type(files).__name__ if not isinstance(files, dict) else "an empty one"))
+    else:
+        for rel, h in files.items():
+            if not (isinstance(h, str) and len(h) == 64 and all(c in "0123456789abcdef" for c in h)):
+                bad.append(f"manifest.json: files_sha256[{rel!r}] = {h!r} is not a SHA-256")
     return bad
 
 

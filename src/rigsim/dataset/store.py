@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from rigsim.errors import DatasetError
+from rigsim.files.atomic import atomic_write_bytes
 
 FORMAT = "rigsim.dataset/1"
 
@@ -42,20 +42,16 @@ def sha256_file(path) -> str:
     return h.hexdigest()
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def atomic_write_json(path, obj) -> None:
     from rigsim.render.frame import _jsonable
 
     atomic_write_bytes(path, (json.dumps(_jsonable(obj), indent=1) + "\n").encode())
+
+
+def canonical_sha256(obj) -> str:
+    """SHA-256 of a JSON value's canonical text (sorted keys, no spaces): what a sidecar's own
+    checksum covers, so a hand edit of any field is seen on resume and by ``verify``."""
+    return sha256_bytes(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode())
 
 
 def encode_image(img: np.ndarray, fmt: str) -> bytes:
@@ -105,30 +101,58 @@ def frame_files(root, index: int, fmt: str) -> tuple[Path, Path]:
     return d / f"{frame_stem(index)}.{fmt}", d / f"{frame_stem(index)}.json"
 
 
-def write_frame_atomic(root, index: int, img: np.ndarray, sidecar: dict, fmt: str = "png") -> str:
-    """Image first, then the sidecar holding its checksum; returns the image's SHA-256."""
+def write_frame_atomic(root, index: int, img: np.ndarray, sidecar: dict, fmt: str = "png", params=None) -> str:
+    """Image first, then the sidecar holding the image's checksum, the checksum of the frame's plan entry
+    (``params``) and its own; returns the image's SHA-256."""
+    from rigsim.render.frame import _jsonable
+
     ip, jp = frame_files(root, index, fmt)
-    ip.parent.mkdir(parents=True, exist_ok=True)
     data = encode_image(img, fmt)
     digest = sha256_bytes(data)
     atomic_write_bytes(ip, data)
-    sc = dict(sidecar)
+    sc = _jsonable(dict(sidecar))
     sc["dataset"] = {**sc.get("dataset", {}), "index": int(index), "image_file": ip.name, "image_sha256": digest}
-    atomic_write_json(jp, sc)
+    if params is not None:
+        sc["dataset"]["params_sha256"] = canonical_sha256(_jsonable(params))
+    sc["dataset"]["sidecar_sha256"] = canonical_sha256(sc)
+    atomic_write_bytes(jp, (json.dumps(sc, indent=1) + "\n").encode())
     return digest
 
 
-def frame_complete(root, index: int, fmt: str, verify: bool = True) -> bool:
-    """A frame is complete when its sidecar parses and names the image's checksum."""
-    ip, jp = frame_files(root, index, fmt)
-    if not (ip.exists() and jp.exists()):
-        return False
+def sidecar_problem(jp, index: int, params=None) -> str | None:
+    """Why a frame's sidecar cannot be trusted (None: it can): unreadable, not for this frame or this
+    plan entry, or edited since it was written (its own checksum no longer matches)."""
+    from rigsim.render.frame import _jsonable
+
     try:
-        sc = json.loads(jp.read_text())
-        want = sc["dataset"]["image_sha256"]
-    except (ValueError, KeyError, TypeError):
+        sc = json.loads(Path(jp).read_text())
+        ds = sc["dataset"]
+        want = ds.pop("sidecar_sha256")
+        if not isinstance(want, str) or not isinstance(ds.get("image_sha256"), str):
+            return "no checksums"
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError):
+        return "unreadable or not written by rigsim dataset generate"
+    if canonical_sha256(sc) != want:
+        return "edited after it was written (its own checksum does not match)"
+    if ds.get("index") != index:
+        return f"written for frame {ds.get('index')!r}"
+    if params is not None and ds.get("params_sha256") != canonical_sha256(_jsonable(params)):
+        return "written for another plan (pose, seed or options differ)"
+    return None
+
+
+def frame_complete(root, index: int, fmt: str, verify: bool = True, params=None) -> bool:
+    """A frame is complete when its sidecar is intact, is this frame's (and, given ``params``, this plan
+    entry's) and names the image's checksum."""
+    ip, jp = frame_files(root, index, fmt)
+    if not (ip.is_file() and jp.is_file()) or ip.is_symlink() or jp.is_symlink():
         return False
-    return (not verify) or sha256_file(ip) == want
+    if sidecar_problem(jp, index, params) is not None:
+        return False
+    if not verify:
+        return True
+    want = json.loads(jp.read_text())["dataset"]["image_sha256"]
+    return sha256_file(ip) == want
 
 
 def read_json(path, what: str) -> dict:

@@ -184,9 +184,13 @@ def _store_verdict(key: str, verdict: dict) -> None:
         p.parent.mkdir(parents=True, exist_ok=True)
         data = _load_cache()
         data["verdicts"][key] = verdict
-        tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
-        os.replace(tmp, p)  # atomic: concurrent test workers never see a torn file
+        from rigsim.errors import InputError
+        from rigsim.files.atomic import atomic_write_bytes
+
+        try:
+            atomic_write_bytes(p, json.dumps(data, indent=1, sort_keys=True).encode())  # never a torn file
+        except InputError as exc:
+            raise OSError(str(exc)) from None
     except OSError as exc:  # read-only home: the verdict is still memoised in-process
         log.debug("cannot write %s: %s", p, exc)
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -109,11 +108,13 @@ def write_frame(path, dn: np.ndarray, sidecar: dict) -> tuple[Path, Path]:
     side.setdefault("format", SIDECAR_FORMAT)
     side["image"] = {"file": png.name, "width": int(img.shape[1]), "height": int(img.shape[0]),
                      "dtype": "uint16", "convention": "img[v, u]; pixel (0,0) centre at (0,0)"}
-    if not cv2.imwrite(str(png), np.ascontiguousarray(img)):
-        raise OSError(f"cv2.imwrite could not write {png}")
-    tmp = js.with_name(f".{js.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(side, indent=1, sort_keys=True, allow_nan=False))
-    os.replace(tmp, js)
+    from rigsim.files.atomic import atomic_write_bytes
+
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(img))
+    if not ok:
+        raise OSError(f"cv2.imencode could not encode {png}")
+    atomic_write_bytes(png, buf.tobytes())
+    atomic_write_bytes(js, json.dumps(side, indent=1, sort_keys=True, allow_nan=False).encode())
     return png, js
 
 

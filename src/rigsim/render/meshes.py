@@ -23,10 +23,10 @@ def _write(mesh: trimesh.Trimesh, name: str, out_dir: Path | None) -> Path:
     data = mesh.export(file_type="ply", encoding="binary")
     digest = hashlib.sha1(data).hexdigest()[:12]
     path = out_dir / f"{name}-{digest}.ply"
-    if not path.exists():
-        tmp = path.with_suffix(".tmp")
-        tmp.write_bytes(data)
-        tmp.replace(path)
+    if not path.is_file() or path.is_symlink():
+        from rigsim.files.atomic import atomic_write_bytes
+
+        atomic_write_bytes(path, data)
     return path
 
 

@@ -1,0 +1,146 @@
+"""A dataset folder cannot be silently corrupted: one run owns it at a time, resume trusts no file it cannot
+check, verify checks the whole plan and stays inside the folder, and nothing is written through a link."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rigsim.dataset.ownership import OWNER_FILE, dataset_lock
+from rigsim.dataset.runner import generate, verify
+from rigsim.errors import DatasetError
+
+pytestmark = pytest.mark.render
+RIG = "sun_sensor_2axis_diaphragm"
+N = 4
+SPP = 4
+
+
+def _gen(root, seed=5, **kw):
+    return generate(RIG, root, frames=N, seed=seed, spp=SPP, workers=1, progress=False, **kw)
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    root = tmp_path_factory.mktemp("base")
+    _gen(root)
+    return root
+
+
+def _copy(base, tmp_path) -> Path:
+    d = tmp_path / "ds"
+    shutil.copytree(base, d)
+    return d
+
+
+def _files(root) -> dict:
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(Path(root).rglob("*")) if p.is_file()}
+
+
+def test_a_second_run_on_a_held_folder_is_refused_naming_the_holder(base, tmp_path):
+    d = _copy(base, tmp_path)
+    before = _files(d)
+    with dataset_lock(d, "test holder"):
+        with pytest.raises(DatasetError, match=rf"in use by another run \(pid {os.getpid()} on .*test holder"):
+            _gen(d, seed=6)
+    assert not (d / OWNER_FILE).exists()
+    assert _files(d) == {k: v for k, v in before.items()}  # nothing touched
+
+
+def test_two_processes_on_one_folder_one_refused_the_other_whole(tmp_path):
+    d = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "rigsim.cli", "dataset", "generate", RIG, "--out", str(d), "--frames", "6",
+           "--spp", str(SPP), "--workers", "1", "--seed"]
+    a = subprocess.Popen(cmd + ["1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while not (d / OWNER_FILE).exists() and a.poll() is None and time.time() - t0 < 120:
+        time.sleep(0.02)
+    b = subprocess.run(cmd + ["2"], capture_output=True, text=True, timeout=300)
+    _, a_err = a.communicate(timeout=600)
+    assert a.returncode == 0, a_err
+    assert b.returncode == 2 and "in use by another run" in b.stderr and "Traceback" not in b.stderr
+    assert len(b.stderr.strip().splitlines()) == 1, b.stderr
+    assert verify(d) == []
+    seeds = {json.loads(p.read_text())["dataset"]["params_sha256"] for p in (d / "frames").glob("*.json")}
+    assert len(seeds) == 6  # six frames of one plan: the refused run wrote nothing
+    assert json.loads((d / "plan.json").read_text())["seed"] == 1
+
+
+def test_a_hand_edited_sidecar_is_found_and_rendered_again(base, tmp_path):
+    d = _copy(base, tmp_path)
+    jp = d / "frames" / "frame_000001.json"
+    original = jp.read_bytes()
+    sc = json.loads(original)
+    sc["dataset"]["truth_row"]["spot_u"] += 5.0
+    jp.write_text(json.dumps(sc, indent=1) + "\n")
+    problems = verify(d)
+    assert "frames/frame_000001.json: checksum mismatch (corrupt or modified)" in problems
+    assert "frames/frame_000001.json: edited after it was written (its own checksum does not match)" in problems
+    r = _gen(d)
+    assert r.n_rendered == 1 and r.n_resumed == N - 1
+    assert jp.read_bytes() == original and verify(d) == []
+
+
+def test_a_sidecar_from_another_plan_is_rendered_again(base, tmp_path):
+    d = _copy(base, tmp_path)
+    other = tmp_path / "other"
+    _gen(other, seed=99)
+    for suffix in ("png", "json"):  # a whole, intact frame 2 of another dataset
+        shutil.copy(other / "frames" / f"frame_000002.{suffix}", d / "frames" / f"frame_000002.{suffix}")
+    assert "frames/frame_000002.json: written for another plan (pose, seed or options differ)" in verify(d)
+    r = _gen(d)
+    assert r.n_rendered == 1 and verify(d) == []
+    assert _files(d)["frames/frame_000002.png"] == _files(base)["frames/frame_000002.png"]
+
+
+@pytest.mark.parametrize("manifest,expect", [
+    ({}, "manifest.json: format = None"),
+    ([], "manifest.json: a JSON object expected, found list"),
+    ("x", "manifest.json: a JSON object expected, found str"),
+])
+def test_verify_refuses_a_manifest_of_the_wrong_shape(base, tmp_path, manifest, expect):
+    d = _copy(base, tmp_path)
+    (d / "manifest.json").write_text(json.dumps(manifest))
+    assert any(p.startswith(expect) for p in verify(d)), verify(d)
+
+
+def test_verify_checks_the_plan_not_only_the_listed_files(base, tmp_path):
+    d = _copy(base, tmp_path)
+    man = json.loads((d / "manifest.json").read_text())
+    for i in range(2):  # two frames deleted and dropped from the manifest
+        for s in ("png", "json"):
+            (d / "frames" / f"frame_00000{i}.{s}").unlink()
+            del man["files_sha256"][f"frames/frame_00000{i}.{s}"]
+    man["files_sha256"]["../../etc/hostname"] = "0" * 64
+    (d / "manifest.json").write_text(json.dumps(man))
+    (d / "frames" / "notes.txt").write_text("x")
+    p = verify(d)
+    assert "frames/frame_000000.png: planned but not in the manifest" in p
+    assert "frames/frame_000001.json: planned but not in the manifest" in p
+    assert "../../etc/hostname: path leaves the dataset folder (not read)" in p
+    assert "frames/notes.txt: extra file (not in the manifest)" in p
+
+
+def test_links_planted_in_the_folder_are_never_written_through(base, tmp_path):
+    d = _copy(base, tmp_path)
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    target = d / "frames" / "frame_000003.png"
+    target.unlink()
+    target.symlink_to(victim)
+    (d / "frames" / ".frame_000000.png.abcd1234.tmp").symlink_to(victim)  # a planted 'temporary'
+    (d / "frames" / ".frame_000001.json.tmp-1234").write_text("stale")
+    r = _gen(d)
+    assert r.n_rendered == 1 and victim.read_text() == "keep me"
+    assert not target.is_symlink() and verify(d) == []
+    assert not [p for p in (d / "frames").iterdir() if p.name.startswith(".")]  # stale temporaries removed
+    shutil.rmtree(d / "frames")
+    (d / "frames").symlink_to(tmp_path)
+    with pytest.raises(DatasetError, match="frames: is a symbolic link"):
+        _gen(d)
+    assert not list(tmp_path.glob("frame_*"))
