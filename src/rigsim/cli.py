@@ -40,11 +40,9 @@ Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
 # ------------------------------------------------------------------------------ rig / doctor
 
 def cmd_rig_check(args) -> int:
-    from rigsim.rig.load import load_any_rig
-
     from rigsim.reporting import safe_text
     from rigsim.rig.cube_mirror import CubeMirrorRig
-    from rigsim.rig.load import resolve_rig_path
+    from rigsim.rig.load import load_any_rig, resolve_rig_path
 
     rig = load_any_rig(args.rig)
     extra = ""
@@ -100,8 +98,17 @@ def cmd_doctor(args) -> int:
 
 # ------------------------------------------------------------------------------ parser
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error: the command, the option, the value and what is allowed (exit 2)."""
+
+    def error(self, message: str):
+        from rigsim.reporting import safe_text
+
+        self.exit(2, f"{self.prog}: error: {safe_text(message, 2000)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="rigsim",
         description="rigsim — physically rendered optical simulator of the rigs that calibrate spacecraft attitude sensors.",
         epilog=EPILOG,
@@ -139,7 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help, --version, or a one-line usage error already printed
+        return e.code if isinstance(e.code, int) else 2
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
@@ -148,7 +158,11 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()
         return rc
     except RigsimError as exc:
-        print(f"rigsim: error: {exc}", file=sys.stderr)
+        from rigsim.reporting import safe_text
+
+        parts = [ln.strip().removeprefix("- ") for ln in str(exc).splitlines() if ln.strip()] or [type(exc).__name__]
+        one = parts[0] + (" " + "; ".join(parts[1:]) if len(parts) > 1 else "")
+        print(f"rigsim: error: {safe_text(one, 4000)}", file=sys.stderr)  # one line, control characters escaped
         return 2
     except KeyboardInterrupt:
         print("rigsim: interrupted", file=sys.stderr)

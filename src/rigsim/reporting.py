@@ -85,6 +85,7 @@ def text_table(header, rows) -> str:
 
 def safe_text(s: str, limit: int = 200) -> str:
     """``s`` for a terminal: control characters escaped (\\x1b, \\n, …), at most ``limit`` characters."""
-    out = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in str(s))
-    return out if len(out) <= limit else out[: limit - 1] + "…"
+    from rigsim.files.names import printable
+
+    return printable(s, limit)
 

@@ -6,6 +6,8 @@ import argparse
 import json
 import sys
 
+from rigsim.files.options import SEED, SPP, integer, number
+
 EPILOG = """\
 examples:
   rigsim dataset generate sun_sensor_2axis_diaphragm --out data/sun --frames 200 --seed 7
@@ -84,18 +86,18 @@ def add_cli(groups: dict) -> None:
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     g.add_argument("rig", help="rig file path or default rig name")
     g.add_argument("--out", required=True, metavar="DIR", help="dataset directory (created; rerun to resume)")
-    g.add_argument("--frames", type=int, default=None, metavar="N", help="N random draws of rig errors and poses")
+    g.add_argument("--frames", type=integer(1, 10_000_000), default=None, metavar="N", help="N random draws of rig errors and poses")
     g.add_argument("--sweep", default=None, metavar="SPEC", help='pose grid, e.g. "X=-60:60:5 Y=0,10,20" (degrees)')
-    g.add_argument("--seed", type=int, default=0, help="the dataset seed: the whole dataset is reproducible from it")
+    g.add_argument("--seed", type=SEED, default=0, help="the dataset seed: the whole dataset is reproducible from it")
     g.add_argument("--generator", default=None, choices=sorted(GENERATORS), help="frame kind (default: the rig's)")
-    g.add_argument("--workers", type=int, default=None, help="local worker processes (default: the CPU count)")
+    g.add_argument("--workers", type=integer(1, 512), default=None, help="local worker processes (default: the CPU count)")
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="run on a Dask distributed cluster")
-    g.add_argument("--spp", type=int, default=None, help="Mitsuba samples per pixel (default: the generator's: "
+    g.add_argument("--spp", type=SPP, default=None, help="Mitsuba samples per pixel (default: the generator's: "
                    + ", ".join(f"{k} {c.default_spp}" for k, c in sorted(GENERATORS.items())) + ")")
     g.add_argument("--renderer", default=None, choices=("analytic", "mitsuba"),
                    help="star-field only: the analytic pixel-integrated PSF (default) or Mitsuba through the "
                         "distorted pinhole (--spp honoured)")
-    g.add_argument("--retries", type=int, default=2, help="retries of a failed task")
+    g.add_argument("--retries", type=integer(0, 20), default=2, help="retries of a failed task")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=_gen)
     s = ds.add_parser("score", help="score an external pipeline's predictions CSV against the truth")
@@ -104,8 +106,8 @@ def add_cli(groups: dict) -> None:
     s.add_argument("--mode", choices=["centroid", "direction"], default=None, help="default: from the columns")
     s.add_argument("--truth-ref", choices=["centre", "pixel-centroid"], default="centre",
                    help="centroid truth: the sun centre's projection, or the exact pixel first moment")
-    s.add_argument("--outlier", type=float, default=None, help="outlier threshold (px or arcsec); default 5 robust σ")
-    s.add_argument("--match-radius", type=float, default=2.0, help="star frames: match radius (px)")
+    s.add_argument("--outlier", type=number(1e-9, 1e9), default=None, help="outlier threshold (px or arcsec); default 5 robust σ")
+    s.add_argument("--match-radius", type=number(1e-3, 1e4), default=2.0, help="star frames: match radius (px)")
     s.add_argument("--json-out", default=None, metavar="FILE")
     s.set_defaults(func=_score)
     v = ds.add_parser("verify", help="check every file against the manifest's checksums")

@@ -124,11 +124,12 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
              generator: str | None = None, workers: int | None = None, scheduler: str | None = None,
              spp: int | None = None, retries: int = 2, chunk: int = 4, progress: bool = True,
              renderer: str | None = None) -> GenerateResult:
-    from rigsim.rig.load import resolve_rig_path
+    from rigsim.rig.load import parse_rig_text, read_rig_text, resolve_rig_path
 
     t0 = time.perf_counter()
     rig_path = resolve_rig_path(rig)
-    rig_text = Path(rig_path).read_text()
+    rig_text = read_rig_text(rig_path)
+    rig_table = parse_rig_text(rig_text, rig_path)
     from rigsim.dataset.generators import generator_for_rig
 
     kind = generator or generator_for_rig(rig_text)
@@ -138,9 +139,7 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
         raise DatasetError("give exactly one of --frames N or --sweep SPEC")
     if frames is not None and not (1 <= frames <= 10_000_000):
         raise DatasetError(f"--frames = {frames}: allowed range is 1 to 10000000")
-    import tomllib
-
-    sd = str(tomllib.loads(rig_text).get("seed_document", "000"))
+    sd = str(rig_table.get("seed_document", "000"))
     if sd not in GENERATORS[kind].seeds:
         fits = [k for k, c in GENERATORS.items() if sd in c.seeds]
         raise DatasetError(f"--generator {kind}: renders seed-{'/'.join(GENERATORS[kind].seeds)} rigs; {rig_path} is a "
@@ -156,6 +155,10 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
         raise DatasetError(f"--workers = {workers}: allowed range is 1 to 512")
     if not (0 <= retries <= 20):
         raise DatasetError(f"--retries = {retries}: allowed range is 0 to 20")
+    opts = {"spp": int(spp)}
+    if renderer is not None:
+        opts["renderer"] = renderer
+    gen = make_generator(kind, rig_text, str(rig_path), **opts)  # the rig is validated before anything is written
     root = Path(out)
     if root.exists() and not root.is_dir():
         raise DatasetError(f"--out {root}: is a file; expected a folder (new or a dataset's)")
@@ -164,19 +167,15 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
     except OSError as e:
         raise DatasetError(f"--out {root}: cannot create the folder ({e.strerror or e})") from None
     with dataset_lock(root, "rigsim dataset generate"):
-        return _generate_locked(root, t0, kind, rig_path, rig_text, frames, sweep, seed, spp, renderer, workers, scheduler,
+        return _generate_locked(root, t0, gen, opts, kind, rig_path, rig_text, frames, sweep, seed, workers, scheduler,
                                 retries, chunk, progress)
 
 
-def _generate_locked(root, t0, kind, rig_path, rig_text, frames, sweep, seed, spp, renderer, workers, scheduler, retries,
+def _generate_locked(root, t0, gen, opts, kind, rig_path, rig_text, frames, sweep, seed, workers, scheduler, retries,
                      chunk, progress) -> GenerateResult:
     for sub in ("frames", "plan.json", "manifest.json", "truth.csv", "truth.parquet"):
         if (root / sub).is_symlink():
             raise DatasetError(f"{root / sub}: is a symbolic link; rigsim writes only inside --out (remove the link)")
-    opts = {"spp": int(spp)}
-    if renderer is not None:
-        opts["renderer"] = renderer
-    gen = make_generator(kind, rig_text, str(rig_path), **opts)
     fmt = gen.image_format
     plan_path = root / "plan.json"
     if plan_path.exists():
@@ -229,8 +228,39 @@ def _generate_locked(root, t0, kind, rig_path, rig_text, frames, sweep, seed, sp
     return GenerateResult(root, n, len(todo), n_resumed, dt, len(todo) / dt_render if todo else 0.0, n_retries, manifest)
 
 
+def _die_with_parent() -> None:
+    """A worker must not outlive the run that started it (a killed main process would otherwise leave
+    workers rendering and writing, holding the caller's pipe): Linux's parent-death signal, and a
+    watchdog thread where that is not available."""
+    import signal
+    import threading
+
+    parent = os.getppid()
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+    def watch():
+        while True:
+            if os.getppid() != parent:
+                os._exit(1)
+            time.sleep(0.5)
+
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=watch, name="rigsim-parent-watch", daemon=True).start()
+
+
 def _init_worker(threads: int | None) -> None:
-    """One thread per worker process when several share the machine (no oversubscription)."""
+    """Die with the parent; one thread per worker process when several share the machine (no oversubscription)."""
+    _die_with_parent()
+    _set_threads(threads)
+
+
+def _set_threads(threads: int | None) -> None:
     if threads:
         try:
             from rigsim.render.backend import set_thread_count
@@ -294,7 +324,7 @@ def _run_pool(workers, kind, rig_text, rig_source, opts, root, fmt, chunks, retr
 
 
 def _dask_task(kind, rig_text, rig_source, opts, root, fmt, items):
-    _init_worker(1)
+    _set_threads(1)
     return render_chunk(kind, rig_text, rig_source, opts, root, fmt, items)
 
 

@@ -114,6 +114,12 @@ def read_predictions(path, mode: str | None = None, multi: bool = False) -> tupl
                 raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols[1:].index(bad)]!r} is not a number") from None
             if not np.all(np.isfinite(v)):
                 raise DatasetError(f"{path}:{line}: non-finite value in {cols[1:]}")
+            if mode == "centroid" and np.max(np.abs(v)) > 1e7:
+                raise DatasetError(f"{path}:{line}: ({', '.join(cols[1:])}) = {tuple(float(x) for x in v)}: a pixel "
+                                   "position must lie within ±1e7 px")
+            if mode == "direction" and not (1e-12 < float(np.linalg.norm(v)) < 1e150):
+                raise DatasetError(f"{path}:{line}: direction ({', '.join(cols[1:])}) = {tuple(float(x) for x in v)} has "
+                                   "no usable length (allowed 1e-12 to 1e150)")
             if multi:
                 out.setdefault(fr, []).append(v)
                 continue

@@ -15,6 +15,7 @@ import numpy as np
 
 from rigsim.errors import CliError
 from rigsim.files import read_image, write_table
+from rigsim.files.options import integer, number
 from rigsim.imaging import Flag, NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame
 
@@ -123,12 +124,12 @@ def add_cli(groups: dict) -> None:
                    help="scurve: S-curve corrected first moment (sun disk); tcom, wcom, gauss: rigsim.imaging's")
     c.add_argument("--rig", default=None, help="rig file or default rig name: the camera's detector")
     c.add_argument("--camera", default=None, choices=sorted(CAMERAS), help="which camera of the rig (default its main one)")
-    c.add_argument("--offset-dn", type=float, default=None, help="black level (default the rig's, else 0)")
-    c.add_argument("--gain-dn-per-e", type=float, default=None, help="system gain (default the rig's, else 1)")
-    c.add_argument("--read-noise-e", type=float, default=None, help="read noise (default the rig's, else 0)")
-    c.add_argument("--saturation-dn", type=float, default=None, help="raw DN of a saturated pixel (default the rig's ADC top)")
-    c.add_argument("--threshold-dn", type=float, default=None, help="detection threshold above the offset (default 5σ read noise, ≥ 3 DN)")
-    c.add_argument("--max-spots", type=int, default=None, help="keep the N brightest spots per frame")
+    c.add_argument("--offset-dn", type=number(0, 1e6), default=None, help="black level (default the rig's, else 0)")
+    c.add_argument("--gain-dn-per-e", type=number(1e-6, 1e3), default=None, help="system gain (default the rig's, else 1)")
+    c.add_argument("--read-noise-e", type=number(0, 1e5), default=None, help="read noise (default the rig's, else 0)")
+    c.add_argument("--saturation-dn", type=number(1, 1e9), default=None, help="raw DN of a saturated pixel (default the rig's ADC top)")
+    c.add_argument("--threshold-dn", type=number(1e-3, 1e6), default=None, help="detection threshold above the offset (default 5σ read noise, ≥ 3 DN)")
+    c.add_argument("--max-spots", type=integer(1, 1_000_000), default=None, help="keep the N brightest spots per frame")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_centroid)
 

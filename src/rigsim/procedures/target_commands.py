@@ -12,6 +12,7 @@ import numpy as np
 
 from rigsim.errors import CliError
 from rigsim.files import write_json, write_table
+from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.optics.targets import TARGET_SPECS, PlanarTarget, TargetPoses, parse_target, read_poses, spread_poses, write_poses
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -115,15 +116,15 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--target", required=True, metavar="SPEC", help=TARGET_SPECS)
     pg = p.add_mutually_exclusive_group(required=True)
     pg.add_argument("--poses", metavar="TABLE", help="poses table (.csv or .parquet)")
-    pg.add_argument("--spread", type=int, metavar="N",
+    pg.add_argument("--spread", type=integer(1, 10_000), metavar="N",
                     help="N calibration poses spread over the camera's field instead (written to DIR/poses.csv): "
                          "board centres on a spiral out to 70%% of the half field, tilted up to 25°, at distances "
                          "where the board spans 35-60%% of the detector width (--seed draws them)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--spp", type=int, default=16, help="samples per pixel, a power of 4 (default 16)")
-    p.add_argument("--seed", type=int, default=0, help="seed of frame 0; frame k uses seed + k (default 0)")
+    p.add_argument("--spp", type=SPP, default=16, help="samples per pixel, a power of 4 (default 16)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of frame 0; frame k uses seed + k (default 0)")
     p.add_argument("--noiseless", action="store_true", help="detector without random noise")
-    p.add_argument("--white-fraction", type=float, default=0.6,
+    p.add_argument("--white-fraction", type=number(1e-3, 1), default=0.6,
                    help="white's signal on axis as a fraction of the usable full well (default 0.6)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_render_target)

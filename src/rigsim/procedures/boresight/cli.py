@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError
+from rigsim.files.options import SEED, SPP, integer, number
 
 __all__ = ["add_cli", "cmd_run_boresight"]
 
@@ -27,14 +28,14 @@ def add_cli(groups: dict) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--rig", default="dual_line_array_prism", help="seed-003 rig file path or default rig name")
     p.add_argument("--out", default="renders/boresight", metavar="DIR", help="report directory")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: the rig's study.seed)")
-    p.add_argument("--runs", type=int, default=None, help="Monte-Carlo runs per point (default: the rig's, 1200)")
+    p.add_argument("--seed", type=SEED, default=None, help="random seed (default: the rig's study.seed)")
+    p.add_argument("--runs", type=integer(10, 1_000_000), default=None, help="Monte-Carlo runs per point (default: the rig's, 1200)")
     p.add_argument("--reading", default="consistent", choices=["consistent", "as_printed"],
                    help="reading of the paper's equations used as 'the' method (both are always compared)")
     p.add_argument("--no-orbit", action="store_true", help="skip the rendered orbit scenario")
-    p.add_argument("--measurements", type=int, default=None, help="orbit measurements (default: the rig's, 19)")
-    p.add_argument("--spp", type=int, default=None, help="light paths per ROI pixel (default: the rig's)")
-    p.add_argument("--jitter-px", type=float, default=0.1,
+    p.add_argument("--measurements", type=integer(3, 100_000), default=None, help="orbit measurements (default: the rig's, 19)")
+    p.add_argument("--spp", type=SPP, default=None, help="light paths per ROI pixel (default: the rig's)")
+    p.add_argument("--jitter-px", type=number(0, 5), default=0.1,
                    help="also evaluate the orbit frames with this equivalent centroid error added (0: off)")
     p.add_argument("--json-out", default=None, metavar="FILE", help="also write the key numbers as JSON")
     p.add_argument("--export-frames", default=None, metavar="DIR", help="also write the orbit's ROI frames as bare "

@@ -10,6 +10,8 @@ import warnings
 from pathlib import Path
 
 from rigsim.errors import CliError
+from rigsim.files.names import file_stem, slug
+from rigsim.files.options import SEED, SPP, number
 
 __all__ = ["add_cli"]
 
@@ -27,15 +29,15 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--rig", default="dual_line_array_prism", help="seed-003 rig file (path or default name)")
     p.add_argument("--camera", default=None, help="camera name (default the rig's first)")
     p.add_argument("--detector", default="M1", choices=("M1", "M2"), help="which CMOS")
-    p.add_argument("--alpha", type=float, default=0.0, help="rotation about x (arcsec)")
-    p.add_argument("--beta", type=float, default=0.0, help="rotation about y (arcsec)")
-    p.add_argument("--gamma", type=float, default=0.0, help="rotation about z (arcsec)")
-    p.add_argument("--df-um", type=float, default=0.0, help="focal-length change (µm)")
-    p.add_argument("--spp", type=int, default=None, help="light paths per ROI pixel (default: the rig's orbit.spp)")
-    p.add_argument("--seed", type=int, default=0, help="frame seed (same seed, same frame)")
+    p.add_argument("--alpha", type=number(-3600, 3600), default=0.0, help="rotation about x (arcsec)")
+    p.add_argument("--beta", type=number(-3600, 3600), default=0.0, help="rotation about y (arcsec)")
+    p.add_argument("--gamma", type=number(-3600, 3600), default=0.0, help="rotation about z (arcsec)")
+    p.add_argument("--df-um", type=number(-10_000, 10_000), default=0.0, help="focal-length change (µm)")
+    p.add_argument("--spp", type=SPP, default=None, help="light paths per ROI pixel (default: the rig's orbit.spp)")
+    p.add_argument("--seed", type=SEED, default=0, help="frame seed (same seed, same frame)")
     p.add_argument("--noiseless", action="store_true", help="detector without random noise")
     p.add_argument("--out", default="renders/frames", help="output folder")
-    p.add_argument("--name", default=None, help="file stem (default boresight_<camera>_<detector>)")
+    p.add_argument("--name", type=file_stem, default=None, help="file stem (default boresight_<camera>_<detector>)")
     p.set_defaults(func=cmd_render_boresight_roi)
 
 
@@ -68,7 +70,7 @@ def cmd_render_boresight_roi(args) -> int:
         warnings.simplefilter("always")
         fr = r.render(E, args.df_um * 1e-3, seed=int(args.seed), noiseless=args.noiseless)
     seconds = time.perf_counter() - t0
-    name = args.name or f"boresight_{cam}_{args.detector.lower()}"
+    name = args.name or slug(f"boresight_{cam}_{args.detector.lower()}")  # camera names come from the rig file
     png, js = fr.write(Path(args.out) / name)
     uv = fr.truth.get("spot_uv")
     o = fr.origin_uv

@@ -46,8 +46,8 @@ from rigsim.errors import SearchError
 from rigsim.estimation.null_search import reading_model
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
 from rigsim.imaging.spot import SpotMeasurement, measure_spot
-from rigsim.procedures.cube_mirror.null_files import autocollimator_roi_px, read_autocollimator
 from rigsim.optics.autocollimator import a_frame_basis, exact_reading_rad, normal_from_reading
+from rigsim.procedures.cube_mirror.null_files import autocollimator_roi_px, read_autocollimator
 from rigsim.procedures.cube_mirror.nulls import TracedSearch, traced_search
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TurntableReading, pose_deg_to_rad

@@ -13,6 +13,8 @@ import numpy as np
 
 import rigsim
 from rigsim.errors import CliError
+from rigsim.files.names import file_stem, slug
+from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.procedures.cube_mirror import file_commands, render_commands
 from rigsim.reporting import text_table
 from rigsim.rig.load import DEFAULT_RIG
@@ -32,13 +34,13 @@ def add_cli(groups: dict) -> None:
     cmr.add_argument("--rig", default=DEFAULT_RIG, help="rig file path or default rig name")
     cmr.add_argument("--analytic", action="store_true", help="analytic campaign (exact geometry + modelled noise, no rendering; seconds)")
     cmr.add_argument("--ideal", action="store_true", help="no rig errors, no encoder or detector noise: checks the simulator itself")
-    cmr.add_argument("--seed", type=int, default=2009, help="random seed (the same seed gives the same numbers)")
-    cmr.add_argument("--trials", type=int, default=None, help="Monte-Carlo campaigns per error-budget row (default 200 rendered, 300 analytic)")
+    cmr.add_argument("--seed", type=SEED, default=2009, help="random seed (the same seed gives the same numbers)")
+    cmr.add_argument("--trials", type=integer(1, 100_000), default=None, help="Monte-Carlo campaigns per error-budget row (default 200 rendered, 300 analytic)")
     cmr.add_argument("--out", default=None, metavar="DIR", help="rendered: report directory (default renders/cube_mirror_<rig name>)")
-    cmr.add_argument("--threshold", type=float, default=None, help="rendered: null-search threshold, px (seed 000) or arcsec (001); default the rig's")
-    cmr.add_argument("--sweep-spp", type=int, default=256, help="rendered: samples per pixel of the sun-sensor sweep frames")
-    cmr.add_argument("--sweep-step", type=float, default=None, metavar="DEG", help="rendered: sweep step (default the rig's, 5°)")
-    cmr.add_argument("--repeat-frames", type=int, default=4, help="rendered: extra frames at the first null to measure the null-measurement noise")
+    cmr.add_argument("--threshold", type=number(1e-6, 1000), default=None, help="rendered: null-search threshold, px (seed 000) or arcsec (001); default the rig's")
+    cmr.add_argument("--sweep-spp", type=SPP, default=256, help="rendered: samples per pixel of the sun-sensor sweep frames")
+    cmr.add_argument("--sweep-step", type=number(1e-3, 90), default=None, metavar="DEG", help="rendered: sweep step (default the rig's, 5°)")
+    cmr.add_argument("--repeat-frames", type=integer(0, 100), default=4, help="rendered: extra frames at the first null to measure the null-measurement noise")
     cmr.add_argument("--axis-order", default=None, help="estimator's axis nesting reading, outermost first (default: the rig's)")
     cmr.add_argument("--no-budget", action="store_true", help="skip the Monte-Carlo error budget")
     cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
@@ -56,12 +58,12 @@ def add_cli(groups: dict) -> None:
                          formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     rss.add_argument("--rig", default=DEFAULT_RIG, help="rig file path or default rig name")
     rss.add_argument("--pose", default=None, help="true turntable angles in degrees, e.g. X=10,Y=-5")
-    rss.add_argument("--seed", type=int, default=0, help="frame seed (same seed, same frame)")
-    rss.add_argument("--spp", type=int, default=1024, help="samples per pixel (power of 4)")
+    rss.add_argument("--seed", type=SEED, default=0, help="frame seed (same seed, same frame)")
+    rss.add_argument("--spp", type=SPP, default=1024, help="samples per pixel (power of 4)")
     rss.add_argument("--noiseless", action="store_true", help="detector without random noise")
     rss.add_argument("--ideal", action="store_true", help="rig without its true errors")
     rss.add_argument("--out", default="renders/frames", help="output folder")
-    rss.add_argument("--name", default="sun_sensor", help="file stem of the frame")
+    rss.add_argument("--name", type=file_stem, default="sun_sensor", help="file stem of the frame")
     rss.add_argument("--preview", default=None, metavar="PNG", help="also write an 8-bit zoomed preview")
     rss.set_defaults(func=cmd_render_sun_sensor)
 
@@ -71,7 +73,7 @@ def add_cli(groups: dict) -> None:
     sce.add_argument("rig", help="rig file path or default rig name")
     sce.add_argument("--xml", required=True, metavar="DIR", help="output folder (XML + meshes/)")
     sce.add_argument("--pose", default=None, help="turntable angles in degrees, e.g. X=180,Y=0")
-    sce.add_argument("--spp", type=int, default=64, help="samples per pixel written into the XML")
+    sce.add_argument("--spp", type=SPP, default=64, help="samples per pixel written into the XML")
     sce.add_argument("--beam", choices=("divergent", "collimated"), default="divergent",
                      help="diaphragm screen: the sun simulator's divergent beam as the campaign renders it (default), "
                           "or one collimated pencil")
@@ -143,7 +145,7 @@ def _run_cube_mirror_rendered(args) -> int:
         rig = rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"command_resolution_deg": 0.0})})
     real = realization_from_rig(rig, ideal=args.ideal)
     noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
-    out_dir = Path(args.out) if args.out else Path("renders") / f"cube_mirror_{rig.name}"
+    out_dir = Path(args.out) if args.out else Path("renders") / f"cube_mirror_{slug(rig.name)}"
     frames = _user_frames(args, rig)
     threshold = args.threshold if args.threshold is not None else (0.01 if args.ideal and rig.procedure.method == "diaphragm"
                                                                    else 0.005 if args.ideal else None)
@@ -393,6 +395,12 @@ def cmd_render_sun_sensor(args) -> int:
         lo, hi = np.percentile(crop, 5), crop.max()
         img = (np.clip((crop - lo) / max(hi - lo, 1), 0, 1) ** 0.4 * 255).astype(np.uint8)  # gamma shows the noise floor
         img = cv2.resize(img, None, fx=16, fy=16, interpolation=cv2.INTER_NEAREST)
-        cv2.imwrite(str(args.preview), img)
+        from rigsim.files import atomic_write_bytes
+
+        ext = Path(args.preview).suffix.lower()
+        ok, buf = cv2.imencode(ext, img) if ext in (".png", ".jpg", ".jpeg", ".tif", ".tiff") else (False, None)
+        if not ok:
+            raise CliError(f"--preview {args.preview}: the name must end in .png, .jpg or .tif")
+        atomic_write_bytes(args.preview, buf.tobytes())
         print(f"wrote {args.preview} (8-bit preview: 24×24 px around the spot, 16× zoom, gamma 0.4)")
     return 0

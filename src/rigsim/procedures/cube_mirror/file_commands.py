@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError
+from rigsim.files.options import number
 from rigsim.rig.load import DEFAULT_RIG
 
 __all__ = ["add_cli"]
@@ -52,7 +53,7 @@ def add_cli(groups: dict) -> None:
     t.add_argument("--rig", default=None, help="rig file or name: axes, faces, reading σ (default: 2-axis, +Z +Y)")
     t.add_argument("--axis-order", default=None, help="nesting reading, outermost first (2-axis: XY or YX; 3-axis: YXZ or XYZ)")
     t.add_argument("--faces", nargs=2, default=None, choices=FACES, help="faces nulled first and second (default the rig's, +Z +Y)")
-    t.add_argument("--sigma-arcsec", type=float, default=None, help="1σ of each reading (default: the rig's encoder ⊕ null accuracy)")
+    t.add_argument("--sigma-arcsec", type=number(1e-6, 3600), default=None, help="1σ of each reading (default: the rig's encoder ⊕ null accuracy)")
     t.add_argument("--out", default=None, metavar="FILE", help="write R(cube←rot) and its covariance as JSON")
     t.add_argument("--json", action="store_true", help="also print the JSON result (last line)")
     t.set_defaults(func=cmd_triad)

@@ -21,7 +21,6 @@ from rigsim.imaging.spot import THRESHOLD_SIGMA, SpotMeasurement, measure_spot
 from rigsim.optics.aiming import nominal_screen_homography
 from rigsim.rig.cube_mirror import Autocollimator, CubeMirrorRig
 from rigsim.rig.load import DEFAULT_RIG
-from rigsim.rig.turntable import TurntableReading
 
 __all__ = ["measure_concentricity", "null_step", "parse_reading", "read_autocollimator", "autocollimator_optics",
            "autocollimator_roi_px", "autocollimator_targets", "add_cli"]

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError
+from rigsim.files.names import file_stem
+from rigsim.files.options import SEED, SPP
 from rigsim.rig.load import DEFAULT_RIG
 
 __all__ = ["add_cli"]
@@ -25,11 +27,11 @@ def _common(p, default_rig: str, name: str) -> None:
     p.add_argument("--face", default=None, help="the face the beam returns from (default the procedure's first)")
     p.add_argument("--pose", default=None, help="true turntable angles in degrees, e.g. X=181.4,Y=0.55 "
                                                 "(default: the face's search start)")
-    p.add_argument("--seed", type=int, default=0, help="frame seed (same seed, same frames)")
+    p.add_argument("--seed", type=SEED, default=0, help="frame seed (same seed, same frames)")
     p.add_argument("--noiseless", action="store_true", help="detector without random noise")
     p.add_argument("--ideal", action="store_true", help="rig without its true errors")
     p.add_argument("--out", default="renders/frames", help="output folder")
-    p.add_argument("--name", default=name, help="file stem of the frame(s)")
+    p.add_argument("--name", type=file_stem, default=name, help="file stem of the frame(s)")
 
 
 def add_cli(groups: dict) -> None:
@@ -40,7 +42,7 @@ def add_cli(groups: dict) -> None:
                                    "campaign does: the lit hole with the return blocked, and the returned divergent "
                                    "spot beside it. Writes NAME_hole.png and NAME_spot.png with their sidecars.")
     _common(a, DEFAULT_RIG, "aiming_camera")
-    a.add_argument("--spp", type=int, default=4, help="pencil samples per pixel of the screen renderer")
+    a.add_argument("--spp", type=SPP, default=4, help="pencil samples per pixel of the screen renderer")
     a.add_argument("--beam", choices=("divergent", "collimated"), default="divergent",
                    help="the sun simulator's beam: divergent (its full collimation angle, as the campaign renders "
                         "it) or one collimated pencil (near the null its return falls back into the hole)")
@@ -50,7 +52,7 @@ def add_cli(groups: dict) -> None:
                        description="Render the autocollimator's frame of a cube face at a true turntable pose as the "
                                    "campaign does (its axis along the nominal beam). Writes NAME.png and its sidecar.")
     _common(c, "sun_sensor_3axis_autocollimator", "autocollimator")
-    c.add_argument("--spp", type=int, default=1024, help="samples per pixel of the window")
+    c.add_argument("--spp", type=SPP, default=1024, help="samples per pixel of the window")
     c.set_defaults(func=cmd_render_autocollimator)
 
 

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from rigsim.errors import CliError
+from rigsim.files.options import SEED, SPP, integer
 
 __all__ = ["add_cli", "cmd_run_star_calibration"]
 
@@ -23,11 +24,11 @@ def add_cli(groups: dict) -> None:
                     "calibrate (f, u0, v0, k1, k2) by AD / ADS EKFs and batch least squares, compare with the "
                     "truth, run the Monte-Carlo AD-vs-ADS study and write a report.")
     p.add_argument("--rig", default="star_sensor", help="star-sensor rig file (path or default name)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the rendered run (same seed, same numbers)")
-    p.add_argument("--trials", type=int, default=None, help="Monte-Carlo trials of the study (default: the rig's)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the rendered run (same seed, same numbers)")
+    p.add_argument("--trials", type=integer(1, 100_000), default=None, help="Monte-Carlo trials of the study (default: the rig's)")
     p.add_argument("--no-study", action="store_true", help="skip the Monte-Carlo study")
     p.add_argument("--renderer", default="analytic", help="frame renderer: analytic | mitsuba")
-    p.add_argument("--mitsuba-spp", type=int, default=256, help="samples per pixel of the Mitsuba windows (power of 4)")
+    p.add_argument("--mitsuba-spp", type=SPP, default=256, help="samples per pixel of the Mitsuba windows (power of 4)")
     p.add_argument("--out", default=None, help="report folder (default renders/star_calibration)")
     p.add_argument("--export-frames", default=None, metavar="DIR", help="also write the frames as bare image files "
                    "(no truth) with attitudes.csv (frame, time_s, qw..qz commanded), for `rigsim star calibrate`")

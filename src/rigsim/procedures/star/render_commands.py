@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError
+from rigsim.files.names import file_stem
+from rigsim.files.options import SEED, SPP
 
 __all__ = ["add_cli", "parse_attitude"]
 
@@ -46,12 +48,12 @@ def add_cli(groups: dict) -> None:
                    help="boresight right ascension and declination and roll (ICRS, degrees)")
     p.add_argument("--renderer", default="mitsuba", choices=("mitsuba", "analytic"),
                    help="Mitsuba through the distorted pinhole, or the analytic pixel-integrated PSF")
-    p.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel (a power of 4)")
-    p.add_argument("--seed", type=int, default=0, help="frame seed (same seed, same frame)")
+    p.add_argument("--spp", type=SPP, default=256, help="Mitsuba samples per pixel (a power of 4)")
+    p.add_argument("--seed", type=SEED, default=0, help="frame seed (same seed, same frame)")
     p.add_argument("--noiseless", action="store_true", help="detector without random noise")
     p.add_argument("--fits", action="store_true", help="also write NAME.fits")
     p.add_argument("--out", default="renders/frames", help="output folder")
-    p.add_argument("--name", default="star_field", help="file stem")
+    p.add_argument("--name", type=file_stem, default="star_field", help="file stem")
     p.set_defaults(func=cmd_render_star_field)
 
 
