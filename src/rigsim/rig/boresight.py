@@ -24,15 +24,16 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from rigsim.detector.config import DetectorConfig
+from rigsim.rig.model import RigModel
 
 __all__ = ["LineCamera", "Laser", "StudySettings", "OrbitScenario", "BoresightRig"]
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+class _Model(RigModel):
+    pass
 
 
 Px2 = Annotated[list[Annotated[float, Field(ge=-10000.0, le=10000.0)]], Field(min_length=2, max_length=2)]

@@ -17,14 +17,14 @@ Frames (see docs/conventions.md):
 from __future__ import annotations
 
 import math
-
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown
+from rigsim.rig.model import RigModel
 
 FaceName = Literal["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
 AxisLabel = Literal["X", "Y", "Z"]
@@ -33,8 +33,8 @@ Small3 = Annotated[list[Annotated[float, Field(ge=-3600.0, le=3600.0)]], Field(m
 """A small rotation vector in arcseconds (each component within ±1°)."""
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+class _Model(RigModel):
+    pass
 
 
 class Orientation(_Model):

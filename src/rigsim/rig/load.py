@@ -156,18 +156,46 @@ def resolve_rig_path(name_or_path: str | Path) -> Path:
     raise RigError(name_or_path, [f"no such rig file; give a path or one of the default rigs: {known}"])
 
 
-def read_rig_toml(path: Path) -> dict:
-    """The TOML table of a rig file; unreadable, non-UTF-8 or malformed files raise RigError."""
+MAX_RIG_FILE_BYTES = 1 << 20  # a rig file is a few kB; anything near this is not one
+
+
+def read_rig_text(path: Path) -> str:
+    """The text of a rig file: a regular file (not a folder, FIFO or device) of at most 1 MiB of UTF-8."""
+    import stat
+
+    path = Path(path)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise RigError(path, [f"cannot read file: {exc.strerror}"]) from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a FIFO, socket or device)"
+        raise RigError(path, [f"is {kind}; expected a TOML rig file"])
+    if st.st_size > MAX_RIG_FILE_BYTES:
+        raise RigError(path, [f"{st.st_size} bytes; a rig file has at most {MAX_RIG_FILE_BYTES} bytes"])
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise RigError(path, [f"cannot read file: {exc.strerror}"]) from None
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise RigError(path, [f"not UTF-8 text (byte {exc.start})"]) from None
+
+
+def parse_rig_text(text: str, path) -> dict:
+    """The TOML table of a rig file's text; malformed (or absurdly nested) TOML raises RigError."""
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RigError(path, [f"TOML syntax error: {exc}"]) from None
+    except RecursionError:
+        raise RigError(path, ["TOML nested too deeply to be a rig file"]) from None
+
+
+def read_rig_toml(path: Path) -> dict:
+    """The TOML table of a rig file; unreadable, non-UTF-8 or malformed files raise RigError."""
+    return parse_rig_text(read_rig_text(path), path)
 
 
 # The schema of each rig family, and the seed documents it describes (plain imports: the rig layer

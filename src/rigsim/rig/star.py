@@ -15,18 +15,19 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown, brown_undistort, radial_r2_max
+from rigsim.rig.model import RigModel
 
 __all__ = ["PSF", "StarSensor", "Nominal", "Sky", "Sequence", "Identification", "Calibration", "Study", "StarRig",
            "NominalSensor", "NominalStarRig", "psf_sigma_px"]
 
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+class _Model(RigModel):
+    pass
 
 
 Pair = Annotated[list[float], Field(min_length=2, max_length=2)]
