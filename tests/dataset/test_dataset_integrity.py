@@ -144,3 +144,50 @@ def test_links_planted_in_the_folder_are_never_written_through(base, tmp_path):
     with pytest.raises(DatasetError, match="frames: is a symbolic link"):
         _gen(d)
     assert not list(tmp_path.glob("frame_*"))
+
+
+def _children(pid: int) -> set[int]:
+    out = set()
+    for p in Path("/proc").iterdir():
+        if p.name.isdigit():
+            try:
+                stat = (p / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.add(int(p.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc (Linux)")
+def test_workers_die_with_a_killed_main_process(tmp_path):
+    import signal
+
+    d = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "rigsim.cli", "dataset", "generate", RIG, "--out", str(d), "--frames", "200",
+           "--spp", "64", "--workers", "2", "--seed", "3"]
+    main = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while time.time() - t0 < 120 and not (d / "frames").is_dir() or not list((d / "frames").glob("*.json")):
+        if time.time() - t0 > 120:
+            break
+        time.sleep(0.05)
+    workers = _children(main.pid) - {main.pid}
+    workers = {w for w in workers if "spawn_main" in (Path("/proc") / str(w) / "cmdline").read_text(errors="replace")}
+    assert len(workers) == 2, workers
+    os.kill(main.pid, signal.SIGKILL)  # the main process only, not its group
+    main.wait()
+    t1 = time.time()
+    while any(_alive(w) for w in workers) and time.time() - t1 < 10:
+        time.sleep(0.05)
+    assert not any(_alive(w) for w in workers), "workers outlived their main process"
+    n = len(list((d / "frames").glob("*.json")))
+    time.sleep(1.0)
+    assert len(list((d / "frames").glob("*.json"))) == n  # nothing written after the kill

@@ -31,9 +31,9 @@ def test_analytic_study_writes_report_and_is_reproducible(tmp_path):
 
 
 @pytest.mark.parametrize("args,expected", [
-    (["--runs", "5"], "--runs = 5: allowed range is 10 to 1000000"),
+    (["--runs", "5"], "argument --runs: '5' is not an integer from 10 to 1000000"),
     (["--spp", "4"], "--spp = 4: allowed range is 16 to 65536"),
-    (["--jitter-px", "-1"], "--jitter-px = -1.0: allowed range is 0 to 5 px"),
+    (["--jitter-px", "-1"], "argument --jitter-px: '-1' is not a number from 0 to 5"),
     (["--rig", "nope"], "no such rig file"),
     (["--rig", "sun_sensor_2axis_diaphragm"], "not a seed-003 rig"),
 ])

@@ -26,6 +26,7 @@ def test_render_boresight_roi_centroid_on_the_exact_spot(tmp_path, capsys):
 
 def test_bad_state_is_one_line(capsys):
     assert main(["render", "boresight-roi", "--alpha", "nan"]) == 2
-    assert capsys.readouterr().err.strip() == "rigsim: error: --alpha = nan: allowed -3600 to 3600 arcsec"
+    assert capsys.readouterr().err.strip() == ("rigsim render boresight-roi: error: argument --alpha: 'nan' is not a number "
+                                               "from -3600 to 3600 (see rigsim render boresight-roi --help)")
     assert main(["render", "boresight-roi", "--camera", "sideways"]) == 2
     assert "has cameras forward, backward" in capsys.readouterr().err

@@ -98,9 +98,9 @@ def test_budget_with_the_papers_sources_matches_their_rss():
 
 
 @pytest.mark.parametrize("args,msg", [
-    (["--sweep-spp", "0"], "--sweep-spp = 0: allowed range is 1 to 65536"),
-    (["--threshold", "-1"], "--threshold = -1.0: allowed range is (0, 1000]"),
-    (["--repeat-frames", "500"], "--repeat-frames = 500: allowed range is 0 to 100"),
+    (["--sweep-spp", "0"], "argument --sweep-spp: '0' is not an integer from 1 to 65536"),
+    (["--threshold", "-1"], "argument --threshold: '-1' is not a number from 1e-06 to 1000"),
+    (["--repeat-frames", "500"], "argument --repeat-frames: '500' is not an integer from 0 to 100"),
 ])
 def test_cli_rendered_bad_arguments(args, msg):
     r = subprocess.run([sys.executable, "-m", "rigsim.cli", "run", "cube-mirror", *args], capture_output=True, text=True)
