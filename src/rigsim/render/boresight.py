@@ -89,10 +89,13 @@ class LoopRenderer:
 
     def __init__(self, rig: BoresightRig, camera: int | str = 0, detector: int = 0, *, window_px: int | None = None,
                  spp: int | None = None, roi_origin=None, follow: bool = False, sampler: str = "independent",
-                 truth_rays: int = 400_000):
+                 truth_rays: int = 400_000, deterministic: bool = True):
         register_plugins()
         import mitsuba as mi
 
+        # the ptracer splats with float32 atomic adds whose order varies between threads: one Dr.Jit thread
+        # makes a frame bit-identical for a seed whatever the machine's or the dataset's worker count
+        self.deterministic = bool(deterministic)
         cams = rig.cameras
         self.cam_index = camera if isinstance(camera, int) else [c.name for c in cams].index(camera)
         if not 0 <= self.cam_index < len(cams):
@@ -278,7 +281,8 @@ class LoopRenderer:
         """Expected photons per ROI pixel (h, w) and the ROI origin (u0, v0)."""
         if window_origin is None:
             window_origin = self._window_for(self.exact_uv(E_hrc, delta_f_mm))
-        img = self._scene.render(self._state(E_hrc, delta_f_mm, window_origin), seed=int(seed), spp=int(spp or self.spp))
+        img = self._scene.render(self._state(E_hrc, delta_f_mm, window_origin), seed=int(seed), spp=int(spp or self.spp),
+                                 single_thread=self.deterministic)
         img = np.ascontiguousarray(img[::-1, :])
         if self.photons_per_unit is None:
             self.photons_per_unit = self._calibrate()
@@ -290,7 +294,8 @@ class LoopRenderer:
         tr = self.truth(None, 0.0, origin)
         if tr["fraction_in_window"] < 1.0:
             raise ValueError("the reference spot does not fit in the ROI: enlarge window_px")
-        img = self._scene.render(self._state(None, 0.0, origin), seed=12345, spp=max(self.spp, 256))
+        img = self._scene.render(self._state(None, 0.0, origin), seed=12345, spp=max(self.spp, 256),
+                                 single_thread=self.deterministic)
         total = float(img.sum())
         if not total > 0:
             raise RuntimeError("the laser loop renders nothing at the reference: scene geometry is broken")
