@@ -110,3 +110,18 @@ def test_control_characters_from_a_rig_are_escaped_on_the_terminal(tmp_path, cap
     main(["rig", "check", str(p)])
     out = capsys.readouterr().out
     assert "\x1b" not in out and "evil\\x1b[2Jname" in out
+
+
+@pytest.mark.parametrize("extra,expect", [
+    (["--sweep", "dX=0:inf:1"], "must be START:STOP:STEP (finite"),
+    (["--sweep", "dX=nan,1"], "comma list of finite numbers"),
+    (["--sweep", "dX=0:99999:1 dY=0:99999:1"], "the grid has 10000000000 poses (at most 10000000"),
+    (["--sweep", "dX=0:1:0"], "STEP > 0"),
+    (["--frames", "2", "--scheduler", "garbage"], "expected a Dask scheduler address"),
+    (["--frames", "2", "--generator", "nope"], "argument --generator: invalid choice: 'nope'"),
+])
+def test_bad_dataset_options_are_one_line_and_write_nothing(tmp_path, extra, expect):
+    gen = [] if "--generator" in extra else ["--generator", "aiming-camera"]
+    r = _run(["dataset", "generate", "sun_sensor_2axis_diaphragm", "--out", str(tmp_path / "ds"), *gen, *extra], tmp_path)
+    assert r.returncode == 2 and expect in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "ds").exists()

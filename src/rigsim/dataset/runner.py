@@ -23,6 +23,7 @@ import datetime as _dt
 import json
 import os
 import platform
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -153,12 +154,18 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
                                                                              else "has one renderer (no --renderer)"))
     if workers is not None and not (1 <= workers <= 512):
         raise DatasetError(f"--workers = {workers}: allowed range is 1 to 512")
+    if isinstance(scheduler, str) and not re.fullmatch(r"((tcp|tls|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}", scheduler):
+        raise DatasetError(f"--scheduler {scheduler!r}: expected a Dask scheduler address HOST:PORT or tcp://HOST:PORT")
     if not (0 <= retries <= 20):
         raise DatasetError(f"--retries = {retries}: allowed range is 0 to 20")
     opts = {"spp": int(spp)}
     if renderer is not None:
         opts["renderer"] = renderer
     gen = make_generator(kind, rig_text, str(rig_path), **opts)  # the rig is validated before anything is written
+    if sweep is not None:
+        from rigsim.dataset.generators.base import parse_sweep
+
+        parse_sweep(sweep, gen.sweepable())  # and the sweep
     root = Path(out)
     if root.exists() and not root.is_dir():
         raise DatasetError(f"--out {root}: is a file; expected a folder (new or a dataset's)")
@@ -339,7 +346,7 @@ def _run_dask(scheduler, kind, rig_text, rig_source, opts, root, fmt, chunks, re
         try:
             client = Client(scheduler, timeout="10s")
             own = True
-        except OSError as e:
+        except (OSError, ValueError, TypeError) as e:
             raise DatasetError(f"--scheduler {scheduler!r}: cannot connect ({e})") from None
     try:
         futs = client.map(_dask_task, [kind] * len(chunks), [rig_text] * len(chunks), [rig_source] * len(chunks),

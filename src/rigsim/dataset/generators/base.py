@@ -21,7 +21,7 @@ def parse_sweep(spec: str, allowed: list[str]) -> dict[str, np.ndarray]:
         try:
             if ":" in vals:
                 a, b, s = (float(x) for x in vals.split(":"))
-                if s <= 0 or b < a:
+                if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(s)) or s <= 0 or b < a:
                     raise ValueError
                 n = int(math.floor((b - a) / s + 1e-9)) + 1
                 if n > 100000:
@@ -29,13 +29,21 @@ def parse_sweep(spec: str, allowed: list[str]) -> dict[str, np.ndarray]:
                 v = a + s * np.arange(n)
             else:
                 v = np.array([float(x) for x in vals.split(",")])
-        except ValueError:
-            raise DatasetError(f"--sweep {spec!r}: '{vals}' must be START:STOP:STEP (STEP > 0, STOP ≥ START) "
-                               "or a comma list of numbers") from None
+            if not np.all(np.isfinite(v)):
+                raise ValueError
+        except (ValueError, OverflowError):
+            raise DatasetError(f"--sweep {spec!r}: '{vals}' must be START:STOP:STEP (finite, STEP > 0, STOP ≥ START) "
+                               "or a comma list of finite numbers") from None
         out[name] = v
     if not out:
         raise DatasetError(f"--sweep {spec!r}: empty")
+    total = math.prod(len(v) for v in out.values())
+    if total > MAX_SWEEP_FRAMES:
+        raise DatasetError(f"--sweep {spec!r}: the grid has {total} poses (at most {MAX_SWEEP_FRAMES}, as --frames)")
     return out
+
+
+MAX_SWEEP_FRAMES = 10_000_000
 
 
 TruthRow = dict

@@ -51,8 +51,11 @@ class SunSensorGenerator:
         enc = {a.label: float(rng.normal(0.0, a.encoder_sigma_arcsec)) for a in tt.axes}
         return {"perpendicularity_arcsec": perp, "encoder_error_arcsec": enc}
 
+    def sweepable(self) -> list[str]:
+        return [a.label for a in self.rig.turntable.axes]
+
     def plan(self, n_frames: int | None, sweep: str | None, seed: int) -> list[dict]:
-        labels = [a.label for a in self.rig.turntable.axes]
+        labels = self.sweepable()
         rng_range = self.rig.procedure.sweep_range_deg
         frames = []
         if sweep:
