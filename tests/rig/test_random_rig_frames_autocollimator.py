@@ -1,0 +1,23 @@
+"""100 random autocollimator rigs (tests/rig/random_rigs.py), each rendered once in every kind it makes: the sun
+sensor (4 spp, centroid within 0.5 px of the truth), a chessboard through its camera, and the autocollimator's frame (64 spp): its centroid near the exact one (tolerance in every_kind.py), unless the truth flags a cut beam.
+The two methods live in two files so that the parallel runner gives each its own worker."""
+
+import pytest
+from every_kind import render_every_kind
+from hypothesis import given
+from random_rigs import build, draw, rig_dicts
+
+SEEN: set[str] = set()
+
+
+@pytest.mark.slow
+@draw(108)  # derandomized hypothesis repeats a few draws: 108 asked give 100 distinct rigs or more
+@given(rig_dicts("autocollimator"))
+def test_random_autocollimator_rig_renders_a_frame_of_every_kind(d):
+    SEEN.add(repr(d))
+    render_every_kind(build(d))
+
+
+@pytest.mark.slow
+def test_100_different_autocollimator_rigs_were_rendered():
+    assert len(SEEN) >= 100
