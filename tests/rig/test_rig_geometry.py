@@ -79,3 +79,27 @@ def test_a_sun_image_under_two_pixels_is_refused():
     # twice the focal length: 2.0 px, accepted by this line
     ok = _custom(wide, focal_length_mm=2 * 0.6567 * 1.001)
     assert next(g for g in geometry_summary(ok) if g.item == "sun image").status == "ok"
+
+
+def test_a_cube_around_the_sensor_is_refused():
+    """The sensor's optical centre is the mount's origin; a 25 mm cube reaches any point within
+    25·√3/2 = 21.65 mm of its centre."""
+    rig = load_rig("sun_sensor_2axis_diaphragm")
+
+    def at(c):
+        return rig.model_copy(update={"cube": rig.cube.model_copy(update={"centre_in_mount_mm": c})})
+
+    with pytest.raises(RigError, match=r"cube\.centre_in_mount_mm, cube\.edge_mm: cube: .*reaches the sensor's optical centre"):
+        check_geometry(at([0.0, 0.0, -21.6]))
+    assert next(g for g in geometry_summary(at([0.0, 0.0, -21.7])) if g.item == "cube").status == "ok"
+
+
+def test_a_sensor_facing_away_is_refused_with_the_likely_cause():
+    from rigsim.rig.cube_mirror import Orientation
+
+    rig = load_rig("sun_sensor_2axis_diaphragm")
+    away = rig.model_copy(update={"sun_sensor": rig.sun_sensor.model_copy(
+        update={"R_sun_from_mount": Orientation(euler_seq="xyz", euler_deg=[180.35, -0.6, 12.0])})})
+    assert sweep_landing(away)[0] == 0
+    with pytest.raises(RigError, match=r"R_sun_from_mount: sweep: .* 0 of 625 poses .*face away"):
+        check_geometry(away)

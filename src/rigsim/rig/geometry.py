@@ -80,9 +80,18 @@ def geometry_summary(rig: CubeMirrorRig) -> list[GeometryLine]:
     status = "error" if landed < max(MIN_SWEEP_POSES, 0.25 * n) else ("warning" if landed < 0.5 * n else "ok")
     out.append(GeometryLine("sweep", f"±{proc.sweep_range_deg:g}° every {proc.sweep_step_deg:g}° about "
                             f"{'/'.join(proc.sweep_axes)}: {landed} of {n} poses put the sun on the detector"
-                            + ("" if status == "ok" else f" (the field is ±{fu:.1f}° × ±{fv:.1f}°: sweep within it)"), status, fields))
-    out.append(GeometryLine("cube", f"{cube.edge_mm:g} mm faces, centre {cube.centre_in_mount_mm} mm in the mount; "
-                            f"faces {' and '.join(proc.faces)}"))
+                            + ("" if status == "ok" else (
+                                " (no pose at all: does the sensor face away from the sun simulator? check "
+                                "sun_sensor.R_sun_from_mount)" if landed == 0 else
+                                f" (the field is ±{fu:.1f}° × ±{fv:.1f}°: sweep within it)")), status,
+                            (*fields, "sun_sensor.R_sun_from_mount") if landed == 0 else fields))
+    # the sensor's optical centre is the mount's origin: a cube around it would blind it
+    d = math.dist(cube.centre_in_mount_mm, (0.0, 0.0, 0.0))
+    engulfs = d <= cube.edge_mm * math.sqrt(3) / 2
+    out.append(GeometryLine("cube", f"{cube.edge_mm:g} mm faces, centre {cube.centre_in_mount_mm} mm in the mount "
+                            f"({d:.1f} mm from the sensor); faces {' and '.join(proc.faces)}"
+                            + (": the cube reaches the sensor's optical centre (the mount's origin)" if engulfs else ""),
+                            "error" if engulfs else "ok", ("cube.centre_in_mount_mm", "cube.edge_mm")))
     if proc.method == "diaphragm":
         ds, ac = rig.diaphragm_screen, rig.aiming_camera
         hole_ok = ds.hole_diameter_mm <= cube.edge_mm
