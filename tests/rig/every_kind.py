@@ -114,3 +114,27 @@ def render_every_kind(rig) -> dict:
             assert out["autocollimator"] < tol, (sm.uv, tr["spot_pixel_centroid_uv"], tol)
     assert out["sun-sensor"] < 0.5, out
     return out
+
+
+def rendered_rig_tests(method: str):
+    """The two slow tests of one method's file: ``draw`` hypothesis rigs each rendered in every kind, then a
+    check that at least 100 of them were different (derandomized hypothesis repeats a few draws: 108 asked
+    give 100 distinct rigs or more). One file per method, so that the parallel runner gives each a worker."""
+    import pytest
+    from hypothesis import given
+    from random_rigs import build, draw, rig_dicts
+
+    seen: set[str] = set()
+
+    @pytest.mark.slow
+    @draw(108)
+    @given(rig_dicts(method))
+    def renders_a_frame_of_every_kind(d):
+        seen.add(repr(d))
+        render_every_kind(build(d))
+
+    @pytest.mark.slow
+    def at_least_100_different_rigs_were_rendered():
+        assert len(seen) >= 100
+
+    return renders_a_frame_of_every_kind, at_least_100_different_rigs_were_rendered

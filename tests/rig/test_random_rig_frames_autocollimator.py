@@ -1,23 +1,8 @@
 """100 random autocollimator rigs (tests/rig/random_rigs.py), each rendered once in every kind it makes: the sun
-sensor (4 spp, centroid within 0.5 px of the truth), a chessboard through its camera, and the autocollimator's frame (64 spp): its centroid near the exact one (tolerance in every_kind.py), unless the truth flags a cut beam.
-The two methods live in two files so that the parallel runner gives each its own worker."""
+sensor (4 spp, centroid within 0.5 px of the truth), a chessboard through its camera, and the autocollimator's
+frame (64 spp): its centroid near the exact one (tolerance in every_kind.py), unless the truth flags a cut beam."""
 
-import pytest
-from every_kind import render_every_kind
-from hypothesis import given
-from random_rigs import build, draw, rig_dicts
+from every_kind import rendered_rig_tests
 
-SEEN: set[str] = set()
-
-
-@pytest.mark.slow
-@draw(108)  # derandomized hypothesis repeats a few draws: 108 asked give 100 distinct rigs or more
-@given(rig_dicts("autocollimator"))
-def test_random_autocollimator_rig_renders_a_frame_of_every_kind(d):
-    SEEN.add(repr(d))
-    render_every_kind(build(d))
-
-
-@pytest.mark.slow
-def test_100_different_autocollimator_rigs_were_rendered():
-    assert len(SEEN) >= 100
+test_random_autocollimator_rig_renders_a_frame_of_every_kind, test_100_different_autocollimator_rigs_were_rendered = \
+    rendered_rig_tests("autocollimator")
