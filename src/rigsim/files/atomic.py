@@ -42,3 +42,18 @@ def atomic_write_bytes(path, data: bytes) -> Path:
             pass
         raise
     return path
+
+
+def atomic_write_text(path, text: str) -> Path:
+    """:func:`atomic_write_bytes` of UTF-8 text."""
+    return atomic_write_bytes(path, str(text).encode("utf-8"))
+
+
+def save_figure(fig, path, **savefig_kw) -> Path:
+    """A Matplotlib figure written through :func:`atomic_write_bytes` (format from the suffix)."""
+    import io
+
+    buf = io.BytesIO()
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    fig.savefig(buf, format=fmt, **savefig_kw)
+    return atomic_write_bytes(path, buf.getvalue())

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import ExportError
+from rigsim.files.atomic import atomic_write_text
 
 
 def _check_builtin(d, where="scene"):
@@ -94,7 +95,7 @@ def perspective_from_intrinsics(fx: float, fy: float, cx: float, cy: float, widt
 def write_xml(path: Path, scene: dict, comments: list[str] | None = None) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(scene_dict_to_xml(scene, comments))
+    atomic_write_text(path, scene_dict_to_xml(scene, comments))
     return path
 
 

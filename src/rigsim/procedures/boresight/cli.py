@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError
+from rigsim.files.atomic import atomic_write_text
 from rigsim.files.options import SEED, SPP, integer, number
 
 __all__ = ["add_cli", "cmd_run_boresight"]
@@ -236,6 +237,6 @@ def cmd_run_boresight(args) -> int:
         print(f"  [{c['verdict']:>13s}] {c['claim']}\n                  {c['measured']}")
     print(f"\nreport: {report}  ({time.perf_counter() - t0:.0f} s)")
     if args.json_out:
-        Path(args.json_out).write_text(json.dumps(key_numbers(res), indent=1, default=float))
+        atomic_write_text(Path(args.json_out), json.dumps(key_numbers(res), indent=1, default=float))
         print(f"wrote {args.json_out}")
     return 0

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rigsim.files.atomic import atomic_write_text, save_figure
 from rigsim.procedures.boresight.studies import PARAMS
 
 __all__ = ["write_report", "key_numbers"]
@@ -61,7 +62,7 @@ def _sweep_figure(rows, xlabel, title, path, *, logx=False, xscale=1.0, relative
                 ha="right", va="bottom" if note_loc == "lower" else "top", fontsize=7, color=C_DVAD)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -87,7 +88,7 @@ def _fig5(res, path):
                  f"(true state α = β = γ = {res['state']['arcsec']:g}″, Δf = {res['state']['df_um']:g} µm); "
                  "dotted: ±3σ of eqs 19–22")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -116,7 +117,7 @@ def _fig8(res, path):
     axs[0].legend(fontsize=6.5, loc="lower right")
     fig.suptitle("Fig 8: systematic difference of the two methods (noise-free); red dotted: 0.1″ (angles), 0.02 mm (Δf)")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -181,7 +182,7 @@ def _orbit(res, path):
                  f"(grey line: end of orbit 1), {o['frames_rendered']} rendered CMOS ROIs of {o['window_px']}² px, "
                  "thresholded CoM, consistent reading", fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.93))
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -211,7 +212,7 @@ def _rois(res, path):
     fig.suptitle(f"Rendered CMOS ROIs (DN, 16×16 px around the spot of a {res['orbit']['window_px']}² ROI) at "
                  f"t = {rois[0]['t_min']:.0f} min; the spot is the image of the laser's 25 µm core")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
     return True
 
@@ -367,12 +368,12 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
         if "rois" in files:
             L.append(f"![ROIs]({files['rois']})\n")
     L.append(f"Analyses: {res['analysis_seconds']:.1f} s; total {res['seconds']:.0f} s.\n")
-    (out / "report.md").write_text("\n".join(L), encoding="utf-8")
+    atomic_write_text((out / "report.md"), "\n".join(L))
     js = {k: v for k, v in res.items() if k not in ("fig5",)}
     js["fig5"] = {k: v for k, v in res["fig5"].items() if k != "errors"}
     if "orbit" in js:
         js["orbit"] = {k: v for k, v in js["orbit"].items() if not k.startswith("_")}
-    (out / "boresight.json").write_text(json.dumps(js, indent=1, ensure_ascii=False, default=float), encoding="utf-8")
+    atomic_write_text((out / "boresight.json"), json.dumps(js, indent=1, ensure_ascii=False, default=float))
     from rigsim.reporting import markdown_to_html
 
     markdown_to_html(out / "report.md")

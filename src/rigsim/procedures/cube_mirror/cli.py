@@ -13,6 +13,7 @@ import numpy as np
 
 import rigsim
 from rigsim.errors import CliError
+from rigsim.files.atomic import atomic_write_text
 from rigsim.files.names import file_stem, slug
 from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.procedures.cube_mirror import file_commands, render_commands
@@ -212,7 +213,7 @@ def _run_cube_mirror_rendered(args) -> int:
     print("\nWall time by stage (s): " + ", ".join(f"{k} {v:.1f}" for k, v in wall.items()))
     print(f"report: {files['report']}  (plots: " + ", ".join(p.name for k, p in files.items() if k not in ("report", "json")) + ")")
     if args.json_out:
-        Path(args.json_out).write_text(files["json"].read_text())
+        atomic_write_text(Path(args.json_out), files["json"].read_text())
         print(f"wrote {args.json_out}")
     return 0
 
@@ -314,7 +315,7 @@ def _run_cube_mirror_analytic(args) -> int:
                   "rigsim reports the resulting σ about each cube axis (docs/error_budget.md).")
         out["budget"] = [{"source": r.source, "sigma_arcsec": r.sigma_arcsec.tolist(), "paper_arcsec": r.paper_arcsec} for r in rows_b]
     if args.json_out:
-        Path(args.json_out).write_text(json.dumps(out, indent=2))
+        atomic_write_text(Path(args.json_out), json.dumps(out, indent=2))
         print(f"\nwrote {args.json_out}")
     return 0
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rigsim.files.atomic import atomic_write_text, save_figure
 from rigsim.frames import ARCSEC_PER_RAD
 
 
@@ -64,7 +65,7 @@ def plot_calibration_residuals(campaign, path: Path) -> Path:
     ax.set_title("residual vs field position")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -108,7 +109,7 @@ def plot_search_path(campaign, path: Path) -> Path:
         ins.set_aspect("equal")
         ins.tick_params(labelsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -132,7 +133,7 @@ def plot_budget_histogram(budget, path: Path, paper_rss: float | None = None) ->
             if k == 0:
                 ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -284,7 +285,7 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
         for k, v in wall_times.items():
             L.append(f"| {k} | {v:.2f} |")
         L.append("")
-    (out / "report.md").write_text("\n".join(L) + "\n")
+    atomic_write_text((out / "report.md"), "\n".join(L) + "\n")
     files["report"] = out / "report.md"
     rec = {"rig": rig.name, "rig_file": rig_path, "seed": campaign.seed, "axis_order": r.axis_order,
            "error_arcsec": {"R_cube_from_sun": r.error_arcsec.tolist(), "R_sun_from_rot": r.sun_error_arcsec.tolist(),
@@ -301,7 +302,7 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
     if budget is not None:
         rec["budget"] = [{"source": b.source, "sigma_arcsec": b.sigma_arcsec.tolist(), "paper_arcsec": b.paper_arcsec,
                           "n": b.n} for b in budget.rows]
-    (out / "campaign.json").write_text(json.dumps(rec, indent=1, default=float))
+    atomic_write_text((out / "campaign.json"), json.dumps(rec, indent=1, default=float))
     files["json"] = out / "campaign.json"
     from rigsim.reporting import markdown_to_html
 

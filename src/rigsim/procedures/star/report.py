@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.estimation.star_calibration import MODELS
+from rigsim.files.atomic import atomic_write_text, save_figure
 from rigsim.procedures.star.pipeline import per_star_residuals
 from rigsim.procedures.star.study import CASES, CLAIM
 
@@ -51,7 +52,7 @@ def _plot_frame(path, res):
     ax[1].set_ylabel("v [px]")
     ax[1].legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -85,7 +86,7 @@ def _plot_residuals(path, res):
     fig.suptitle("Star residuals across the field (measured − re-projected catalogue star, attitude fitted per frame); "
                  "arrows magnified", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -122,7 +123,7 @@ def _plot_ekf(path, res):
     fig.suptitle("EKF convergence over the image sequence (band: ±1σ predicted by the filter); prior = the nominal "
                  "principal point", fontsize=11)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -147,7 +148,7 @@ def _plot_study(path, study, weighting):
     axes[0].legend(fontsize=8, loc="upper left")
     fig.suptitle("Monte-Carlo study: principal-point accuracy of the EKF (improved ADS is off scale: see the report)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -176,7 +177,7 @@ def _plot_observability(path, res):
     axes[0].legend(fontsize=8)
     fig.suptitle("Observability of the principal point (u0, v0) over the 20-frame sequence, f and k known", fontsize=11)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -341,7 +342,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
                    + "; mean predicted σ " + ", ".join(f"{n} {v:.3g}" for n, v in zip(("f", "u0", "v0", "k1", "k2"), bs.mean(axis=0))) + ".", ""]
     md += ["## Wall time (s)", "", ", ".join(f"{k} {v:.2f}" for k, v in res.times.items()), ""]
     files["report"] = out / "report.md"
-    files["report"].write_text("\n".join(md) + "\n")
+    atomic_write_text(files["report"], "\n".join(md) + "\n")
     data = {"seed": res.seed, "renderer": res.renderer, "truth_theta": t.tolist(),
             "ident": {k: v for k, v in res.ident_stats.items()}, "centroids": res.centroid_stats,
             "batch": {"theta": b.theta.tolist(), "sigma": b.sigma.tolist(), "chi2_reduced": b.chi2_reduced},
@@ -355,7 +356,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
                          "rms_px": {f"{c}/{m}": study.rms((c, m, w)).tolist() for c in CASES for m in study.models},
                          "verdict": claim_verdict(study)}
     files["json"] = out / "star_calibration.json"
-    files["json"].write_text(json.dumps(data, indent=1, default=float))
+    atomic_write_text(files["json"], json.dumps(data, indent=1, default=float))
     from rigsim.reporting import markdown_to_html
 
     files["html"] = markdown_to_html(files["report"])
