@@ -15,36 +15,6 @@ AC_SPP = 64
 AC_TOLERANCE_PX = 4.3 * 0.035 * math.sqrt(64 / AC_SPP)
 
 
-def _lens_area(rho: np.ndarray, a: float, b: float) -> np.ndarray:
-    """Area common to two disks of radii a and b whose centres are rho apart."""
-    rho = np.asarray(rho, float)
-    out = np.where(rho <= abs(a - b), math.pi * min(a, b) ** 2, 0.0)
-    m = (rho > abs(a - b)) & (rho < a + b)
-    p = rho[m]
-    ca = np.clip((p * p + a * a - b * b) / (2 * p * a), -1.0, 1.0)
-    cb = np.clip((p * p + b * b - a * a) / (2 * p * b), -1.0, 1.0)
-    k = np.sqrt(np.clip((-p + a + b) * (p + a - b) * (p - a + b) * (p + a + b), 0.0, None))
-    out[m] = a * a * np.arccos(ca) + b * b * np.arccos(cb) - 0.5 * k
-    return out
-
-
-def visible_spot_offset_mm(offset_mm, hole_radius_mm: float, blur_radius_mm: float, level: float = 0.1):
-    """Where the concentricity measurement should find the returned spot, by a second method: on the screen
-    plane the spot is the collimated pencil's disk (the hole's radius r) blurred by the divergence disk (radius
-    R), i.e. the two disks' overlap area as a function of the distance to the spot's centre, minus the light
-    that falls back into the hole; its centroid over the part above ``level`` of its peak (the measurement's
-    threshold). Integrated on a grid of r/60."""
-    d = np.asarray(offset_mm, float)
-    r, R = float(hole_radius_mm), float(blur_radius_mm)
-    h = min(r, R) / 60.0
-    n = math.ceil((float(np.abs(d).max()) + r + R) / h) + 2
-    x = h * np.arange(-n, n + 1)
-    X, Y = np.meshgrid(x, x)
-    img = _lens_area(np.hypot(X - d[0], Y - d[1]), r, R) * (np.hypot(X, Y) >= r)
-    w = img * (img > level * img.max())
-    return np.array([(w * X).sum(), (w * Y).sum()]) / w.sum()
-
-
 def render_every_kind(rig) -> dict:
     """One frame of every kind the rig makes, each measured by its file stage against its truth."""
     from rigsim.imaging.frame_spots import measure_frame, single_spot
@@ -74,6 +44,7 @@ def render_every_kind(rig) -> dict:
     out["target"] = int(vis.sum())
     assert tf.dn.shape == (cam.height, cam.width) and vis.sum() > 0 and tf.dn.max() > tf.dn.min()
     if rig.procedure.method == "diaphragm":
+        from rigsim.optics.screen_return import visible_return_centre_mm
         from rigsim.procedures.cube_mirror.null_files import measure_concentricity
         from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
         from rigsim.truth.cube_mirror.placement import diaphragm_layout
@@ -87,7 +58,7 @@ def render_every_kind(rig) -> dict:
         # the light lost into the hole pulls the measured centre away from it: by 3 % of the offset on the
         # default rig, by 90 % when the divergence blur is no larger than the hole (a short screen distance)
         op = rig.aiming_camera.object_pixel_mm
-        ex = visible_spot_offset_mm(af.truth.offset_mm, renderer.geometry.hole_radius_mm, renderer.R_div_mm) / op
+        ex = visible_return_centre_mm(af.truth.offset_mm, renderer.geometry.hole_radius_mm, renderer.R_div_mm) / op
         out["aiming-camera"] = float(np.hypot(*(m["offset_px"] - ex)))
         assert out["aiming-camera"] < 0.5 + 0.02 * np.hypot(*ex), (m["offset_px"], ex)
     else:

@@ -11,12 +11,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from rigsim.errors import RigError
+from rigsim.optics.screen_return import hole_pull_gain
 from rigsim.optics.sun_disk import max_spot_extent_px, sun_window_px
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TurntableModel
 
 MIN_SWEEP_POSES = 8  # the sun-sensor least squares needs at least this many points
 MIN_SUN_IMAGE_PX = 2.0  # a sun image narrower than this lights fewer than the 3 connected pixels a frame spot needs
+MAX_HOLE_PULL_GAIN = 1.5  # above: the return is mostly lost into the hole near the null (a warning)
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,17 @@ def geometry_summary(rig: CubeMirrorRig) -> list[GeometryLine]:
         out.append(GeometryLine("hole vs face", f"Ø {ds.hole_diameter_mm:g} mm beam on a {cube.edge_mm:g} mm face"
                                 + ("" if hole_ok else ": the beam overfills the face, the returned spot is clipped"),
                                 "ok" if hole_ok else "error", ("diaphragm_screen.hole_diameter_mm", "cube.edge_mm")))
-        ret = ds.hole_diameter_mm + 2 * 2 * ds.distance_to_cube_mm * math.tan(full / 2)
+        blur = 2 * ds.distance_to_cube_mm * math.tan(full / 2)
+        gain = hole_pull_gain(ds.hole_diameter_mm / 2, blur)
+        pulled = gain > MAX_HOLE_PULL_GAIN
+        out.append(GeometryLine("return vs hole", f"divergence blur R = {blur:.2f} mm around the Ø {ds.hole_diameter_mm:g} mm "
+                                f"pencil: near the null the visible return reads {gain:.2f}× the geometric offset"
+                                + (" (most of the return falls back into the hole: the null is still unbiased, but "
+                                   "the concentricity threshold means less than it says; a longer screen distance or a "
+                                   "smaller hole helps)" if pulled else ""), "warning" if pulled else "ok",
+                                ("diaphragm_screen.hole_diameter_mm", "diaphragm_screen.distance_to_cube_mm",
+                                 "sun_simulator.collimation_full_angle_arcmin")))
+        ret = ds.hole_diameter_mm + 2 * blur
         fw, fh = (r * ac.object_pixel_mm for r in ac.resolution_px)
         fits = ret < min(fw, fh)
         out.append(GeometryLine("aiming camera", f"{ac.resolution_px[0]}×{ac.resolution_px[1]} px at "
