@@ -87,25 +87,31 @@ def render_every_kind(rig) -> dict:
     return out
 
 
-def rendered_rig_tests(method: str):
-    """The two slow tests of one method's file: ``draw`` hypothesis rigs each rendered in every kind, then a
-    check that at least 100 of them were different (derandomized hypothesis repeats a few draws: 108 asked
-    give 100 distinct rigs or more). One file per method, so that the parallel runner gives each a worker."""
+def rendered_rig_tests(method: str, draws: int, distinct: int, parts: int = 1, part: int = 0):
+    """The two slow tests of one file: ``draws`` hypothesis rigs of ``method`` (derandomized: the same rigs in
+    every run and every file), of which this file renders every ``parts``-th from number ``part`` in every kind,
+    then a check that at least ``distinct`` of those were different (derandomized hypothesis repeats a few
+    draws). Files go to different workers of the parallel runner: a slow method is spread over several."""
+    import itertools
+
     import pytest
     from hypothesis import given
     from random_rigs import build, draw, rig_dicts
 
     seen: set[str] = set()
+    number = itertools.count()
 
     @pytest.mark.slow
-    @draw(108)
+    @draw(draws)
     @given(rig_dicts(method))
     def renders_a_frame_of_every_kind(d):
+        if next(number) % parts != part:
+            return
         seen.add(repr(d))
         render_every_kind(build(d))
 
     @pytest.mark.slow
-    def at_least_100_different_rigs_were_rendered():
-        assert len(seen) >= 100
+    def enough_different_rigs_were_rendered():
+        assert len(seen) >= distinct
 
-    return renders_a_frame_of_every_kind, at_least_100_different_rigs_were_rendered
+    return renders_a_frame_of_every_kind, enough_different_rigs_were_rendered
