@@ -213,3 +213,28 @@ def test_the_same_seed_gives_byte_identical_frames_for_one_or_two_workers(tmp_pa
                      progress=False, chunk=1)
         shas.append({k: v for k, v in r.manifest["files_sha256"].items() if k.endswith((".png", ".fits"))})
     assert len(shas[0]) >= 2 and shas[0] == shas[1]
+
+
+def test_workers_choose_the_tested_libllvm_whatever_drjit_libllvm_path_says(tmp_path):
+    """A user's DRJIT_LIBLLVM_PATH naming a library that fails the self-test (here a file that is no libLLVM at
+    all, standing in for libLLVM 15/16, which abort the interpreter) must not reach drjit in any process: every
+    worker renders with the llvm variant and the frames match a single worker's byte for byte."""
+    from rigsim.render.backend import loaded_libllvm  # noqa: F401  (the module must import without drjit)
+
+    bad = tmp_path / "lib" / "libLLVM-15.so.1"
+    bad.parent.mkdir()
+    bad.write_bytes(b"\x7fELF not a library")
+    env = {**os.environ, "DRJIT_LIBLLVM_PATH": str(bad), "RIGSIM_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("RIGSIM_VARIANT", None)
+    shas = []
+    for w in (1, 2):
+        out = tmp_path / f"w{w}"
+        cmd = [sys.executable, "-m", "rigsim", "dataset", "generate", RIG, "--out", str(out), "--frames", "2",
+               "--spp", "16", "--workers", str(w), "--seed", "7"]
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        variants = {json.loads(p.read_text())["render"].get("mitsuba_variant") for p in (out / "frames").glob("*.json")}
+        assert variants == {"llvm_ad_mono"}, (variants, r.stderr[-2000:])
+        m = json.loads((out / "manifest.json").read_text())
+        shas.append({k: v for k, v in m["files_sha256"].items() if k.endswith(".png")})
+    assert len(shas[0]) == 2 and shas[0] == shas[1]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -80,12 +81,16 @@ def build_sidecar(*, truth: dict | None = None, render: dict | None = None,
         flags["saturated"] = bool(detector_frame.saturated_pixels > 0)
         if detector is None and "config" in det_meta:
             detector = det_meta["config"]
+    render = dict(render or {})
+    mi = sys.modules.get("mitsuba")
+    if mi is not None and render.get("renderer") != "analytic" and "mitsuba_variant" not in render and mi.variant():
+        render["mitsuba_variant"] = mi.variant()  # llvm_ad_mono unless no libLLVM passed the self-test
     side = {
         "format": SIDECAR_FORMAT,
         "seed": seed,
         "flags": flags,
         "truth": truth or {},
-        "render": render or {},
+        "render": render,
         "detector": detector or {},
         "detector_frame": det_meta or {},
         "pose": pose or {},

@@ -1,0 +1,7 @@
+"""``python -m rigsim`` is the ``rigsim`` command."""
+
+import sys
+
+from rigsim.cli import main
+
+sys.exit(main())
