@@ -171,11 +171,20 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdout()
         return 141
     except OSError as exc:
+        from rigsim.reporting import safe_text
+
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):
             print(f"rigsim: error: no space left on the device writing {exc.filename or 'the output'}; free some and "
                   "run the command again", file=sys.stderr)
             return 1
+        if exc.filename is not None and exc.errno in _PATH_ERRNOS:  # a path given by the user that cannot be used
+            print(f"rigsim: error: {safe_text(str(exc.filename), 300)}: {exc.strerror}", file=sys.stderr)
+            return 2
         raise
+
+
+_PATH_ERRNOS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.ELOOP, errno.EACCES, errno.EPERM,
+                errno.EROFS, errno.EEXIST, errno.ENXIO}
 
 
 def _silence_stdout() -> None:

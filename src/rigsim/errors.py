@@ -9,7 +9,7 @@ derive from ``ValueError`` so that generic ``except ValueError`` code keeps work
 from __future__ import annotations
 
 __all__ = ["RigsimError", "CliError", "RigError", "GeometryError", "SearchError", "DatasetError", "InputError", "ViewError",
-           "ExportError", "GeometryWarning", "SaturationWarning"]
+           "ExportError", "ResourceError", "GeometryWarning", "SaturationWarning"]
 
 
 class RigsimError(Exception):
@@ -53,6 +53,10 @@ class DatasetError(RigsimError):
 
 class ViewError(RigsimError, ValueError):
     """A 3D view cannot be built or written (bad pose, face, size or output path)."""
+
+
+class ResourceError(RigsimError):
+    """A run that cannot fit in the machine's memory or on the output disk (known before it starts)."""
 
 
 class ExportError(RigsimError, ValueError):

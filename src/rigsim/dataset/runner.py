@@ -24,6 +24,7 @@ import json
 import os
 import platform
 import re
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +43,7 @@ from rigsim.dataset.store import (
 )
 from rigsim.errors import DatasetError
 from rigsim.files.atomic import atomic_write_bytes
+from rigsim.render.budget import check_disk, cpu_count, fit_processes, process_bytes
 
 PLAN_KEYS = ("generator", "rig_sha256", "seed", "frames", "sweep", "options")
 FAIL_ENV = "RIGSIM_DATASET_INJECT_FAULT"  # tests: "crash:INDEX" or "raise:INDEX" (once per dataset)
@@ -166,6 +168,10 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
         from rigsim.dataset.generators.base import parse_sweep
 
         parse_sweep(sweep, gen.sweepable())  # and the sweep
+    if not scheduler:
+        fit_processes(1, int(gen.pixels_per_frame), f"{rig_path}: {gen.detector_field}")  # before anything is written
+    if frames is not None:
+        check_disk(out, frames, int(gen.pixels_per_frame), f"--out {out}")  # before the plan is drawn
     root = Path(out)
     if root.exists() and not root.is_dir():
         raise DatasetError(f"--out {root}: is a file; expected a folder (new or a dataset's)")
@@ -201,6 +207,7 @@ def _generate_locked(root, t0, gen, opts, kind, rig_path, rig_text, frames, swee
         params = gen.plan(frames, sweep, seed)
         if not params:
             raise DatasetError("the plan has no frame whose spot lands on the detector (check --sweep)")
+        check_disk(root, len(params), int(gen.pixels_per_frame), f"--out {root}")  # before the plan is written
         atomic_write_json(plan_path, _plan_record(kind, rig_path, rig_text, seed, frames, sweep, opts, params))
         params = read_json(plan_path, "the dataset's plan")["frame_params"]  # as the workers and resumes see it
     if not isinstance(params, list) or not all(isinstance(p, dict) for p in params):
@@ -210,6 +217,16 @@ def _generate_locked(root, t0, gen, opts, kind, rig_path, rig_text, frames, swee
     todo = [i for i in range(n) if not frame_complete(root, i, fmt, params=params[i])]
     n_resumed = n - len(todo)
     chunks = [[(i, params[i]) for i in todo[k:k + chunk]] for k in range(0, len(todo), chunk)]
+    w = workers or min(cpu_count(), 8)
+    if todo:  # bounded up front: the memory holds the workers (fewer workers if need be), the disk the frames
+        pixels = int(gen.pixels_per_frame)
+        check_disk(root, len(todo), pixels, f"--out {root}")
+        if not scheduler:
+            fit = fit_processes(w, pixels, f"{rig_path}: {gen.detector_field}")
+            if fit < w:
+                print(f"rigsim: note: {w} workers of {process_bytes(pixels) / 1e9:.1f} GB each do not fit in the "
+                      f"available memory; rendering with {fit}", file=sys.stderr)
+                w = fit
     from tqdm import tqdm
 
     bar = tqdm(total=n, initial=n_resumed, desc=f"dataset {kind}", unit="frame", disable=None if progress else True)
@@ -220,7 +237,6 @@ def _generate_locked(root, t0, gen, opts, kind, rig_path, rig_text, frames, swee
             if scheduler:
                 n_retries = _run_dask(scheduler, kind, rig_text, str(rig_path), opts, root, fmt, chunks, retries, bar)
             else:
-                w = workers or min(os.cpu_count() or 1, 8)
                 n_retries = _run_pool(w, kind, rig_text, str(rig_path), opts, root, fmt, chunks, retries, bar)
     finally:
         bar.close()

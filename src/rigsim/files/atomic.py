@@ -18,13 +18,27 @@ def _file_mode() -> int:
     return 0o666 & ~mask
 
 
+def output_folder(path, what: str = "output folder") -> Path:
+    """``path`` as a folder to write into, created if missing; one line (naming ``what``, e.g. ``--out``) when it
+    is a file or cannot be created (a name too long, no permission, a component that is a file)."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            return path
+        if path.exists() or path.is_symlink():
+            raise InputError(f"{what} {path}: is a file, not a folder")
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise InputError(f"{what} {path}: a part of the path is a file, not a folder") from None
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot create the folder ({exc.strerror or exc})") from None
+    return path
+
+
 def atomic_write_bytes(path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; the folder is created if missing. Returns the path."""
     path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{path.parent}: cannot create the output folder ({exc.strerror or exc})") from None
+    output_folder(path.parent)
     if path.is_dir():
         raise InputError(f"{path}: is a folder; expected a file name")
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")

@@ -12,6 +12,7 @@ import numpy as np
 
 from rigsim.errors import CliError
 from rigsim.files import write_json, write_table
+from rigsim.files.atomic import output_folder
 from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.optics.targets import TARGET_SPECS, PlanarTarget, TargetPoses, parse_target, read_poses, spread_poses, write_poses
 from rigsim.rig.load import DEFAULT_RIG
@@ -37,7 +38,7 @@ def render_target_frames(rig, target: PlanarTarget, poses: TargetPoses, out, *, 
         raise CliError(f"--out = {out}: a file, not a folder")
     if "target" in poses.frames:
         raise CliError("frame name 'target': its sidecar would overwrite target.json; rename the frame")
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     t0 = time.perf_counter()
     scene = TargetScene(cam, target, det, spp=spp, white_fraction=white_fraction)
     cols: dict[str, list] = {k: [] for k in POINT_COLUMNS}
@@ -141,7 +142,7 @@ def cmd_render_target(args) -> int:
         poses = read_poses(args.poses, target)
     else:
         poses = spread_for_camera(rig, target, args.spread, camera=args.camera, seed=args.seed)
-        Path(args.out).mkdir(parents=True, exist_ok=True)
+        output_folder(Path(args.out), "--out")
         print(f"wrote {write_poses(Path(args.out) / 'poses.csv', poses)}: {len(poses)} poses spread over the field")
     with tqdm(total=len(poses), desc="target", unit="frame", disable=True if args.quiet else None) as pb:
         s = render_target_frames(rig, target, poses, args.out, camera=args.camera, spp=args.spp, seed=args.seed,

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import ExportError
-from rigsim.files.atomic import atomic_write_text
+from rigsim.files.atomic import atomic_write_text, output_folder
 
 
 def _check_builtin(d, where="scene"):
@@ -94,7 +94,7 @@ def perspective_from_intrinsics(fx: float, fy: float, cx: float, cy: float, widt
 
 def write_xml(path: Path, scene: dict, comments: list[str] | None = None) -> Path:
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    output_folder(path.parent)
     atomic_write_text(path, scene_dict_to_xml(scene, comments))
     return path
 
@@ -113,7 +113,7 @@ def localise_files(scene: dict, out_dir: Path) -> dict:
                 res[k] = walk(v)
             elif k == "filename" and isinstance(v, (str, Path)) and Path(v).is_file():
                 dst = out_dir / "meshes" / Path(v).name
-                dst.parent.mkdir(parents=True, exist_ok=True)
+                output_folder(dst.parent)
                 shutil.copyfile(v, dst)
                 res[k] = f"meshes/{dst.name}"
             else:

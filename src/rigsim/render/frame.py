@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rigsim.files.atomic import output_folder
+
 __all__ = ["SIDECAR_FORMAT", "FLAG_KEYS", "OBSERVABLE_FLAGS", "Frame", "Observation", "digitise", "build_sidecar",
            "write_frame", "read_frame", "frame_paths"]
 
@@ -108,7 +110,7 @@ def write_frame(path, dn: np.ndarray, sidecar: dict) -> tuple[Path, Path]:
     if img.ndim != 2 or img.dtype != np.uint16:
         raise ValueError(f"frames are 2-D uint16 images; got shape {img.shape}, dtype {img.dtype}")
     png, js = frame_paths(path)
-    png.parent.mkdir(parents=True, exist_ok=True)
+    output_folder(png.parent)
     side = _jsonable(dict(sidecar))
     side.setdefault("format", SIDECAR_FORMAT)
     side["image"] = {"file": png.name, "width": int(img.shape[1]), "height": int(img.shape[0]),
@@ -240,7 +242,10 @@ def digitise(photons: np.ndarray, detector_config, *, seed: int, noiseless: bool
     ``seed`` drives the detector noise; ``frame_seed`` (default ``seed``) is the seed the sidecar
     records, the one the whole frame is reproduced from when the detector's is derived from it."""
     from rigsim.detector import apply_detector
+    from rigsim.render.budget import fit_processes
 
+    rows, cols = detector_shape if detector_shape is not None else np.shape(photons)
+    fit_processes(1, int(rows) * int(cols), f"a {cols}×{rows} px detector")  # one line, not an out-of-memory kill
     kw = {"origin_uv": tuple(origin_uv), "detector_shape": detector_shape} if detector_shape is not None else {}
     det = apply_detector(photons, detector_config, seed=seed, noiseless=noiseless, **kw)
     sidecar = build_sidecar(truth=truth, render=render, detector_frame=det, geometry_flags=geometry_flags, pose=pose,

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import trimesh
 
+from rigsim.files.atomic import output_folder
 from rigsim.optics.meshes import cube_mesh
 
 DEFAULT_MESH_DIR = Path.home() / ".cache" / "rigsim" / "meshes"
@@ -19,7 +20,7 @@ DEFAULT_MESH_DIR = Path.home() / ".cache" / "rigsim" / "meshes"
 
 def _write(mesh: trimesh.Trimesh, name: str, out_dir: Path | None) -> Path:
     out_dir = Path(out_dir) if out_dir is not None else DEFAULT_MESH_DIR
-    out_dir.mkdir(parents=True, exist_ok=True)
+    output_folder(out_dir)
     data = mesh.export(file_type="ply", encoding="binary")
     digest = hashlib.sha1(data).hexdigest()[:12]
     path = out_dir / f"{name}-{digest}.ply"

@@ -138,22 +138,64 @@ class Scene:
             self.params.update()
 
     def render(self, state: Mapping | None = None, *, seed: int = 0, spp: int | None = None,
-               single_thread: bool = False) -> np.ndarray:
+               single_thread: bool = False, progress: Callable[[int, int], None] | None = None) -> np.ndarray:
         """Update for ``state``, render, return the film as a 2-D float64 array (rows v, columns u).
 
         ``single_thread``: render with one Dr.Jit thread (light tracers splat with float32 atomic
-        adds whose order varies between threads; one thread makes the image bit-identical)."""
+        adds whose order varies between threads; one thread makes the image bit-identical).
+        A render of more than :data:`PASS_SAMPLES` light paths runs in passes (:func:`render_passes`);
+        ``progress(done, passes)`` is called after each."""
         import drjit as dr
         import mitsuba as mi
 
         self.update(state)
+        sensor = self.scene.sensors()[0]
+        total = int(spp) if spp is not None else int(sensor.sampler().sample_count())
+        passes, per_pass = render_passes(total, int(np.prod(sensor.film().crop_size())))
         prev = dr.thread_count()
         if single_thread and prev != 1:
             dr.set_thread_count(1)
         try:
-            kw = {} if spp is None else {"spp": int(spp)}
-            arr = np.array(mi.render(self.scene, seed=mitsuba_seed(seed), **kw), dtype=np.float64)
+            if passes == 1:
+                kw = {} if spp is None else {"spp": total}
+                arr = np.array(mi.render(self.scene, seed=mitsuba_seed(seed), **kw), dtype=np.float64)
+            else:  # equal passes with their own seeds, averaged: the same estimator as one pass of all samples
+                import sys
+
+                from tqdm import tqdm
+
+                arr = None
+                with tqdm(total=passes, desc=f"render ({total} spp in {passes} passes)", unit="pass", leave=False,
+                          disable=None if progress is None else True, file=sys.stderr) as bar:
+                    for k in range(passes):
+                        a = np.array(mi.render(self.scene, seed=mitsuba_seed(seed, 0x9A55, k), spp=per_pass),
+                                     dtype=np.float64)
+                        arr = a if arr is None else arr + a
+                        bar.update(1)
+                        if progress is not None:
+                            progress(k + 1, passes)
+                arr /= passes
         finally:
             if dr.thread_count() != prev:
                 dr.set_thread_count(prev)
         return arr[..., 0] if arr.ndim == 3 else arr
+
+
+PASS_SAMPLES = 2**30  # light paths per Mitsuba pass: below its 2^32 wavefront limit, whose own split fails
+
+
+def render_passes(spp: int, pixels: int, limit: int | None = None) -> tuple[int, int]:
+    """(passes, samples per pixel per pass) for ``spp`` samples on ``pixels``: the fewest equal passes of at
+    most ``limit`` light paths each. A power-of-4 ``spp`` (the ldsampler's) is split into powers of 4."""
+    limit = PASS_SAMPLES if limit is None else int(limit)
+    spp, pixels = int(spp), int(pixels)
+    power_of_4 = spp & (spp - 1) == 0 and (spp.bit_length() - 1) % 2 == 0
+    for passes in range(1, spp + 1):
+        if spp % passes or (power_of_4 and (passes.bit_length() - 1) % 2) or passes & (passes - 1) and power_of_4:
+            continue
+        if (spp // passes) * pixels <= limit:
+            return passes, spp // passes
+    from rigsim.errors import CliError
+
+    raise CliError(f"spp = {spp} on {pixels} pixels: {spp * pixels:.3g} light paths cannot be split into equal "
+                   f"passes of at most {limit:.3g}")

@@ -16,6 +16,7 @@ import time
 import numpy as np
 from scipy.special import erf
 
+from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.scene import Element, PinholeSensor, Scene
 from rigsim.truth.star import StarSky
@@ -150,6 +151,7 @@ class MitsubaStarRenderer:
             raise ValueError(f"window_px = {window_px} is too small for a PSF of σ = {self.sigma_px:.2f} px "
                              f"(need ≥ {2 * math.ceil(5 * self.sigma_px) + 4})")
         self.cam = sensor.camera()
+        check_memory(sensor.resolution_px, "sensor.resolution_px")
         self.pcam = self.cam
         self.variant = ensure_variant()
         register_sensors()

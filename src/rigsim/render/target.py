@@ -22,6 +22,7 @@ from rigsim.errors import CliError
 from rigsim.optics.aiming import aiming_camera
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.targets import PlanarTarget, project_target, target_to_camera
+from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.scene import Element, PinholeSensor, Scene, mitsuba_seed
 
@@ -70,6 +71,7 @@ class TargetScene:
         if not (0.0 <= black_reflectance < 1.0):
             raise CliError(f"black_reflectance = {black_reflectance}: allowed 0 to < 1")
         self.camera, self.target, self.detector = camera, target, detector
+        check_memory((camera.width, camera.height), "the camera's resolution_px")
         self.spp, self.sampler = _check_spp(spp), sampler
         usable_e = min(detector.full_well_e, (detector.max_dn - detector.offset_dn) / detector.gain_dn_per_e)
         self.white_photons = float(white_fraction * usable_e / detector.quantum_efficiency)

@@ -143,14 +143,21 @@ def resolve_rig_path(name_or_path: str | Path) -> Path:
     """A path, or a rig name (``sun_sensor_2axis_diaphragm``): ``NAME.toml`` in the current folder
     first, then the packaged default rigs."""
     p = Path(name_or_path)
-    if p.suffix == ".toml" and p.exists():
+
+    def there(q: Path, file: bool = False) -> bool:  # a name too long or through a non-folder is simply absent
+        try:
+            return q.is_file() if file else q.exists()
+        except OSError:
+            return False
+
+    if p.suffix == ".toml" and there(p):
         return p
     fname = p.name if p.suffix == ".toml" else f"{p.name}.toml"
     if len(p.parts) == 1:
         for cand in (Path.cwd() / fname, SCENES_DIR / fname):
-            if cand.is_file():
+            if there(cand, file=True):
                 return cand
-    if p.exists():
+    if there(p):
         return p
     known = ", ".join(sorted(x.stem for x in SCENES_DIR.glob("*.toml"))) or "(none)"
     raise RigError(name_or_path, [f"no such rig file; give a path or one of the default rigs: {known}"])

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from rigsim.errors import CliError
+from rigsim.files.atomic import output_folder
 
 __all__ = ["add_cli", "cmd_view", "parse_pose_arg"]
 
@@ -106,7 +107,7 @@ def cmd_view(args) -> int:
         from rigsim.view.plot import make_plotter
 
         out = Path(args.screenshot)
-        out.parent.mkdir(parents=True, exist_ok=True)
+        output_folder(out.parent)
         pl = make_plotter(scene, off_screen=True, size=size)
         try:
             pl.screenshot(str(out), return_img=False)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import ViewError
+from rigsim.files.atomic import output_folder
 from rigsim.view.display import has_display, prepare_offscreen
 from rigsim.view.scene import COLOURS, RigScene, ViewSpec
 
@@ -203,7 +204,7 @@ def screenshot(scene: RigScene, out_png, *, size=(1200, 800), views: list[str] |
     out = Path(out_png)
     if out.suffix.lower() != ".png":
         raise ViewError(f"--screenshot = {str(out_png)!r}: must be a .png file")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    output_folder(out.parent)
     pl = make_plotter(scene, off_screen=True, size=size, views=views)
     try:
         pl.screenshot(str(out), return_img=False)
@@ -243,7 +244,7 @@ def export_scene(scene: RigScene, path) -> Path:
     suf = out.suffix.lower()
     if suf not in EXPORT_SUFFIXES:
         raise ViewError(f"export file {str(path)!r}: allowed suffixes are {', '.join(EXPORT_SUFFIXES)}")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    output_folder(out.parent)
     if suf == ".vtm":
         import pyvista as pv
 

@@ -32,6 +32,13 @@ class AimingCameraGenerator:
     default_spp = 4
     description = "seed-000 aiming-camera frames (hole, spot) of the diaphragm screen at drawn poses near each null"
 
+    detector_field = "aiming_camera.resolution_px"  # the rig field that sets pixels_per_frame
+
+    @property
+    def pixels_per_frame(self) -> int:
+        w, h = self.rig.aiming_camera.resolution_px
+        return int(w) * int(h)
+
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 4, threads: int | None = None):
         import tomllib
 

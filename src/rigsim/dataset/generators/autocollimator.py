@@ -29,6 +29,13 @@ class AutocollimatorGenerator:
     default_spp = 256
     description = "seed-001 autocollimator frames of the cube faces at drawn poses near each null"
 
+    detector_field = "autocollimator.resolution_px"  # the rig field that sets pixels_per_frame
+
+    @property
+    def pixels_per_frame(self) -> int:
+        w, h = self.rig.autocollimator.resolution_px
+        return int(w) * int(h)
+
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 256, threads: int | None = None):
         import tomllib
 

@@ -27,6 +27,12 @@ class BoresightRoiGenerator:
     RANGE_ARCSEC = 60.0
     DF_RANGE_UM = 20.0
 
+    detector_field = "orbit.window_px"  # the rig field that sets pixels_per_frame
+
+    @property
+    def pixels_per_frame(self) -> int:
+        return int(self.rig.orbit.window_px) ** 2
+
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 1024, threads: int | None = None):
         import tomllib
 

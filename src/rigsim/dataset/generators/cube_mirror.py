@@ -17,6 +17,13 @@ class SunSensorGenerator:
     default_spp = 1024
     description = "full sun-sensor frames at random (or swept) turntable poses, rig errors drawn per frame"
 
+    detector_field = "sun_sensor.resolution_px"  # the rig field that sets pixels_per_frame
+
+    @property
+    def pixels_per_frame(self) -> int:
+        w, h = self.rig.sun_sensor.resolution_px
+        return int(w) * int(h)
+
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 1024, threads: int | None = None):
         import tomllib
 

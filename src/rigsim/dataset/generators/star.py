@@ -24,6 +24,13 @@ class StarFieldGenerator:
     renderers = ("analytic", "mitsuba")
     default_spp = 256
 
+    detector_field = "sensor.resolution_px"  # the rig field that sets pixels_per_frame
+
+    @property
+    def pixels_per_frame(self) -> int:
+        w, h = self.rig.sensor.resolution_px
+        return int(w) * int(h)
+
     def __init__(self, rig_text: str, rig_source: str = "<rig>", *, spp: int = 256, threads: int | None = None,
                  renderer: str = "analytic"):
         import tomllib

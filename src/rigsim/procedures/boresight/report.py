@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rigsim.files.atomic import atomic_write_text, save_figure
+from rigsim.files.atomic import atomic_write_text, output_folder, save_figure
 from rigsim.procedures.boresight.studies import PARAMS
 
 __all__ = ["write_report", "key_numbers"]
@@ -237,7 +237,7 @@ def _fmt(x, nd=3):
 
 def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_prism.toml", command: str = "") -> Path:
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     files = {}
     _sweep_figure(res["fig4"]["rows"], "centroid error σ [px]", "Fig 4: 3σ errors vs centroid error "
                   f"({res['runs']} runs per point)", out / "fig4_centroid_error.png", relative=True)

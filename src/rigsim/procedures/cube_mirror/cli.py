@@ -13,7 +13,7 @@ import numpy as np
 
 import rigsim
 from rigsim.errors import CliError
-from rigsim.files.atomic import atomic_write_text
+from rigsim.files.atomic import atomic_write_text, output_folder
 from rigsim.files.names import file_stem, slug
 from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.procedures.cube_mirror import file_commands, render_commands
@@ -231,7 +231,7 @@ def _user_frames(args, rig):
         out = Path(args.export_frames)
         if out.exists() and not out.is_dir():
             raise CliError(f"--export-frames = {out}: exists and is not a folder")
-        out.mkdir(parents=True, exist_ok=True)
+        output_folder(out)
     fn = load_centroider(args.centroider) if args.centroider else None
     return CampaignFrames(rig, out, centroider=fn, centroider_name=args.centroider or "", seed=args.seed,
                           suffix={"png": ".png", "tiff": ".tif", "fits": ".fits"}[args.frame_format])

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rigsim.files.atomic import atomic_write_text, save_figure
+from rigsim.files.atomic import atomic_write_text, output_folder, save_figure
 from rigsim.frames import ARCSEC_PER_RAD
 
 
@@ -193,7 +193,7 @@ def _search_table_md(s) -> list[str]:
 def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None = None,
                  wall_times: dict | None = None, command: str | None = None, user: dict | None = None) -> dict[str, Path]:
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     files = {"calibration_residuals": plot_calibration_residuals(campaign, out / "calibration_residuals.png"),
              "search_path": plot_search_path(campaign, out / "search_path.png")}
     if budget is not None:

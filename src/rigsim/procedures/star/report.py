@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.estimation.star_calibration import MODELS
-from rigsim.files.atomic import atomic_write_text, save_figure
+from rigsim.files.atomic import atomic_write_text, output_folder, save_figure
 from rigsim.procedures.star.pipeline import per_star_residuals
 from rigsim.procedures.star.study import CASES, CLAIM
 
@@ -246,7 +246,7 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
 
     matplotlib.use("Agg")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     files = {}
     files["frame"] = out / "star_frame.png"
     _plot_frame(files["frame"], res)

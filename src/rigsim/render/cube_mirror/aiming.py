@@ -36,6 +36,7 @@ import warnings
 import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
+from rigsim.render.budget import check_memory
 from rigsim.render.cube_mirror.diaphragm import _WARN_FLAGS, DiaphragmFrames, DiaphragmRenderer, _derived_seed
 from rigsim.render.frame import digitise
 from rigsim.rig.cube_mirror import CubeMirrorRig
@@ -72,6 +73,7 @@ class ConcentricityRenderer:
             raise ValueError(f"grid_mm = {grid_mm!r}: must be in [0.001, 0.1]")
         self.divergence_rad = math.radians(arcmin / 60.0)
         det = detector if detector is not None else rig.aiming_camera.detector
+        check_memory(rig.aiming_camera.resolution_px, "aiming_camera.resolution_px")
         if spot_photons_per_px is None:
             spot_photons_per_px = 0.5 * det.full_well_e / det.quantum_efficiency
         self.spot_photons_per_px = float(spot_photons_per_px)

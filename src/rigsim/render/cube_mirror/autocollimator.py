@@ -59,6 +59,7 @@ from rigsim.optics.autocollimator import (
 from rigsim.optics.autocollimator import diffraction_half_px as _kernel_half_px
 from rigsim.optics.meshes import lens_mesh, stop_mesh
 from rigsim.render.backend import ensure_variant
+from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise, write_frame
 from rigsim.render.meshes import mesh_ply
 from rigsim.render.scene import Scene
@@ -328,6 +329,7 @@ class AutocollimatorRenderer:
                  diffraction_half_px: int | None = None):
         import mitsuba as _mi  # noqa: F401  (ensure_variant happens in autocollimator_scene)
 
+        check_memory(rig.autocollimator.resolution_px, "autocollimator.resolution_px")
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         self.optics = optics or AutocollimatorOptics(rig.autocollimator)

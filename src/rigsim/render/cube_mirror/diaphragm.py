@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
+from rigsim.files.atomic import output_folder
 from rigsim.optics.meshes import screen_with_hole_mesh
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.scene import Scene
@@ -503,7 +504,7 @@ def preview_png(dn: np.ndarray, path, *, low_pct: float = 1.0, high_pct: float =
     lo, hi = np.percentile(a, [low_pct, high_pct])
     x = np.clip((a - lo) / max(hi - lo, 1e-12), 0.0, 1.0) ** gamma
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    output_folder(path.parent)
     if not cv2.imwrite(str(path), np.round(255.0 * x).astype(np.uint8)):
         raise OSError(f"cv2.imwrite could not write {path}")
     return path

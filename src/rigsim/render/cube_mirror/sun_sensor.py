@@ -19,8 +19,17 @@ import numpy as np
 
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
-from rigsim.optics.sun_disk import SUN_FULL_ANGLE_RAD, _basis, _unit, spot_geometry_flags, spot_truth, sun_window_px, window_centroid
+from rigsim.optics.sun_disk import (
+    SUN_FULL_ANGLE_RAD,
+    _basis,
+    _unit,
+    spot_geometry_flags,
+    spot_truth,
+    sun_window_px,
+    window_centroid,
+)
 from rigsim.render.backend import ensure_variant
+from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.plugins import register_sensors
 from rigsim.render.scene import Element, PinholeSensor, Scene
@@ -232,6 +241,7 @@ class SunSensorScene:
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         self.analytic_camera = rig.sun_sensor.camera()
+        check_memory(rig.sun_sensor.resolution_px, "sun_sensor.resolution_px")
         self.camera = self.analytic_camera
         self.full_angle_rad = math.radians(rig.sun_simulator.collimation_full_angle_arcmin / 60.0)
         self.spot_photons = float(spot_photons) if spot_photons is not None else default_spot_photons(rig)
