@@ -2,7 +2,8 @@
 
 Tests marked ``@pytest.mark.slow`` are skipped in the default run (which must stay well under
 ten minutes on 2 cores) and run with ``-m slow`` or ``RIGSIM_SLOW=1``; .ci/run runs them after
-the default suite.
+the default suite. Tests marked ``@pytest.mark.long`` (each above ~15 minutes on one core: the dense
+acceptance campaigns) run only with ``-m long`` or ``RIGSIM_LONG=1``, not in CI (docs/testing.md).
 """
 
 import os
@@ -15,13 +16,20 @@ def _slow_requested(config) -> bool:
     return ("slow" in expr and "not slow" not in expr) or os.environ.get("RIGSIM_SLOW") == "1"
 
 
+def _long_requested(config) -> bool:
+    expr = config.getoption("markexpr") or ""
+    return ("long" in expr and "not long" not in expr) or os.environ.get("RIGSIM_LONG") == "1"
+
+
 def pytest_collection_modifyitems(config, items):
-    if _slow_requested(config):
-        return
-    skip = pytest.mark.skip(reason="slow: run with -m slow or RIGSIM_SLOW=1")
+    slow, long = _slow_requested(config), _long_requested(config)
+    skip_slow = pytest.mark.skip(reason="slow: run with -m slow or RIGSIM_SLOW=1")
+    skip_long = pytest.mark.skip(reason="long: run with -m long or RIGSIM_LONG=1 (not in CI)")
     for item in items:
-        if "slow" in item.keywords:
-            item.add_marker(skip)
+        if "long" in item.keywords and not long:
+            item.add_marker(skip_long)
+        elif "slow" in item.keywords and not slow:
+            item.add_marker(skip_slow)
 
 
 @pytest.fixture(scope="session")

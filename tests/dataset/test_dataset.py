@@ -94,7 +94,7 @@ def test_sigkill_then_rerun_resumes_without_loss_duplicate_or_corruption(clean, 
 @pytest.mark.parametrize("fault", ["crash", "raise"])
 def test_a_crashing_task_is_retried_and_its_frame_is_whole(clean, tmp_path, monkeypatch, fault):
     root, _ = clean
-    monkeypatch.setenv(FAIL_ENV, f"{fault}:2")
+    monkeypatch.setenv(FAIL_ENV, f"{fault}:2:{tmp_path.parent}")  # beside the dataset, inside pytest's folder
     r = generate(RIG, tmp_path, frames=4, seed=11, spp=SPP, workers=2, progress=False, chunk=1)
     assert r.retries >= 1
     assert verify(tmp_path) == []

@@ -46,7 +46,7 @@ from rigsim.files.atomic import atomic_write_bytes
 from rigsim.render.budget import check_disk, cpu_count, fit_processes, process_bytes
 
 PLAN_KEYS = ("generator", "rig_sha256", "seed", "frames", "sweep", "options")
-FAIL_ENV = "RIGSIM_DATASET_INJECT_FAULT"  # tests: "crash:INDEX" or "raise:INDEX" (once per dataset)
+FAIL_ENV = "RIGSIM_DATASET_INJECT_FAULT"  # tests: "crash:INDEX:MARKER_DIR" or "raise:INDEX:MARKER_DIR" (once)
 
 
 def software_versions() -> dict:
@@ -66,14 +66,13 @@ def _maybe_inject_fault(root: Path, index: int) -> None:
     spec = os.environ.get(FAIL_ENV)
     if not spec:
         return
-    mode, idx = spec.split(":")
+    mode, idx, marker_dir = spec.split(":", 2)
     if int(idx) != index:
         return
     import hashlib
-    import tempfile
 
     tag = hashlib.sha256(str(root.resolve()).encode()).hexdigest()[:16]
-    marker = Path(tempfile.gettempdir()) / f"rigsim-fault-injected-{tag}-{index}"  # outside the dataset
+    marker = Path(marker_dir) / f"rigsim-fault-injected-{tag}-{index}"  # the test's folder, outside the dataset
     if marker.exists():
         return
     marker.write_text(mode)

@@ -65,7 +65,7 @@ def test_report_has_the_table_and_the_plots(coarse_ideal_000, tmp_path):
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
 
 
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.render
 def test_noise_free_ideal_campaign_recovers_r_pm_sun_within_a_tenth_of_an_arcsecond():
     """The acceptance target: noise-free ideal rig → R(pm←sun) within 0.1″ per axis. The limit is
