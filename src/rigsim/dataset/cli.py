@@ -55,7 +55,7 @@ def _score(args) -> int:
 def _verify(args) -> int:
     from rigsim.dataset.runner import verify
 
-    bad = verify(args.dataset)
+    bad = verify(args.dataset, progress=True)
     if bad:
         print(f"{len(bad)} problems:\n  " + "\n  ".join(bad[:50]), file=sys.stderr)
         return 1

@@ -433,8 +433,8 @@ def finish(root) -> dict:
     return man
 
 
-def verify(root) -> list[str]:
-    """Problems found (empty: the dataset is whole). The manifest's shape is checked; every planned frame,
+def verify(root, progress: bool = False) -> list[str]:
+    """Problems found (empty: the dataset is whole); ``progress``: a bar over the files on a terminal. The manifest's shape is checked; every planned frame,
     sidecar and table must be listed and match its checksum; every sidecar must be intact and belong to its
     plan entry; a listed path that leaves the folder is refused (never read); files the manifest does not
     list are reported as extra."""
@@ -449,7 +449,10 @@ def verify(root) -> list[str]:
     n, fmt, files = man["n_frames"], man["image_format"], man["files_sha256"]
     resolved_root = root.resolve()
     listed = set()
-    for rel, want in files.items():
+    from tqdm import tqdm
+
+    for rel, want in tqdm(files.items(), total=len(files), desc="verify", unit="file", leave=False,
+                          disable=None if progress else True):
         p = root / rel
         if Path(rel).is_absolute() or ".." in Path(rel).parts or not p.resolve().is_relative_to(resolved_root):
             bad.append(f"{rel}: path leaves the dataset folder (not read)")
