@@ -31,8 +31,8 @@ NASTY = ["", "nan", "-1", "1e308", "../../escape", "\x1b[31mred", "x" * 300, "@d
          "@link", "@json-list", "@csv-wrong", "@png-8bit"]
 CHEAP = {  # flags that keep a valid run of a heavy command short (the option under attack overrides its own)
     ("run", "cube-mirror"): ["--analytic", "--no-budget", "--quiet"],
-    ("run", "boresight"): ["--no-orbit", "--runs", "1"],
-    ("run", "star-calibration"): ["--no-study", "--renderer", "analytic", "--trials", "1"],
+    ("run", "boresight"): ["--no-orbit", "--runs", "10", "--quiet"],
+    ("run", "star-calibration"): ["--no-study", "--renderer", "analytic", "--trials", "2", "--quiet"],
     ("dataset", "generate"): ["--frames", "1", "--spp", "1", "--workers", "1"],
     ("render", "sun-sensor"): ["--spp", "1"],
     ("render", "aiming-camera"): ["--spp", "1"],
@@ -42,6 +42,11 @@ CHEAP = {  # flags that keep a valid run of a heavy command short (the option un
     ("render", "target"): ["--spread", "1", "--spp", "1"],
 }
 RIG_DESTS = {"rig"}
+VALID = {  # a valid value for a required option, so that the other options' cases reach the command's body
+    ("render", "target", "target"): "chessboard:8x6:10",
+    ("boresight", "centroid", "camera"): "forward",
+}
+OUTPUT_DESTS = {"out", "json_out", "xml", "preview", "export_frames"}  # where the user names the destination
 
 
 def leaves():
@@ -98,7 +103,8 @@ def cases(files: dict[str, str]):
             for a in required:
                 if a is skip:
                     continue
-                argv += [a.option_strings[0], "out" if a.dest in ("out", "xml") else files["@garbage"]]
+                v = VALID.get((*path, a.dest)) or ("out" if a.dest in ("out", "xml") else files["@garbage"])
+                argv += [a.option_strings[0], v]
             return argv
 
         cheap = CHEAP.get(tuple(path), [])
@@ -205,7 +211,8 @@ def main():
                       flush=True)
             if k % 100 == 0:
                 print(f"... {k}/{len(todo)} {counts}", flush=True)
-    outside = sorted(snapshot(root) - before - {"cases", ".cache"})
+    named = {r["value"].split("/")[-1] for r in results if r["option"] in OUTPUT_DESTS and r["value"].startswith("../")}
+    outside = sorted(snapshot(root) - before - {"cases", ".cache"} - named)  # a destination the user named is theirs
     changed = hashlib.sha256((root / "precious.txt").read_bytes()).hexdigest() != precious
     counts["outside"] = len(outside) + int(changed)
     print(json.dumps({"cases": len(todo), **counts, "written_outside": outside, "precious_changed": changed}))

@@ -56,8 +56,11 @@ def _verify(args) -> int:
     from rigsim.dataset.runner import verify
 
     bad = verify(args.dataset, progress=True)
-    if bad:
-        print(f"{len(bad)} problems:\n  " + "\n  ".join(bad[:50]), file=sys.stderr)
+    if bad:  # the problems are the command's output (stdout); one line on stderr says the dataset is not whole
+        from rigsim.reporting import safe_text
+
+        print("\n".join(safe_text(b, 500) for b in bad[:200]) + (f"\n... and {len(bad) - 200} more" if len(bad) > 200 else ""))
+        print(f"rigsim: {args.dataset}: {len(bad)} problem(s) found (listed on stdout)", file=sys.stderr)
         return 1
     print(f"{args.dataset}: every file matches the manifest")
     return 0

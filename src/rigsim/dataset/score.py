@@ -24,6 +24,7 @@ Reported: n, RMS, mean (bias), percentiles 50/90/95/99, max, the outliers (error
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,8 +77,14 @@ def read_predictions(path, mode: str | None = None, multi: bool = False) -> tupl
     path = Path(path)
     if not path.exists():
         raise DatasetError(f"{path}: no such predictions file")
-    with open(path, newline="") as f:
-        rd = csv.reader(f)
+    if not path.is_file():
+        raise DatasetError(f"{path}: not a regular file (a folder, FIFO or device); expected the predictions CSV")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); expected the predictions CSV") from None
+    if True:
+        rd = csv.reader(io.StringIO(text, newline=""))
         try:
             header = [h.strip() for h in next(rd)]
         except StopIteration:
