@@ -154,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        rc = int(args.func(args) or 0)
+        with _Heartbeat(" ".join(a for a in (argv if argv is not None else sys.argv[1:])[:2] if not a.startswith("-"))):
+            rc = int(args.func(args) or 0)
         sys.stdout.flush()
         return rc
     except RigsimError as exc:
@@ -185,6 +186,57 @@ def main(argv: list[str] | None = None) -> int:
 
 _PATH_ERRNOS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.ELOOP, errno.EACCES, errno.EPERM,
                 errno.EROFS, errno.EEXIST, errno.ENXIO}
+
+
+class _Heartbeat:
+    """On a terminal, a command that runs longer than ``delay`` seconds without a progress bar of its own shows
+    the seconds it has been working on stderr (one line, rewritten in place, erased at the end)."""
+
+    def __init__(self, label: str, delay: float = 2.0, interval: float = 0.5, stream=None):
+        import threading
+
+        self.label, self.delay, self.interval = f"rigsim {label}".strip(), delay, interval
+        self.stream = stream if stream is not None else sys.stderr
+        self.stop, self.shown, self.thread = threading.Event(), False, None
+
+    def _run(self) -> None:
+        import time
+
+        t0 = time.monotonic()
+        if self.stop.wait(self.delay):
+            return
+        while not self.stop.is_set():
+            try:
+                from tqdm import tqdm
+
+                busy = bool(getattr(tqdm, "_instances", None))
+            except ImportError:
+                busy = False
+            if not busy:
+                self.stream.write(f"\r\x1b[K{self.label}: working, {time.monotonic() - t0:.0f} s")
+                self.stream.flush()
+                self.shown = True
+            self.stop.wait(self.interval)
+
+    def __enter__(self):
+        import threading
+
+        try:
+            tty = self.stream.isatty()
+        except (AttributeError, ValueError):
+            tty = False
+        if tty:
+            self.thread = threading.Thread(target=self._run, name="rigsim-heartbeat", daemon=True)
+            self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.thread is not None:
+            self.stop.set()
+            self.thread.join()
+            if self.shown:
+                self.stream.write("\r\x1b[K")
+                self.stream.flush()
 
 
 def _silence_stdout() -> None:
