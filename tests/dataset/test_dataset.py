@@ -126,7 +126,10 @@ def test_score_against_known_errors(clean, tmp_path):
 
 
 @pytest.mark.parametrize("content,msg", [
-    ("frame,u\n1,2\n", "match no mode"),
+    ("frame,u\n1,2\n", "hold no known prediction; expected 'frame' and 'u, v' or 'u_px, v_px'"),
+    ("u,v\n1,2\n", "no 'frame' column"),
+    ("frame,u,v\n1,inf,2\n", "infinite value"),
+    ("frame,u,v\n1,nan,2\n", "no prediction rows (1 rows are NaN)"),
     ("frame,u,v\n1,abc,2\n", "column 'u' = 'abc' is not a number"),
     ("frame,u,v\n1,2,3\n1,2,3\n", "frame 1 appears twice"),
     ("frame,u,v\n99,2,3\n", "frame(s) [99] not in the dataset"),
@@ -139,6 +142,63 @@ def test_score_bad_csv(clean, tmp_path, content, msg):
     with pytest.raises(DatasetError) as e:
         score(root, p)
     assert msg in str(e.value)
+
+
+@pytest.mark.parametrize("header", ["u,v", "u_px,v_px", "xcentroid,ycentroid", "x,y"])
+def test_score_reads_the_column_names_of_opencv_photutils_and_sep(clean, tmp_path, header):
+    root, _ = clean
+    t = open_dataset(root).truth_numpy()
+    p = tmp_path / "c.csv"
+    p.write_text(f"frame,{header},flux\n" + "".join(f"{i},{t['spot_u'][i] + 0.03},{t['spot_v'][i]},9\n" for i in range(N)))
+    s = score(root, p)
+    assert s.columns == ["frame", *header.split(",")] and f"columns frame, {header.replace(',', ', ')}" in s.text()
+    assert s.rms == pytest.approx(0.03, rel=1e-9) and s.hints == []
+
+
+def test_score_counts_nan_rows_as_failed_fits_and_writes_every_error(clean, tmp_path):
+    root, _ = clean
+    t = open_dataset(root).truth_numpy()
+    p = tmp_path / "c.csv"
+    rows = [f"{i},{t['spot_u'][i] + 0.01 * i},{t['spot_v'][i]}" for i in range(N - 2)] + [f"{N - 2},nan,nan", f"{N - 1},,"]
+    p.write_text("frame,u,v\n" + "\n".join(rows) + "\n")
+    s = score(root, p)
+    assert s.n == N - 2 and s.missing == [N - 2, N - 1] and s.failed == [N - 2, N - 1]
+    assert "of which 2 NaN (failed fits)" in s.text()
+    out = tmp_path / "errors.csv"
+    from rigsim import cli
+
+    assert cli.main(["dataset", "score", str(root), str(p), "--errors-out", str(out), "--json-out",
+                     str(tmp_path / "s.json")]) == 0
+    from rigsim.files.tables import Column, read_table
+
+    e = read_table(out, [Column("frame", kind="int"), Column("du", "px"), Column("error", "px")])
+    np.testing.assert_allclose(e["du_px"], 0.01 * np.arange(N - 2), atol=1e-9)
+    assert json.loads((tmp_path / "s.json").read_text())["failed"] == [N - 2, N - 1]
+
+
+@pytest.mark.parametrize("shift,expect", [((1.0, 1.0), "1-based pixel indices"), ((0.5, 0.5), "corner-origin"),
+                                          ((-1.0, 0.0), "u look shifted by 1 px")])
+def test_score_names_a_pixel_convention_mistake(clean, tmp_path, shift, expect):
+    root, _ = clean
+    t = open_dataset(root).truth_numpy()
+    rng = np.random.default_rng(1)
+    p = tmp_path / "c.csv"
+    p.write_text("frame,u,v\n" + "".join(f"{i},{t['spot_u'][i] + shift[0] + rng.normal(0, 0.02)},"
+                                         f"{t['spot_v'][i] + shift[1] + rng.normal(0, 0.02)}\n" for i in range(N)))
+    s = score(root, p)
+    assert len(s.hints) == 1 and expect in s.hints[0], s.hints
+
+
+def test_score_names_swapped_u_and_v_and_takes_an_absolute_outlier_threshold(clean, tmp_path):
+    root, _ = clean
+    t = open_dataset(root).truth_numpy()
+    p = tmp_path / "c.csv"
+    p.write_text("frame,u,v\n" + "".join(f"{i},{t['spot_v'][i] + 0.01},{t['spot_u'][i]}\n" for i in range(N)))
+    s = score(root, p)
+    assert any("u and v look swapped" in h and "0.01 px" in h for h in s.hints), s.hints
+    assert s.rms > 1.0
+    s = score(root, p, outlier_abs=0.5)
+    assert s.outlier_threshold == 0.5 and len(s.outliers) == int(np.sum(np.hypot(t["spot_v"] - t["spot_u"], 0) > 0.5))
 
 
 def test_bad_dataset_files_are_named(clean, tmp_path):

@@ -42,13 +42,18 @@ def _score(args) -> int:
 
         raise DatasetError(f"--match-radius = {args.match_radius}: allowed range is (0, 50] px")
     s = score(args.dataset, args.predictions, mode=args.mode, truth_ref=args.truth_ref, outlier=args.outlier,
-              match_radius_px=args.match_radius)
+              match_radius_px=args.match_radius, outlier_abs=args.outlier_abs)
     print(s.text())
     if args.json_out:
-        from pathlib import Path
+        from rigsim.files.atomic import atomic_write_text
 
-        Path(args.json_out).write_text(json.dumps({k: v for k, v in s.__dict__.items() if k != "per_frame"}, indent=1,
-                                                  default=float))
+        atomic_write_text(args.json_out, json.dumps(s.as_dict(), indent=1, default=float) + "\n")
+    if args.errors_out:
+        from rigsim.files.tables import write_table
+
+        keys = list(s.rows[0]) if s.rows else ["frame"]
+        write_table(args.errors_out, {k: [r[k] for r in s.rows] for k in keys})
+        print(f"wrote {args.errors_out}: {len(s.rows)} rows")
     return 0
 
 
@@ -105,13 +110,20 @@ def add_cli(groups: dict) -> None:
     g.set_defaults(func=_gen)
     s = ds.add_parser("score", help="score an external pipeline's predictions CSV against the truth")
     s.add_argument("dataset", metavar="DIR")
-    s.add_argument("predictions", metavar="CSV", help="columns frame,u,v (centroid) or frame,x,y,z (direction)")
+    s.add_argument("predictions", metavar="CSV",
+                   help="columns frame and u,v / u_px,v_px / xcentroid,ycentroid (photutils) / x,y (sep) for centroids, "
+                        "or frame,x,y,z for directions; a NaN or empty value is a failed fit (counted as missing)")
     s.add_argument("--mode", choices=["centroid", "direction"], default=None, help="default: from the columns")
     s.add_argument("--truth-ref", choices=["centre", "pixel-centroid"], default="centre",
                    help="centroid truth: the sun centre's projection, or the exact pixel first moment")
-    s.add_argument("--outlier", type=number(1e-9, 1e9), default=None, help="outlier threshold (px or arcsec); default 5 robust σ")
+    s.add_argument("--outlier", type=number(1e-9, 1e9), default=None,
+                   help="a floor under the outlier threshold (px or arcsec); default 5 robust σ")
+    s.add_argument("--outlier-abs", type=number(1e-9, 1e9), default=None, metavar="VALUE",
+                   help="an absolute outlier threshold (px or arcsec) instead of the robust one")
     s.add_argument("--match-radius", type=number(1e-3, 1e4), default=2.0, help="star frames: match radius (px)")
-    s.add_argument("--json-out", default=None, metavar="FILE")
+    s.add_argument("--json-out", default=None, metavar="FILE", help="the summary as JSON")
+    s.add_argument("--errors-out", default=None, metavar="CSV",
+                   help="every frame's (star frames: every matched star's) prediction, truth and error")
     s.set_defaults(func=_score)
     v = ds.add_parser("verify", help="check every file against the manifest's checksums")
     v.add_argument("dataset", metavar="DIR")

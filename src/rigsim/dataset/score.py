@@ -34,7 +34,6 @@ import numpy as np
 from rigsim.dataset.reader import open_dataset
 from rigsim.errors import DatasetError
 
-MODES = {"centroid": ("frame", "u", "v"), "direction": ("frame", "x", "y", "z")}
 TRUTH_REFS = {"centre": ("spot_u", "spot_v"), "pixel-centroid": ("spot_centroid_u", "spot_centroid_v")}
 
 
@@ -52,28 +51,59 @@ class Score:
     excluded_invalid: int
     outlier_threshold: float
     per_frame: dict = field(repr=False, default_factory=dict)
+    columns: list[str] = field(default_factory=list)
+    failed: list[int] = field(default_factory=list)
+    hints: list[str] = field(default_factory=list)
+    rows: list[dict] = field(repr=False, default_factory=list)
 
     def text(self) -> str:
         p = self.percentiles
         what = "matched stars" if self.mode.startswith("star") else "frames"
-        lines = [f"{self.mode} errors over {self.n} {what} ({self.unit}):",
+        lines = [f"{self.mode} errors over {self.n} {what} ({self.unit}; columns {', '.join(self.columns)}):",
                  f"  RMS {self.rms:.4g}   mean {', '.join(f'{m:+.4g}' for m in self.mean)}   max {self.max:.4g}",
                  "  percentiles " + "  ".join(f"{k} {v:.4g}" for k, v in p.items()),
                  f"  outliers (> {self.outlier_threshold:.3g} {self.unit}): {len(self.outliers)}"
-                 + ("" if not self.outliers else " — " + ", ".join(f"frame {i}: {e:.3g}" for i, e in self.outliers[:10]))]
+                 + ("" if not self.outliers else " — " + ", ".join(f"{i}: {e:.3g}" for i, e in self.outliers[:10]))]
         if self.missing:
-            lines.append(f"  frames without a prediction: {len(self.missing)} (first {self.missing[:10]})")
+            lines.append(f"  frames without a prediction: {len(self.missing)} (first {self.missing[:10]})"
+                         + (f", of which {len(self.failed)} NaN (failed fits)" if self.failed else ""))
         det = getattr(self, "detection", None)
         if det:
             lines.append(f"  stars: {det['matched']} of {det['valid_stars']} valid stars matched within "
                          f"{det['match_radius_px']:g} px, {det['missed']} missed, {det['false_detections']} false detections")
         if self.excluded_invalid:
             lines.append(f"  frames left out (truth not valid: spot cut by the edge or saturated): {self.excluded_invalid}")
+        lines += [f"  hint: {h}" for h in self.hints]
         return "\n".join(lines)
 
+    def as_dict(self) -> dict:
+        """The JSON result (without the per-row table, which goes to a CSV)."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("per_frame", "rows")}
 
-def read_predictions(path, mode: str | None = None, multi: bool = False) -> tuple[str, dict[int, np.ndarray]]:
-    """{frame: values} — with ``multi`` (star frames) several rows per frame: {frame: (k, d) array}."""
+
+CENTROID_COLUMNS = (("u", "v"), ("u_px", "v_px"), ("xcentroid", "ycentroid"), ("x", "y"))  # rigsim/OpenCV, photutils, sep
+DIRECTION_COLUMNS = ("x", "y", "z")
+
+
+def _columns(path, header: list[str], mode: str | None) -> tuple[str, tuple[str, ...]]:
+    """The mode and the value columns used (after ``frame``), from the header."""
+    if mode not in (None, "centroid", "direction"):
+        raise DatasetError(f"--mode {mode!r}: allowed centroid, direction")
+    if mode in (None, "direction") and all(c in header for c in DIRECTION_COLUMNS):
+        return "direction", DIRECTION_COLUMNS
+    if mode in (None, "centroid"):
+        for pair in CENTROID_COLUMNS:
+            if all(c in header for c in pair):
+                return "centroid", pair
+    want = ("'x, y, z' (direction)" if mode == "direction" else
+            " or ".join(f"'{', '.join(c)}'" for c in CENTROID_COLUMNS) + " (centroid)"
+            + ("" if mode == "centroid" else " or 'x, y, z' (direction)"))
+    raise DatasetError(f"{path}: columns {header[:12]} hold no {mode or 'known'} prediction; expected 'frame' and {want}")
+
+
+def read_predictions(path, mode: str | None = None, multi: bool = False):
+    """(mode, {frame: values}, columns used, frames whose prediction is NaN or empty: a failed fit, counted as
+    missing). With ``multi`` (star frames) several rows per frame: {frame: (k, d) array}."""
     path = Path(path)
     if not path.exists():
         raise DatasetError(f"{path}: no such predictions file")
@@ -83,61 +113,55 @@ def read_predictions(path, mode: str | None = None, multi: bool = False) -> tupl
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); expected the predictions CSV") from None
-    if True:
-        rd = csv.reader(io.StringIO(text, newline=""))
+    rd = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = [h.strip() for h in next(rd)]
+    except StopIteration:
+        raise DatasetError(f"{path}: empty file (expected a header row)") from None
+    if "frame" not in header:
+        raise DatasetError(f"{path}: no 'frame' column (the dataset's frame index, truth.csv's 'frame')")
+    mode, cols = _columns(path, header, mode)
+    idx = [header.index("frame")] + [header.index(c) for c in cols]
+    out: dict[int, list | np.ndarray] = {}
+    failed: list[int] = []
+    for line, row in enumerate(rd, start=2):
+        if not row or all(not x.strip() for x in row):
+            continue
         try:
-            header = [h.strip() for h in next(rd)]
-        except StopIteration:
-            raise DatasetError(f"{path}: empty file (expected a header row)") from None
-        if mode is None:
-            found = [m for m, cols in MODES.items() if all(c in header for c in cols)]
-            if not found:
-                raise DatasetError(f"{path}: columns {header} match no mode; expected "
-                                   + " or ".join(f"'{', '.join(c)}' ({m})" for m, c in MODES.items()))
-            mode = found[0]
-        elif mode not in MODES:
-            raise DatasetError(f"--mode {mode!r}: allowed {', '.join(MODES)}")
-        cols = MODES[mode]
-        missing = [c for c in cols if c not in header]
-        if missing:
-            raise DatasetError(f"{path}: missing column(s) {missing} for mode '{mode}' (need {', '.join(cols)})")
-        idx = [header.index(c) for c in cols]
-        out: dict[int, np.ndarray] = {}
-        for line, row in enumerate(rd, start=2):
-            if not row or all(not x.strip() for x in row):
-                continue
-            try:
-                vals = [row[i] for i in idx]
-            except IndexError:
-                raise DatasetError(f"{path}:{line}: {len(row)} fields, header has {len(header)}") from None
-            try:
-                fr = int(vals[0])
-            except ValueError:
-                raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0]!r} is not an integer") from None
-            try:
-                v = np.array([float(x) for x in vals[1:]])
-            except ValueError:
-                bad = next(c for c, x in zip(cols[1:], vals[1:]) if not _isfloat(x))
-                raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols[1:].index(bad)]!r} is not a number") from None
-            if not np.all(np.isfinite(v)):
-                raise DatasetError(f"{path}:{line}: non-finite value in {cols[1:]}")
-            if mode == "centroid" and np.max(np.abs(v)) > 1e7:
-                raise DatasetError(f"{path}:{line}: ({', '.join(cols[1:])}) = {tuple(float(x) for x in v)}: a pixel "
-                                   "position must lie within ±1e7 px")
-            if mode == "direction" and not (1e-12 < float(np.linalg.norm(v)) < 1e150):
-                raise DatasetError(f"{path}:{line}: direction ({', '.join(cols[1:])}) = {tuple(float(x) for x in v)} has "
-                                   "no usable length (allowed 1e-12 to 1e150)")
-            if multi:
-                out.setdefault(fr, []).append(v)
-                continue
-            if fr in out:
-                raise DatasetError(f"{path}:{line}: frame {fr} appears twice")
-            out[fr] = v
+            vals = [row[i].strip() for i in idx]
+        except IndexError:
+            raise DatasetError(f"{path}:{line}: {len(row)} fields, header has {len(header)}") from None
+        try:
+            fr = int(vals[0])
+        except ValueError:
+            raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0]!r} is not an integer") from None
+        try:
+            v = np.array([float(x) if x else math.nan for x in vals[1:]])
+        except ValueError:
+            bad = next(c for c, x in zip(cols, vals[1:]) if x and not _isfloat(x))
+            raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols.index(bad)]!r} is not a number") from None
+        if np.any(np.isnan(v)):  # a failed fit: the frame has no prediction
+            failed.append(fr)
+            continue
+        if not np.all(np.isfinite(v)):
+            raise DatasetError(f"{path}:{line}: infinite value in {list(cols)}")
+        if mode == "centroid" and np.max(np.abs(v)) > 1e7:
+            raise DatasetError(f"{path}:{line}: ({', '.join(cols)}) = {tuple(float(x) for x in v)}: a pixel "
+                               "position must lie within ±1e7 px")
+        if mode == "direction" and not (1e-12 < float(np.linalg.norm(v)) < 1e150):
+            raise DatasetError(f"{path}:{line}: direction ({', '.join(cols)}) = {tuple(float(x) for x in v)} has "
+                               "no usable length (allowed 1e-12 to 1e150)")
+        if multi:
+            out.setdefault(fr, []).append(v)
+            continue
+        if fr in out:
+            raise DatasetError(f"{path}:{line}: frame {fr} appears twice")
+        out[fr] = v
     if multi:
         out = {k: np.array(v) for k, v in out.items()}
     if not out:
-        raise DatasetError(f"{path}: no prediction rows")
-    return mode, out
+        raise DatasetError(f"{path}: no prediction rows" + (f" ({len(failed)} rows are NaN)" if failed else ""))
+    return mode, out, cols, sorted(set(failed) - set(out))
 
 
 def _isfloat(x) -> bool:
@@ -149,14 +173,16 @@ def _isfloat(x) -> bool:
 
 
 def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centre",
-          outlier: float | None = None, match_radius_px: float = 2.0) -> Score:
+          outlier: float | None = None, match_radius_px: float = 2.0, outlier_abs: float | None = None) -> Score:
+    """Score predictions against the dataset's truth. ``outlier``: a floor under the robust threshold (5 × the
+    robust 2-D rms); ``outlier_abs``: an absolute threshold instead of it."""
     ds = open_dataset(root)
     if ds.rows_per_frame:
-        return _score_stars(ds, predictions, outlier, match_radius_px)
-    mode, pred = read_predictions(predictions, mode)
+        return _score_stars(ds, predictions, outlier, match_radius_px, outlier_abs)
+    mode, pred, cols, failed = read_predictions(predictions, mode)
     t = ds.truth_numpy()
     n = len(ds)
-    unknown = sorted(k for k in pred if not (0 <= k < n))
+    unknown = sorted(k for k in [*pred, *failed] if not (0 <= k < n))
     if unknown:
         raise DatasetError(f"{predictions}: frame(s) {unknown[:10]} not in the dataset (0 to {n - 1})")
     valid = t["valid"].astype(bool) if "valid" in t else np.ones(n, bool)
@@ -185,46 +211,81 @@ def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centr
         raise DatasetError("no prediction for any valid frame")
     P = np.array([pred[i] for i in frames])
     T = truth[frames]
+    hints: list[str] = []
     if mode == "centroid":
         d = P - T
         err = np.hypot(d[:, 0], d[:, 1])
         mean = d.mean(axis=0).tolist()
+        hints = convention_hints(P, T)
+        rows = [{"frame": f, "u_pred_px": p[0], "v_pred_px": p[1], "u_true_px": q[0], "v_true_px": q[1],
+                 "du_px": e[0], "dv_px": e[1], "error_px": r} for f, p, q, e, r in zip(frames, P, T, d, err)]
     else:
         Pn = P / np.linalg.norm(P, axis=1, keepdims=True)
         Tn = T / np.linalg.norm(T, axis=1, keepdims=True)
         err = np.degrees(np.arctan2(np.linalg.norm(np.cross(Pn, Tn), axis=1), np.sum(Pn * Tn, axis=1))) * 3600.0
         mean = [float(err.mean())]
-    return _summary(mode, unit, frames, err, mean, outlier, missing, excluded)
-
-
-def _summary(mode, unit, frames, err, mean, outlier, missing, excluded, extra: dict | None = None) -> Score:
-    # robust scale: for a 2-D Gaussian error of σ per axis the error *magnitude* has median
-    # 1.1774 σ; an outlier is beyond 5 × the 2-D rms (5·√2·σ ≈ 6.0 × the median)
-    med = float(np.median(err))
-    thr = max(5.0 * math.sqrt(2.0) * med / 1.1774, outlier or 0.0)
-    outl = sorted(((fr, float(e)) for fr, e in zip(frames, err) if e > thr), key=lambda x: -x[1])
-    pct = {f"p{q}": float(np.percentile(err, q)) for q in (50, 90, 95, 99)}
-    sc = Score(mode, unit, len(frames), float(math.sqrt(np.mean(err**2))), [float(m) for m in mean], pct,
-               float(err.max()), outl, missing, excluded, thr, dict(zip(frames, err.tolist())))
-    if extra:
-        sc.per_frame.update({"_detection": extra})
+        rows = [{"frame": f, "error_arcsec": r} for f, r in zip(frames, err)]
+    sc = _summary(mode, unit, [f"frame {f}" for f in frames], err, mean, outlier, missing, excluded,
+                  outlier_abs=outlier_abs)
+    sc.per_frame = dict(zip(frames, err.tolist()))
+    sc.columns, sc.failed, sc.hints, sc.rows = ["frame", *cols], [f for f in failed if f in missing], hints, rows
     return sc
 
 
-def _score_stars(ds, predictions, outlier, match_radius_px: float) -> Score:
+def convention_hints(P: np.ndarray, T: np.ndarray) -> list[str]:
+    """Likely causes of a systematic error: a constant offset near ±1 px (1-based pixels: FITS, MATLAB, IRAF) or
+    ±0.5 px (a corner-origin convention), or u and v swapped (the error shrinks when they are exchanged)."""
+    out = []
+    d = P - T
+    err = np.hypot(d[:, 0], d[:, 1])
+    rms = float(np.sqrt(np.mean(err**2)))
+    m = d.mean(axis=0)
+    spread = float(np.sqrt(np.mean(np.sum((d - m) ** 2, axis=1))))
+    if len(d) >= 3 and spread < 0.25 * float(np.hypot(*m)):
+        for target, cause in ((1.0, "1-based pixel indices (FITS, MATLAB, IRAF): subtract 1"),
+                              (0.5, "a corner-origin convention (pixel (0, 0) spans 0 to 1): subtract 0.5")):
+            near = [abs(abs(x) - target) < 0.15 for x in m]
+            if any(near):
+                axes = "u and v" if all(near) else ("u" if near[0] else "v")
+                out.append(f"the error is a constant offset of ({m[0]:+.3f}, {m[1]:+.3f}) px (scatter {spread:.3f} px): "
+                           f"{axes} look shifted by {target:g} px — {cause} (rigsim's pixel centres are integers, "
+                           "0-based, OpenCV's convention)")
+                break
+    swapped = P[:, ::-1] - T
+    rms_sw = float(np.sqrt(np.mean(np.sum(swapped**2, axis=1))))
+    if len(d) >= 2 and rms_sw < 0.1 * rms:
+        out.append(f"u and v look swapped: with them exchanged the RMS would be {rms_sw:.3g} px instead of {rms:.3g} px "
+                   "(u is the column, v the row)")
+    return out
+
+
+def _summary(mode, unit, frames, err, mean, outlier, missing, excluded, extra: dict | None = None,
+             outlier_abs: float | None = None) -> Score:
+    # robust scale: for a 2-D Gaussian error of σ per axis the error *magnitude* has median
+    # 1.1774 σ; an outlier is beyond 5 × the 2-D rms (5·√2·σ ≈ 6.0 × the median)
+    med = float(np.median(err))
+    thr = float(outlier_abs) if outlier_abs is not None else max(5.0 * math.sqrt(2.0) * med / 1.1774, outlier or 0.0)
+    outl = sorted(((fr, float(e)) for fr, e in zip(frames, err) if e > thr), key=lambda x: -x[1])
+    pct = {f"p{q}": float(np.percentile(err, q)) for q in (50, 90, 95, 99)}
+    sc = Score(mode, unit, len(frames), float(math.sqrt(np.mean(err**2))), [float(m) for m in mean], pct,
+               float(err.max()), outl, missing, excluded, thr)
+    return sc
+
+
+def _score_stars(ds, predictions, outlier, match_radius_px: float, outlier_abs: float | None = None) -> Score:
     """Star frames: each predicted (u, v) is matched to the nearest true star of its frame within
     ``match_radius_px``; the unmatched predictions are false detections, the unmatched valid stars
     are missed. Errors are over the matched valid stars (px)."""
     from scipy.spatial import cKDTree
 
-    mode, pred = read_predictions(predictions, "centroid", multi=True)
+    mode, pred, cols, failed = read_predictions(predictions, "centroid", multi=True)
     t = ds.truth_numpy()
     n = len(ds)
     unknown = sorted(k for k in pred if not (0 <= k < n))
     if unknown:
         raise DatasetError(f"{predictions}: frame(s) {unknown[:10]} not in the dataset (0 to {n - 1})")
     fr_col = t["frame"].astype(int)
-    errs, labels, d_all = [], [], []
+    errs, labels, d_all, rows = [], [], [], []
     false_det = missed = n_valid = 0
     for f in range(n):
         sel = np.flatnonzero((fr_col == f) & (t["star"] >= 0))
@@ -241,7 +302,11 @@ def _score_stars(ds, predictions, outlier, match_radius_px: float) -> Score:
                     if valid[jj]:
                         errs.append(dd)
                         d_all.append(P[p_i] - truth_uv[jj])
-                        labels.append(f)
+                        star = int(t["star"][sel[jj]])
+                        labels.append(f"frame {f} star {star}")
+                        rows.append({"frame": f, "star": star, "u_pred_px": P[p_i][0], "v_pred_px": P[p_i][1],
+                                     "u_true_px": truth_uv[jj][0], "v_true_px": truth_uv[jj][1],
+                                     "du_px": d_all[-1][0], "dv_px": d_all[-1][1], "error_px": dd})
                 else:
                     false_det += 1
         else:
@@ -253,6 +318,8 @@ def _score_stars(ds, predictions, outlier, match_radius_px: float) -> Score:
     extra = {"valid_stars": n_valid, "matched": len(errs), "missed": missed, "false_detections": false_det,
              "match_radius_px": match_radius_px}
     sc = _summary("star centroid", "px", labels, np.array(errs), d_all.mean(axis=0).tolist(), outlier,
-                  [f for f in range(n) if f not in pred], 0, extra)
+                  [f for f in range(n) if f not in pred], 0, extra, outlier_abs=outlier_abs)
+    sc.per_frame = {"_detection": extra}
     sc.detection = extra
+    sc.columns, sc.failed, sc.rows = ["frame", *cols], failed, rows
     return sc
