@@ -11,8 +11,9 @@ import sys
 
 import rigsim
 from rigsim.dataset import cli as dataset_cli
-from rigsim.errors import RigsimError
+from rigsim.errors import CliError, RigsimError
 from rigsim.families import FAMILIES, family_of
+from rigsim.files.options import number
 from rigsim.procedures import centroid as centroid_stage
 from rigsim.procedures import target_commands
 from rigsim.view import cli as view_cli
@@ -67,6 +68,35 @@ def cmd_rig_list(args) -> int:
     for p in default_rigs():
         r = load_any_rig(p)
         print(f"{p.stem:40s} seed {r.seed_document}  {family_of(r).name:12s} {r.description}")
+    return 0
+
+
+def cmd_rig_import_camera(args) -> int:
+    from pathlib import Path
+
+    from rigsim.files.atomic import atomic_write_text
+    from rigsim.rig.cube_mirror import CubeMirrorRig
+    from rigsim.rig.load import RIG_MODELS, parse_model, parse_rig_text, read_rig_text, resolve_rig_path
+    from rigsim.rig.opencv_camera import import_camera, read_opencv_camera
+
+    src = resolve_rig_path(args.rig)
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise CliError(f"--out {out}: a rig file name ends in .toml")
+    if out.exists() and out.resolve() == src.resolve():
+        raise CliError(f"--out {out}: is the rig file itself; write a new file (the original stays as it was)")
+    cam = read_opencv_camera(args.camera)
+    text, changes = import_camera(read_rig_text(src), src, cam, pixel_pitch_um=args.pixel_pitch_um, source=args.camera)
+    data = parse_rig_text(text, out)  # the new rig is checked as `rig check` would, before anything is written
+    rig = parse_model(RIG_MODELS.get(str(data.get("seed_document", "")), CubeMirrorRig), data, out)
+    if isinstance(rig, CubeMirrorRig):
+        from rigsim.rig.geometry import check_geometry
+
+        check_geometry(rig, out)
+    atomic_write_text(out, text)
+    for c in changes:
+        print(f"  {c}")
+    print(f"wrote {out}: {src.name} with the camera of {args.camera}; check it: rigsim rig check {out}")
     return 0
 
 
@@ -128,6 +158,17 @@ def build_parser() -> argparse.ArgumentParser:
     gc.set_defaults(func=cmd_rig_check)
     gl = gs.add_parser("list", help="list the default rigs in scenes/")
     gl.set_defaults(func=cmd_rig_list)
+    gi = gs.add_parser("import-camera", help="a rig file with the intrinsics of an OpenCV camera (FileStorage YAML/JSON)",
+                       description="Write a copy of RIG whose sun sensor (or star sensor) has the camera matrix, "
+                                   "distortion and image size of an OpenCV FileStorage file (camera_matrix, "
+                                   "distortion_coefficients k1 k2 p1 p2 k3, image_width, image_height). The focal "
+                                   "length in mm is fx times the rig's pixel pitch. Comments and layout are kept.")
+    gi.add_argument("camera", help="OpenCV FileStorage file (.yml, .yaml, .json, .xml)")
+    gi.add_argument("--rig", default="sun_sensor_2axis_diaphragm", help="rig file path or default rig name")
+    gi.add_argument("--out", required=True, metavar="NEW.toml", help="the new rig file")
+    gi.add_argument("--pixel-pitch-um", type=number(0.1, 100.0), default=None, metavar="UM",
+                    help="the detector's pixel pitch, if not the rig's (OpenCV's matrix is in pixels)")
+    gi.set_defaults(func=cmd_rig_import_camera)
 
     r = sub.add_parser("run", help="run a documented procedure end to end")
     rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")

@@ -1,0 +1,152 @@
+"""An OpenCV camera (``cv2.FileStorage`` YAML, JSON or XML: ``camera_matrix``, ``distortion_coefficients``,
+``image_width``, ``image_height``, as ``calibrateCamera`` results are usually saved) pasted into a rig file's
+camera: the sun sensor of a cube-mirror rig, or the star sensor of a seed-004 rig. The rig file keeps its
+comments and layout (tomlkit); only the intrinsics change. docs/custom-rig.md has the mapping."""
+
+from __future__ import annotations
+
+import math
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rigsim.errors import InputError, RigError
+
+MATRIX_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsic_matrix")
+DIST_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D", "distortion")
+DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tau_x", "tau_y")
+
+
+@dataclass
+class OpenCVCamera:
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: dict[str, float]
+    size: tuple[int, int] | None  # (width, height)
+    skew: float = 0.0
+
+
+def read_opencv_camera(path) -> OpenCVCamera:
+    """The camera in an OpenCV FileStorage file; one line naming the file and the key for anything unusable."""
+    import cv2
+
+    path = Path(path)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode) or st.st_size > (1 << 20):
+        raise InputError(f"{path}: not a regular file of at most 1 MiB; expected an OpenCV FileStorage camera (.yml, .json)")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {exc.start}); expected an OpenCV FileStorage camera") from None
+    if path.suffix.lower() in (".yml", ".yaml") and not text.lstrip().startswith("%YAML"):
+        text = "%YAML:1.0\n" + text  # OpenCV insists on its header; files written by hand often lack it
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError) as exc:  # OpenCV's parser raises through a SystemError on some syntax errors
+        cause = exc.__cause__ or exc
+        raise InputError(f"{path}: not an OpenCV FileStorage file ({str(cause).strip().splitlines()[-1][:120]})") from None
+    try:
+        K = _matrix(fs, MATRIX_KEYS)
+        D = _matrix(fs, DIST_KEYS)
+        size = tuple(_integer(fs, k) for k in ("image_width", "image_height"))
+    finally:
+        fs.release()
+    if K is None:
+        raise InputError(f"{path}: no camera matrix (looked for {', '.join(MATRIX_KEYS)})")
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise InputError(f"{path}: camera_matrix is {K.shape[0]}×{K.shape[1] if K.ndim > 1 else 1}; expected a finite 3×3 matrix")
+    if not (K[1, 0] == 0 and K[2, 0] == 0 and K[2, 1] == 0 and abs(K[2, 2] - 1.0) < 1e-9):
+        raise InputError(f"{path}: camera_matrix is not [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    if not (fx > 0 and fy > 0):
+        raise InputError(f"{path}: camera_matrix fx = {fx:g}, fy = {fy:g}; both must be positive")
+    d = np.zeros(0) if D is None else D.ravel()
+    if len(d) not in (0, 4, 5, 8, 12, 14) or not np.all(np.isfinite(d)):
+        raise InputError(f"{path}: distortion_coefficients has {len(d)} finite values; OpenCV's are 4, 5, 8, 12 or 14")
+    dist = {n: float(v) for n, v in zip(DIST_NAMES, d)}
+    w, h = size
+    return OpenCVCamera(fx, fy, cx, cy, dist, (w, h) if w and h else None, float(K[0, 1]))
+
+
+def _matrix(fs, keys):
+    for k in keys:
+        node = fs.getNode(k)
+        if not node.empty():
+            m = node.mat()
+            if m is None and node.isSeq():
+                m = np.array([node.at(i).real() for i in range(node.size())])
+            return None if m is None else np.asarray(m, float)
+    return None
+
+
+def _integer(fs, key) -> int | None:
+    node = fs.getNode(key)
+    if node.empty():
+        return None
+    v = node.real()
+    return int(v) if math.isfinite(v) and v == int(v) and 16 <= v <= 20000 else None
+
+
+def import_camera(rig_text: str, rig_path, cam: OpenCVCamera, *, pixel_pitch_um: float | None = None,
+                  source: str = "camera") -> tuple[str, list[str]]:
+    """The rig file's text with ``cam``'s intrinsics in its camera, and the lines that say what changed."""
+    import tomlkit
+
+    doc = tomlkit.parse(rig_text)
+    if "sun_sensor" in doc:
+        sec, name = doc["sun_sensor"], "sun_sensor"
+    elif "sensor" in doc:
+        sec, name = doc["sensor"], "sensor"
+    else:
+        raise RigError(rig_path, ["no [sun_sensor] or [sensor] table: only a sun sensor or a star sensor takes an OpenCV camera"])
+    pitch = float(pixel_pitch_um if pixel_pitch_um is not None else sec.get("pixel_pitch_um", 0.0))
+    if not (pitch > 0):
+        raise RigError(rig_path, [f"{name}.pixel_pitch_um is missing; give --pixel-pitch-um (OpenCV's matrix is in pixels)"])
+    extra = {k: v for k, v in cam.dist.items() if k not in ("k1", "k2", "p1", "p2", "k3") and v != 0.0}
+    if extra:
+        raise InputError(f"{source}: distortion {', '.join(f'{k} = {v:g}' for k, v in extra.items())}: rigsim's camera "
+                         "has k1, k2, p1, p2, k3 only (OpenCV's 5-coefficient model)")
+    if abs(cam.skew) > 1e-9 * cam.fx:
+        raise InputError(f"{source}: camera_matrix skew = {cam.skew:g}: rigsim's camera has none")
+    changes = []
+
+    def put(table, key, value, text):
+        old = _plain(table.get(key))
+        table[key] = value
+        if old != value:
+            changes.append(f"{name}.{text}: {old} → {value}")
+
+    if cam.size is not None:
+        put(sec, "resolution_px", list(cam.size), "resolution_px")
+    if pixel_pitch_um is not None:
+        put(sec, "pixel_pitch_um", float(pixel_pitch_um), "pixel_pitch_um")
+    put(sec, "focal_length_mm", round(cam.fx * pitch * 1e-3, 9), "focal_length_mm")
+    put(sec, "principal_point_px", [round(cam.cx, 6), round(cam.cy, 6)], "principal_point_px")
+    k = {n: round(cam.dist.get(n, 0.0), 9) for n in ("k1", "k2", "p1", "p2", "k3")}
+    if name == "sun_sensor":
+        put(sec, "fy_over_fx", round(cam.fy / cam.fx, 12), "fy_over_fx")
+        if "distortion" not in sec:
+            sec["distortion"] = tomlkit.inline_table()
+        for n, v in k.items():
+            put(sec["distortion"], n, v, f"distortion.{n}")
+    else:
+        if abs(cam.fy / cam.fx - 1.0) > 1e-6:
+            raise InputError(f"{source}: fy/fx = {cam.fy / cam.fx:.9f}; the star sensor has one focal length (square pixels)")
+        if k["k3"] != 0.0:
+            raise InputError(f"{source}: distortion k3 = {k['k3']:g}; the star sensor's model has k1, k2, p1, p2")
+        for n in ("k1", "k2", "p1", "p2"):
+            put(sec, n, k[n], n)
+    return tomlkit.dumps(doc), changes
+
+
+def _plain(v):
+    if hasattr(v, "unwrap"):
+        v = v.unwrap()
+    return v
