@@ -54,8 +54,8 @@ def canonical_sha256(obj) -> str:
     return sha256_bytes(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode())
 
 
-def encode_image(img: np.ndarray, fmt: str) -> bytes:
-    """Lossless bytes of a uint16 image: PNG (OpenCV) or FITS (astropy)."""
+def encode_image(img: np.ndarray, fmt: str, header=None) -> bytes:
+    """Lossless bytes of a uint16 image: PNG (OpenCV) or FITS (astropy, with the ``header`` cards)."""
     a = np.asarray(img)
     if a.dtype != np.uint16 or a.ndim != 2:
         raise ValueError(f"frames must be 2-D uint16, got {a.dtype} {a.shape}")
@@ -72,7 +72,10 @@ def encode_image(img: np.ndarray, fmt: str) -> bytes:
         from astropy.io import fits
 
         bio = io.BytesIO()
-        fits.PrimaryHDU(a).writeto(bio)
+        hdu = fits.PrimaryHDU(a)
+        for key, value, comment in header or ():
+            hdu.header[key] = (value, comment)
+        hdu.writeto(bio)
         return bio.getvalue()
     raise ValueError(f"image format {fmt!r}: must be 'png' or 'fits'")
 
@@ -107,7 +110,7 @@ def write_frame_atomic(root, index: int, img: np.ndarray, sidecar: dict, fmt: st
     from rigsim.render.frame import _jsonable
 
     ip, jp = frame_files(root, index, fmt)
-    data = encode_image(img, fmt)
+    data = encode_image(img, fmt, sidecar.get("fits_header"))
     digest = sha256_bytes(data)
     atomic_write_bytes(ip, data)
     sc = _jsonable(dict(sidecar))

@@ -83,8 +83,9 @@ def read_image(path, *, shape: tuple[int, int] | None = None, allowed_bits=(8, 1
     return img
 
 
-def encode_image(dn: np.ndarray, suffix: str) -> bytes:
-    """The bytes of ``dn`` (2-D uint8/uint16) as a PNG, TIFF or FITS file."""
+def encode_image(dn: np.ndarray, suffix: str, header=None) -> bytes:
+    """The bytes of ``dn`` (2-D uint8/uint16) as a PNG, TIFF or FITS file; ``header``: FITS cards
+    ``[(keyword, value, comment), ...]`` (FITS only)."""
     img = np.ascontiguousarray(dn)
     if img.ndim != 2 or img.dtype not in _BITS:
         raise ValueError(f"frames are 2-D uint8/uint16 images; got shape {img.shape}, dtype {img.dtype}")
@@ -93,7 +94,10 @@ def encode_image(dn: np.ndarray, suffix: str) -> bytes:
         from astropy.io import fits
 
         buf = io.BytesIO()
-        fits.PrimaryHDU(img).writeto(buf)
+        hdu = fits.PrimaryHDU(img)
+        for key, value, comment in header or ():
+            hdu.header[key] = (value, comment)
+        hdu.writeto(buf)
         return buf.getvalue()
     import cv2
 
@@ -103,9 +107,9 @@ def encode_image(dn: np.ndarray, suffix: str) -> bytes:
     return enc.tobytes()
 
 
-def write_image(path, dn: np.ndarray) -> Path:
-    """Write a frame as PNG, TIFF or FITS (by the suffix), atomically."""
+def write_image(path, dn: np.ndarray, header=None) -> Path:
+    """Write a frame as PNG, TIFF or FITS (by the suffix), atomically; ``header``: FITS cards (FITS only)."""
     path = Path(path)
     if path.suffix.lower() not in FRAME_SUFFIXES:
         raise InputError(f"{path}: unsupported frame file type {path.suffix!r}; expected one of {', '.join(FRAME_SUFFIXES)}")
-    return atomic_write_bytes(path, encode_image(dn, path.suffix))
+    return atomic_write_bytes(path, encode_image(dn, path.suffix, header))

@@ -59,9 +59,27 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
         raise ValueError(f"renderer = {renderer!r}: allowed 'analytic' or 'mitsuba'")
     fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth.as_dict(), truth_object=truth,
                   render=settings, index=int(index), time_s=float(time_s))
+    fr.extra["fits_header"] = star_fits_cards(sky.rig, truth.R_cam_from_icrs, seed=int(seed), time_s=float(time_s))
     if not keep_photons:
         fr.photons = None
     return fr
+
+
+def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0) -> list:
+    """The FITS header cards of a star frame of ``rig`` at an attitude: the true camera's WCS (TAN-SIP), the
+    exposure, gain, observation time (the rig's epoch plus ``time_s``), units, seed and detector model."""
+    import astropy.units as u
+    from astropy.time import Time
+
+    from rigsim.optics.wcs import star_frame_header
+
+    s = rig.sensor
+    d = s.detector
+    t = Time(rig.sky.epoch_year, format="jyear", scale="tt") + time_s * u.s
+    model = f"QE {d.quantum_efficiency:g} K {d.gain_dn_per_e:g}/e read {d.read_noise_e:g}e {d.adc_bits}b"
+    return [list(c) for c in star_frame_header(s.camera(), R_cam_from_icrs, exposure_s=d.exposure_s,
+                                                gain_e_per_dn=1.0 / d.gain_dn_per_e, date_obs=t.utc.isot,
+                                                seed=seed, detector=model)]
 
 
 def render_sequence(sky: StarSky, seq, *, seed: int, renderer: str = "analytic", noiseless: bool = False,

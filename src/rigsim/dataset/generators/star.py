@@ -130,6 +130,7 @@ class StarFieldGenerator:
                          "valid": False})
         sc = dict(fr.sidecar)  # the one sidecar format; the per-star truth is in the truth table
         sc["truth"] = {"rig": self.rig.name, "R_cam_from_icrs": R.tolist(), "stars": len(tr)}
+        sc["fits_header"] = fr.extra["fits_header"]  # the FITS file's WCS and keywords, also here for readers
         sc["dataset"] = {"params": params}
         return fr.dn, sc, rows
 

@@ -89,7 +89,7 @@ def cmd_render_star_field(args) -> int:
         "u_px": uv[:, 0], "v_px": uv[:, 1]})
     written = [png, js, stars]
     if args.fits:
-        written.append(write_image(out / f"{args.name}.fits", fr.dn))
+        written.append(write_image(out / f"{args.name}.fits", fr.dn, fr.extra.get("fits_header")))
     print(f"wrote {', '.join(str(p) for p in written)} in {seconds:.2f} s ({args.renderer}"
           + (f", {spp} spp" if args.renderer == "mitsuba" else "") + f"; boresight ra {ra:g}°, dec {dec:g}°, roll {roll:g}°)")
     on = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
