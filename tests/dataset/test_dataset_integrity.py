@@ -233,7 +233,7 @@ def test_workers_choose_the_tested_libllvm_whatever_drjit_libllvm_path_says(tmp_
                "--spp", "16", "--workers", str(w), "--seed", "7"]
         r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]
-        variants = {json.loads(p.read_text())["render"].get("mitsuba_variant") for p in (out / "frames").glob("*.json")}
+        variants = {json.loads(p.read_text())["render"].get("variant") for p in (out / "frames").glob("*.json")}
         assert variants == {"llvm_ad_mono"}, (variants, r.stderr[-2000:])
         m = json.loads((out / "manifest.json").read_text())
         shas.append({k: v for k, v in m["files_sha256"].items() if k.endswith(".png")})

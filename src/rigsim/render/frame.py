@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,9 +83,6 @@ def build_sidecar(*, truth: dict | None = None, render: dict | None = None,
         if detector is None and "config" in det_meta:
             detector = det_meta["config"]
     render = dict(render or {})
-    mi = sys.modules.get("mitsuba")
-    if mi is not None and render.get("renderer") != "analytic" and "mitsuba_variant" not in render and mi.variant():
-        render["mitsuba_variant"] = mi.variant()  # llvm_ad_mono unless no libLLVM passed the self-test
     side = {
         "format": SIDECAR_FORMAT,
         "seed": seed,
