@@ -124,3 +124,18 @@ def test_noise_free_seed_001_campaign_on_rendered_frames():
     assert np.all(np.abs(c.result.cube_error_arcsec) < 0.05), c.result.cube_error_arcsec
     sd = np.sqrt(np.diag(c.calibration.rotation_covariance_rad2)) * 206264.806
     assert np.all(np.abs(c.result.sun_error_arcsec) < 4 * sd + 0.02)
+
+
+def test_the_analytic_campaign_says_which_centroid_sigma_it_uses(tmp_path):
+    """The modelled centroid noise is printed with its source; --centroid-sigma-px replaces it (the fit RMS follows:
+    √2 · σ for the 2-D residual), and is refused without --analytic."""
+    base = [sys.executable, "-m", "rigsim", "run", "cube-mirror", "--analytic", "--no-budget", "--quiet",
+            "--out", str(tmp_path)]
+    r = subprocess.run(base, capture_output=True, text=True)
+    assert r.returncode == 0 and "noise of 0.05 px per axis (the rig's sun_sensor.centroid_sigma_px" in r.stdout
+    r = subprocess.run(base + ["--centroid-sigma-px", "0.006"], capture_output=True, text=True)
+    assert r.returncode == 0 and "noise of 0.006 px per axis (--centroid-sigma-px" in r.stdout
+    rms = float(r.stdout.split("fit RMS ")[1].split(" px")[0])
+    assert abs(rms / (0.006 * np.sqrt(2)) - 1) < 0.1, rms
+    r = subprocess.run(base[:5] + ["--centroid-sigma-px", "0.006"], capture_output=True, text=True)
+    assert r.returncode == 2 and "add --analytic" in r.stderr

@@ -44,6 +44,9 @@ def add_cli(groups: dict) -> None:
     cmr.add_argument("--repeat-frames", type=integer(0, 100), default=4, help="rendered: extra frames at the first null to measure the null-measurement noise")
     cmr.add_argument("--axis-order", default=None, help="estimator's axis nesting reading, outermost first (default: the rig's)")
     cmr.add_argument("--no-budget", action="store_true", help="skip the Monte-Carlo error budget")
+    cmr.add_argument("--centroid-sigma-px", type=number(0.0, 10.0), default=None, metavar="PX",
+                     help="analytic: the sun-sensor centroid noise per axis (default the rig's "
+                          "sun_sensor.centroid_sigma_px); a rendered run prints the σ its frames measure")
     cmr.add_argument("--json-out", default=None, metavar="FILE", help="also write the results as JSON")
     cmr.add_argument("--export-frames", default=None, metavar="DIR", help="rendered: also write the sweep and null-search "
                      "frames as bare image files (no truth) with angles.csv, nulls.csv and null_frames.csv, for your own pipeline")
@@ -114,6 +117,9 @@ def cmd_run_cube_mirror(args) -> int:
         if used:
             raise CliError(f"--{used[0].replace('_', '-')}: works on rendered frames; drop --analytic")
         return _run_cube_mirror_analytic(args)
+    if args.centroid_sigma_px is not None:
+        raise CliError("--centroid-sigma-px: the analytic campaign's modelled centroid noise; a rendered run measures "
+                       "it on its frames (add --analytic)")
     return _run_cube_mirror_rendered(args)
 
 
@@ -276,6 +282,10 @@ def _run_cube_mirror_analytic(args) -> int:
     rng = np.random.default_rng(args.seed)
     real = realization_from_rig(rig, ideal=args.ideal)
     noise = cm.Noise() if args.ideal else cm.noise_from_rig(rig)
+    if args.centroid_sigma_px is not None:
+        from dataclasses import replace
+
+        noise = replace(noise, centroid_sigma_px=float(args.centroid_sigma_px))
     res = cm.run_campaign(rig, real, noise, rng, axis_order)
 
     print(f"rigsim {rigsim.__version__} — cube-mirror campaign, analytic (seed {rig.seed_document}), rig '{rig.name}'")
@@ -284,6 +294,9 @@ def _run_cube_mirror_analytic(args) -> int:
     cal = res.calibration
     print(f"\nStep 1/B  sun-sensor sweep ±{rig.procedure.sweep_range_deg:g}° every {rig.procedure.sweep_step_deg:g}°: "
           f"{cal.n_points} poses on the detector, fit RMS {cal.rms_px:.4f} px")
+    src = "--centroid-sigma-px" if args.centroid_sigma_px is not None else "the rig's sun_sensor.centroid_sigma_px"
+    print(f"  centroids: the exact spot centre + Gaussian noise of {noise.centroid_sigma_px:g} px per axis ({src}; "
+          "a rendered run, without --analytic, measures its frames' σ and prints it: pass it here to compare)")
     ss = rig.sun_sensor
     truth = {"fx": ss.fx_px, "fy": ss.fy_px, "cx": ss.principal_point_px[0], "cy": ss.principal_point_px[1], **ss.distortion.model_dump()}
     rows = []
