@@ -107,3 +107,10 @@ def test_lost_in_space_needs_no_attitude(exported, tmp_path, capsys):
     assert np.allclose(got["batch"]["theta"], ref["batch"]["theta"], rtol=1e-9, atol=0)
     assert main(["star", "calibrate", *frames, "--attitudes", str(d / "times.csv"), "--out", str(d / "x")]) == 2
     assert "times.csv: no column qw" in capsys.readouterr().err
+
+
+def test_the_report_explains_the_diverged_improved_ads(exported):
+    """The patent's improved ADS (eq 12) ends far off (its approximation drops a term as large as the one it keeps):
+    the report says so in one line beside the number, so that a reader does not take it for a bug."""
+    md = (exported / "report" / "report.md").read_text()
+    assert "improved ADS (the patent's eq 12) ends up to" in md and "not a bug" in md

@@ -219,6 +219,13 @@ def summary_lines(res, study=None) -> list[str]:
             L.append(f"  improvement over AD, {CASE_LABEL[case]:20s}: ADS u0 {100 * est[0]:+.1f}% [{100 * lo[0]:+.1f}, {100 * hi[0]:+.1f}], "
                      f"v0 {100 * est[1]:+.1f}% [{100 * lo[1]:+.1f}, {100 * hi[1]:+.1f}];  improved ADS u0 {100 * ei[0]:+.3g}%, v0 {100 * ei[1]:+.3g}%")
         L.append(f"  claim (+{100 * CLAIM['u0']:.1f}% u0, +{100 * CLAIM['v0']:.1f}% v0): " + claim_verdict(study))
+    worst = max((float(np.max(np.abs(r.theta[1:3] - t[1:3]))) for (case, model), r in res.ekf.items()
+                 if model == "ads_improved"), default=0.0)
+    if worst > 20:
+        L.append(f"  note: improved ADS (the patent's eq 12) ends up to {worst:.0f} px off"
+                 + (", and its 'improvement' over AD is a large negative %" if study is not None else "")
+                 + ": not a bug; its approximation D_iD_j ≈ D_jD_k drops a term as large as the one it keeps "
+                   "(≈ r²/f²), so its filter converges to a wrong point (docs/star_calibration.md)")
     return L
 
 
