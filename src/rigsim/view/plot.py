@@ -233,7 +233,8 @@ def export_scene(scene: RigScene, path) -> Path:
     """Write the scene to ``path``; the suffix picks the format:
 
     * ``.gltf`` — glTF 2.0 with the buffers inlined (one self-contained file; Blender, three.js
-      viewers, Windows 3D Viewer); colours and opacity kept, labels not (they are 2D overlays);
+      viewers, Windows 3D Viewer), in metres, one node per item named after it; colours and opacity
+      kept, labels not (they are 2D overlays);
     * ``.vtkjs`` — vtk.js scene archive (zip), opens in ParaView Glance / vtk.js OfflineLocalView;
     * ``.vtm``  — VTK multiblock of every item as its own named block (float64 points, e.g. for
       ParaView; no colours);
@@ -262,6 +263,7 @@ def export_scene(scene: RigScene, path) -> Path:
     try:
         if suf == ".gltf":
             pl.export_gltf(str(out), inline_data=True, rotate_scene=False)
+            gltf_in_metres(out, [it.name for it in scene.items], scene.rig_name)
         elif suf == ".vtkjs":
             import vtk
 
@@ -280,6 +282,37 @@ def export_scene(scene: RigScene, path) -> Path:
     finally:
         pl.close()
     return out
+
+
+def gltf_in_metres(path, names: list[str], title: str) -> None:
+    """Rewrite a glTF written by VTK (millimetres, meshes named mesh0…) in glTF's unit, metres: the meshes under
+    one root node scaled by 1/1000 and named after the scene's items (turntable axes, cube faces, beams,
+    cameras); the camera node's position converted to metres."""
+    import json
+
+    from rigsim.files.atomic import atomic_write_text
+
+    path = Path(path)
+    g = json.loads(path.read_text())
+    nodes = g.get("nodes", [])
+    mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
+    if len(mesh_nodes) == len(names):  # VTK writes the renderer's actors in the order they were added
+        for i, name in zip(mesh_nodes, names):
+            nodes[i]["name"] = name
+            g["meshes"][nodes[i]["mesh"]]["name"] = name
+    for n in nodes:
+        if "camera" in n and "matrix" in n:
+            n["matrix"] = [*n["matrix"][:12], *(x / 1000.0 for x in n["matrix"][12:15]), n["matrix"][15]]
+    root = len(nodes)
+    nodes.append({"name": f"{title} (metres)", "scale": [0.001, 0.001, 0.001], "children": mesh_nodes})
+    for sc in g.get("scenes", []):
+        sc["name"] = title
+        sc["nodes"] = [root] + [i for i in range(root) if "camera" in nodes[i]]
+    for i in range(root):  # the old root ("Renderer Node") is no longer in the scene: keep it empty
+        if "children" in nodes[i] and i not in mesh_nodes:
+            nodes[i]["children"] = []
+    g.setdefault("asset", {})["generator"] = "rigsim (VTK glTF exporter, converted to metres)"
+    atomic_write_text(path, json.dumps(g))
 
 
 def show(scene: RigScene, *, size=(1400, 900)) -> None:
