@@ -23,6 +23,12 @@ def test_html_export_draws_the_rig_in_a_browser(tmp_path):
     assert r.returncode == 0, r.stderr
     text = html.read_text()
     assert "<script" in text and len(text) > 200_000  # vtk.js and the scene are inlined: works offline
+    assert "<title>rigsim — sun-sensor-2axis-diaphragm (seed 000)" in text  # not vtk.js's "VTK.js | Example"
+    dom = subprocess.run([CHROMIUM, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                          "--enable-unsafe-swiftshader", "--virtual-time-budget=8000", "--dump-dom",
+                          html.resolve().as_uri()], capture_output=True, text=True, timeout=180).stdout
+    # the title, legend and notes of the PNG lie over the 3D view once the viewer has started
+    assert 'id="rigsim-title"' in dom and "reflected beam" in dom and "exact null of face +Z" in dom
     shot = tmp_path / "shot.png"
     subprocess.run([CHROMIUM, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
                     "--enable-unsafe-swiftshader", "--virtual-time-budget=10000", "--window-size=1000,700",

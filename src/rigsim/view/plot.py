@@ -279,9 +279,44 @@ def export_scene(scene: RigScene, path) -> Path:
                             z.write(f, Path("scene") / f.relative_to(d))
         else:  # .html with trame-pyvista present
             pl.trame.export_html(str(out))
+            html_overlay(out, scene)
     finally:
         pl.close()
     return out
+
+
+def html_overlay(path, scene: RigScene) -> None:
+    """Title the vtk.js page with the rig (not "VTK.js | Example") and lay the PNG's title, notes and legend over
+    the 3D view (vtk.js drops VTK's 2D text)."""
+    import html as h
+    import re
+
+    from rigsim.files.atomic import atomic_write_text
+
+    path = Path(path)
+    text = path.read_text()
+    entries = [(it.legend, it.style.get("color", "#000000")) for it in scene.items if it.legend]
+    entries += scene.info.get("legend_extra", [])
+    notes = list(scene.notes) + [f"WARNING: {x}" for x in scene.warnings]
+    notes.append(scene.frame + "; positions and angles true, housings schematic")
+    box = ("position:fixed;z-index:2147483647;background:rgba(255,255,255,0.82);padding:6px 9px;border-radius:4px;"
+           "font:13px sans-serif;color:#202020;pointer-events:none;max-width:46vw")
+    legend = "".join(f'<div><span style="display:inline-block;width:12px;height:12px;margin-right:6px;'
+                     f'background:{h.escape(str(c))}"></span>{h.escape(str(t))}</div>' for t, c in entries)
+    overlay = (f'<div id="rigsim-title" style="{box};top:8px;left:8px"><b>{h.escape(scene.title)}</b></div>'
+               f'<div id="rigsim-legend" style="{box};top:8px;right:8px">{legend}</div>'
+               f'<div id="rigsim-notes" style="{box};bottom:8px;left:8px">{"<br>".join(h.escape(n) for n in notes)}</div>')
+    text = re.sub(r"<title>.*?</title>", f"<title>rigsim — {h.escape(scene.title)}</title>", text, count=1, flags=re.S)
+    # the viewer empties <body> when it starts: the overlay is (re)added by a script once it has
+    import json
+
+    script = ("<script>(function(){var o=" + json.dumps(overlay).replace("</", "<\\/") + ";"
+              "function ensure(){if(document.body&&!document.getElementById('rigsim-title'))"
+              "document.body.insertAdjacentHTML('beforeend',o);}"
+              "new MutationObserver(ensure).observe(document.documentElement,{childList:true,subtree:true});"
+              "window.addEventListener('load',ensure);ensure();})();</script>")
+    text = text.replace("</body>", script + "</body>", 1) if "</body>" in text else text + script
+    atomic_write_text(path, text)
 
 
 def gltf_in_metres(path, names: list[str], title: str) -> None:
