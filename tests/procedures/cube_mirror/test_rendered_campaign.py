@@ -139,3 +139,46 @@ def test_the_analytic_campaign_says_which_centroid_sigma_it_uses(tmp_path):
     assert abs(rms / (0.006 * np.sqrt(2)) - 1) < 0.1, rms
     r = subprocess.run(base[:5] + ["--centroid-sigma-px", "0.006"], capture_output=True, text=True)
     assert r.returncode == 2 and "add --analytic" in r.stderr
+
+
+def _campaign_schema():
+    import json
+    from importlib.resources import files
+
+    return json.loads(files("rigsim").joinpath("schemas/cube-mirror-campaign.schema.json").read_text())
+
+
+@pytest.mark.render
+def test_the_rendered_campaign_json_matches_its_published_schema(coarse_ideal_000, tmp_path):
+    """campaign.json (rendered) and --json-out (analytic) have one shape, checked with jsonschema against the schema
+    shipped in the package; the covariance of R(cube←sun) is Σ_cube + R·Σ_sun·Rᵀ (its trace the sum)."""
+    import json
+
+    import jsonschema
+
+    from rigsim.procedures.cube_mirror.report import write_report
+
+    rig, c = coarse_ideal_000
+    files = write_report(tmp_path, c, rig, budget=None, wall_times=c.times)
+    rec = json.loads(files["json"].read_text())
+    jsonschema.validate(rec, _campaign_schema())
+    assert rec["mode"] == "rendered"
+    tr = [np.trace(rec[k]["covariance"]["matrix"]) for k in ("R_cube_from_rot", "R_sun_from_rot", "R_cube_from_sun")]
+    assert tr[2] == pytest.approx(tr[0] + tr[1], rel=1e-9)
+    np.testing.assert_allclose(rec["R_cube_from_sun"]["error_arcsec"], c.result.error_arcsec, atol=1e-12)
+
+
+def test_the_analytic_campaign_json_matches_the_same_schema(tmp_path):
+    import json
+
+    import jsonschema
+
+    out = tmp_path / "a.json"
+    r = subprocess.run([sys.executable, "-m", "rigsim", "run", "cube-mirror", "--analytic", "--trials", "4", "--quiet",
+                        "--json-out", str(out), "--out", str(tmp_path)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rec = json.loads(out.read_text())
+    jsonschema.validate(rec, _campaign_schema())
+    assert rec["mode"] == "analytic" and len(rec["budget"]) >= 3
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({**rec, "R_cube_from_sun": {"matrix": [[1, 0, 0]]}}, _campaign_schema())

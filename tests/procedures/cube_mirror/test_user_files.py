@@ -78,11 +78,11 @@ def _round_trip(tmp_path, seed, capsys, extra=()):
     exp, rep = tmp_path / "export", tmp_path / "report"
     assert main(["run", "cube-mirror", "--rig", rig, "--sweep-step", "15", "--sweep-spp", "16", "--no-budget",
                  "--repeat-frames", "0", "--export-frames", str(exp), "--out", str(rep), "--quiet", *extra]) == 0
-    camp = json.loads((rep / "campaign.json").read_text())["recovered"]
+    camp = json.loads((rep / "campaign.json").read_text())
     out = _file_route(_rename(exp, tmp_path / "bare"), rig, capsys)
-    _assert_rel(out["sun"]["R_sun_from_rot"]["matrix"], camp["R_sun_from_rot"])
-    _assert_rel(out["cube"]["R_cube_from_rot"]["matrix"], camp["R_cube_from_rot"])
-    _assert_rel(out["cs"]["R_cube_from_sun"]["matrix"], camp["R_cube_from_sun"])
+    _assert_rel(out["sun"]["R_sun_from_rot"]["matrix"], camp["R_sun_from_rot"]["matrix"])
+    _assert_rel(out["cube"]["R_cube_from_rot"]["matrix"], camp["R_cube_from_rot"]["matrix"])
+    _assert_rel(out["cs"]["R_cube_from_sun"]["matrix"], camp["R_cube_from_sun"]["matrix"])
     _null_frames_round_trip(exp, tmp_path, RIGS[seed], capsys)
     i = out["sun"]["intrinsics"]
     _assert_rel([i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"]], [camp["intrinsics"][k] for k in ("fx", "fy", "cx", "cy")])
@@ -90,6 +90,10 @@ def _round_trip(tmp_path, seed, capsys, extra=()):
     tr = [np.trace(np.array(out[k][b]["covariance"]["matrix"]))
           for k, b in (("cube", "R_cube_from_rot"), ("sun", "R_sun_from_rot"), ("cs", "R_cube_from_sun"))]
     assert tr[2] == pytest.approx(tr[0] + tr[1], rel=1e-12)
+    # the campaign's own JSON carries the same rotations with the same covariances as the file stages
+    for k, b in (("cube", "R_cube_from_rot"), ("sun", "R_sun_from_rot"), ("cs", "R_cube_from_sun")):
+        _assert_rel(camp[b]["covariance"]["matrix"], out[k][b]["covariance"]["matrix"], rel=1e-6)
+    assert camp["format"] == "rigsim.cube-mirror-campaign/1" and camp["mode"] == "rendered"
     return out, camp, rep
 
 

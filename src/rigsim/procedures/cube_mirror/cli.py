@@ -311,9 +311,11 @@ def _run_cube_mirror_analytic(args) -> int:
     np.set_printoptions(precision=7, suppress=True)
     print(f"\nrecovered R(cube←sun):\n{res.R_cube_from_sun_est}")
 
-    out = {"rig": rig.name, "seed": args.seed, "axis_order": axis_order, "ideal": args.ideal,
-           "error_arcsec": res.error_arcsec.tolist(), "null_poses_deg": res.null_poses_deg,
-           "R_cube_from_sun_est": res.R_cube_from_sun_est.tolist(), "R_cube_from_sun_true": res.R_cube_from_sun_true.tolist()}
+    from rigsim.procedures.cube_mirror.result_json import campaign_json
+    from rigsim.rig.load import resolve_rig_path
+
+    out = campaign_json(res, rig, mode="analytic", seed=args.seed, rig_file=resolve_rig_path(args.rig), ideal=args.ideal)
+    out["centroid_sigma_px"] = float(noise.centroid_sigma_px)
     if not args.no_budget:
         n_src = len(cm.budget_sources(rig)) + (2 if rig.procedure.method == "diaphragm" else 1)
         with _progress(n_src * args.trials, "error budget (Monte Carlo)", not args.quiet) as bar:

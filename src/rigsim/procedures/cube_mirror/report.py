@@ -287,16 +287,11 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
         L.append("")
     atomic_write_text((out / "report.md"), "\n".join(L) + "\n")
     files["report"] = out / "report.md"
-    rec = {"rig": rig.name, "rig_file": rig_path, "seed": campaign.seed, "axis_order": r.axis_order,
-           "error_arcsec": {"R_cube_from_sun": r.error_arcsec.tolist(), "R_sun_from_rot": r.sun_error_arcsec.tolist(),
-                            "R_cube_from_rot": r.cube_error_arcsec.tolist()},
-           "recovered": {"R_sun_from_rot": r.R_sun_from_rot_est.tolist(), "R_cube_from_rot": r.R_cube_from_rot_est.tolist(),
-                         "R_cube_from_sun": r.R_cube_from_sun_est.tolist(),
-                         "intrinsics": dict(zip(cal.param_names[:-3], cal.params[:-3].tolist()))},
-           "null_readings_deg": r.null_poses_deg, "searches": [s.as_dict() for s in campaign.searches],
-           "measured_noise": campaign.measured_noise, "times_s": wall_times or campaign.times,
-           "calibration": {"names": cal.param_names, "params": cal.params.tolist(), "sigma": list(sig.values()),
-                           "rms_px": cal.rms_px, "n_points": cal.n_points}}
+    from rigsim.procedures.cube_mirror.result_json import campaign_json
+
+    rec = campaign_json(r, rig, mode="rendered", seed=campaign.seed, rig_file=rig_path)
+    rec.update({"searches": [s.as_dict() for s in campaign.searches], "measured_noise": campaign.measured_noise,
+                "times_s": wall_times or campaign.times})
     if user is not None:
         rec["user_centroider"] = user
     if budget is not None:
