@@ -169,24 +169,12 @@ def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: st
 
 
 def write_opencv_camera(path, cal_camera) -> Path:
-    """OpenCV's FileStorage camera (``camera_matrix``, ``distortion_coefficients`` k1 k2 p1 p2 k3,
-    ``image_width``, ``image_height``), YAML or JSON by the suffix."""
-    import cv2
+    """OpenCV's FileStorage camera of a calibrated :class:`~rigsim.optics.camera.PinholeBrown`, YAML, JSON or XML by
+    the suffix (:func:`rigsim.files.opencv.write_opencv_camera`)."""
+    from rigsim.files.opencv import write_opencv_camera as write
 
-    from rigsim.files import atomic_write_bytes
-
-    path = Path(path)
-    if path.suffix.lower() not in (".yml", ".yaml", ".json", ".xml"):
-        raise InputError(f"{path}: expected an OpenCV FileStorage name ending .yml, .yaml, .json or .xml")
-    fmt = {".json": cv2.FILE_STORAGE_FORMAT_JSON, ".xml": cv2.FILE_STORAGE_FORMAT_XML}.get(path.suffix.lower(),
-                                                                                          cv2.FILE_STORAGE_FORMAT_YAML)
-    fs = cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | fmt)
     c = cal_camera
-    fs.write("image_width", int(c.width))
-    fs.write("image_height", int(c.height))
-    fs.write("camera_matrix", np.array([[c.fx, 0.0, c.cx], [0.0, c.fy, c.cy], [0.0, 0.0, 1.0]]))
-    fs.write("distortion_coefficients", np.array([[c.k1, c.k2, c.p1, c.p2, c.k3]]))
-    return atomic_write_bytes(path, fs.releaseAndGetString().encode())
+    return write(path, c.fx, c.fy, c.cx, c.cy, [c.k1, c.k2, c.p1, c.p2, c.k3], c.width, c.height)
 
 
 def plot_residuals(cal: SunCalibration, path, title: str = "") -> Path:

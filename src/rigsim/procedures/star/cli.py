@@ -48,6 +48,8 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--attitudes", required=True, metavar="FILE", help="attitude log (.csv/.parquet)")
     c.add_argument("--out", required=True, metavar="DIR", help="output folder: stars.csv and calibration.json")
     c.add_argument("--ekf", default="both", choices=["ad", "ads", "both"], help="EKF measurement model(s) to report")
+    c.add_argument("--opencv", default=None, metavar="FILE",
+                   help="also write the batch calibration as OpenCV's FileStorage camera (.yml/.json/.xml)")
     c.add_argument("--identify", default="commanded", choices=["commanded", "lost-in-space"],
                    help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
                         "frame and time_s)")
@@ -79,12 +81,21 @@ def cmd_star_calibrate(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CliError(f"--out = {out}: exists and is not a folder")
+    if args.opencv and Path(args.opencv).suffix.lower() not in (".yml", ".yaml", ".json", ".xml"):
+        raise CliError(f"--opencv {args.opencv}: an OpenCV FileStorage name ends in .yml, .yaml, .json or .xml")
     t0 = time.perf_counter()
     res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=args.identify)
     models = ("ad", "ads") if args.ekf == "both" else (args.ekf,)
     data = star_result_json(res, names, models)
     write_table(out / "stars.csv", stars_table(res, names))
     write_json(out / "calibration.json", data)
+    if args.opencv:
+        from rigsim.files.opencv import write_opencv_camera
+
+        th = dict(zip(data["theta_names"], res.batch.theta))  # f, u0, v0 (px), k1, k2
+        W, H = rig.sensor.resolution_px
+        write_opencv_camera(args.opencv, th["f"], th["f"], th["u0"], th["v0"], [th["k1"], th["k2"], 0.0, 0.0, 0.0], W, H)
+        print(f"→ {args.opencv} (OpenCV camera: the batch least-squares calibration)")
     st = res.ident_stats
     print(f"{st['frames']} frames, {st['frames_identified']} identified; {st['usable']} usable stars, "
           f"{st['identified']} identified")
