@@ -67,16 +67,9 @@ def encode_image(img: np.ndarray, fmt: str, header=None) -> bytes:
             raise RuntimeError("PNG encoding failed")
         return buf.tobytes()
     if fmt == "fits":
-        import io
+        from rigsim.files.images import encode_image as encode_frame
 
-        from astropy.io import fits
-
-        bio = io.BytesIO()
-        hdu = fits.PrimaryHDU(a)
-        for key, value, comment in header or ():
-            hdu.header[key] = (value, comment)
-        hdu.writeto(bio)
-        return bio.getvalue()
+        return encode_frame(a, ".fits", header)  # the one FITS writer, header cards included
     raise ValueError(f"image format {fmt!r}: must be 'png' or 'fits'")
 
 
