@@ -23,6 +23,7 @@ from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.imaging.frame_spots import REJECT
 from rigsim.optics.cube import FACE_NORMALS
 from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
+from rigsim.procedures.results import ROTATION_CONVENTION, rotation_block
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableReading
 
@@ -43,8 +44,6 @@ __all__ = [
     "write_opencv_camera",
 ]
 
-ROTATION_CONVENTION = "R_true ≈ exp([δ]×)·R, δ = (δx, δy, δz) about the target frame's axes, arcsec"
-ARCSEC3 = ["arcsec"] * 3  # per parameter; the matrix is in arcsec²
 
 
 def axis_orders(rig: CubeMirrorRig) -> dict[str, str]:
@@ -140,13 +139,6 @@ def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, 
     return fit_sun_sensor(rig, inp.readings, inp.uv, order), inp
 
 
-def _rotation_block(R: np.ndarray, cov_rad2: np.ndarray) -> dict:
-    e = Rotation.from_matrix(R).as_euler("xyz", degrees=True)
-    return {"matrix": np.asarray(R).tolist(), "euler_xyz_deg": e.tolist(),
-            "covariance": covariance_block(["dx", "dy", "dz"], np.asarray(cov_rad2) * ARCSEC_PER_RAD**2, ARCSEC3),
-            "convention": ROTATION_CONVENTION}
-
-
 def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: str, inputs: SunSensorInputs) -> dict:
     """The calibration as one JSON object: intrinsics with their covariance, R(sun←rot) with its
     covariance, residual statistics, the frames used."""
@@ -161,7 +153,7 @@ def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: st
                        "model": "OpenCV (Brown), normalised coordinates"},
         "intrinsics_covariance": covariance_block(cal.param_names[:n_int], cal.covariance[:n_int, :n_int],
                                                   [units.get(a, "1") for a in cal.param_names[:n_int]]),
-        "R_sun_from_rot": _rotation_block(cal.R_sun_from_rot, cal.rotation_covariance_rad2),
+        "R_sun_from_rot": rotation_block(cal.R_sun_from_rot, cal.rotation_covariance_rad2),
         "residual_rms_px": cal.rms_px, "n_frames": cal.n_points, "n_rejected": len(inputs.rejected),
         "frames_rejected": inputs.rejected,
         "sigma_source": "residual scatter of the fit (σ² = RSS / dof)",
@@ -263,7 +255,7 @@ def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, read
     return {"kind": "TRIAD", "rig": rig_name, "faces": list(faces), "axis_order": axis_order,
             "readings_deg": [{k: float(np.degrees(v)) for k, v in r.items()} for r in readings],
             "reading_sigma_arcsec": {k: v * ARCSEC_PER_RAD for k, v in sigma_rad.items()},
-            "R_cube_from_rot": _rotation_block(R, cov_rad2)}
+            "R_cube_from_rot": rotation_block(R, cov_rad2)}
 
 
 def _rotation_from(path, key: str) -> tuple[np.ndarray, np.ndarray]:
@@ -291,4 +283,4 @@ def compose_rotations(cube_path, sun_path) -> dict:
     R = Rc @ Rs.T
     C = Cc + R @ Cs @ R.T
     return {"kind": "compose", "inputs": {"cube_from_rot": str(cube_path), "sun_from_rot": str(sun_path)},
-            "R_cube_from_sun": _rotation_block(R, C)}
+            "R_cube_from_sun": rotation_block(R, C)}

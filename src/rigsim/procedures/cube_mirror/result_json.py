@@ -10,7 +10,8 @@ import math
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.procedures.cube_mirror.files import _rotation_block, reading_sigma_rad, triad_with_covariance
+from rigsim.procedures.cube_mirror.files import reading_sigma_rad, triad_with_covariance
+from rigsim.procedures.results import rotation_block
 from rigsim.rig.turntable import TurntableReading
 
 CAMPAIGN_FORMAT = "rigsim.cube-mirror-campaign/1"
@@ -31,7 +32,7 @@ def campaign_json(res, rig, *, mode: str, seed: int, rig_file=None, ideal: bool 
     C_cs = C_cube + R @ C_sun @ R.T
 
     def block(est, true, cov, err):
-        return {**_rotation_block(est, cov), "true_matrix": np.asarray(true).tolist(),
+        return {**rotation_block(est, cov), "true_matrix": np.asarray(true).tolist(),
                 "error_arcsec": np.asarray(err).tolist()}
 
     out = {

@@ -24,6 +24,8 @@ from rigsim.rig.star import NominalStarRig
 
 __all__ = [
     "LOG_COLUMNS",
+    "STAR_FORMAT",
+    "attitude_covariance_rad2",
     "attitude_log_columns",
     "calibrate_star_files",
     "read_attitude_log",
@@ -117,16 +119,43 @@ def stars_table(out: PipelineOutput, names: Sequence[str]) -> dict[str, list]:
     return cols
 
 
-def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequence[str] = ("ad", "ads")) -> dict:
-    """The calibration as one JSON object: the batch (f, u0, v0, k1, k2) with its covariance and χ²,
-    each EKF's final state with its covariance, the identification statistics."""
+STAR_FORMAT = "rigsim.star-calibration/1"
+
+
+def attitude_covariance_rad2(dirs_cam: np.ndarray, sigma_rad: np.ndarray) -> np.ndarray:
+    """Covariance (rad², about the camera axes) of an attitude fitted to unit vectors ``dirs_cam``
+    measured with isotropic angular noise ``sigma_rad`` each: [Σ (I − b bᵀ)/σ²]⁻¹ (Shuster's QUEST
+    covariance). Measurement noise only: the nominal intrinsics' error is not in it."""
+    b = np.asarray(dirs_cam, float)
+    w = 1.0 / np.asarray(sigma_rad, float) ** 2
+    F = np.einsum("n,nij->ij", w, np.eye(3)[None] - b[:, :, None] * b[:, None, :])
+    return np.linalg.inv(F) if len(b) >= 2 else np.full((3, 3), np.nan)
+
+
+def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequence[str] = ("ad", "ads"), *,
+                     mode: str = "files", seed=None, rig_file=None, true_theta=None, true_R=None) -> dict:
+    """The calibration as one JSON object (schema ``star-calibration.schema.json``): the batch (f, u0, v0,
+    k1, k2) with its covariance and χ², each EKF's final state with its covariance, each frame's attitude
+    R(cam←ICRS) with its covariance, the identification statistics. With ``true_theta`` (and ``true_R``,
+    one matrix per frame), rigsim's own campaigns put the truth and the error beside each estimate; the
+    estimators never saw them."""
+    from rigsim.frames import ARCSEC_PER_RAD
+    from rigsim.procedures.results import result_header, rotation_block
+
     b = out.batch
-    res = {"kind": "star-sensor calibration", "rig": out.nominal.name, "frames": list(names),
+    t = None if true_theta is None else np.asarray(true_theta, float)
+
+    def err(theta):
+        return None if t is None else (np.asarray(theta) - t).tolist()
+
+    res = {**result_header(STAR_FORMAT, "star-calibration", mode, out.nominal, seed=seed, rig_file=rig_file),
+           "seed_document": "004", "frames": list(names),
            "theta_names": list(THETA_NAMES), "theta_units": list(THETA_UNITS),
-           "nominal_theta": list(out.nominal.sensor.theta),
+           "nominal_theta": list(out.nominal.sensor.theta), "true_theta": None if t is None else t.tolist(),
            "batch": {"theta": b.theta.tolist(), "estimated": list(b.names),
                      "covariance": covariance_block(list(b.names), b.cov, [THETA_UNITS[THETA_NAMES.index(n)] for n in b.names]),
-                     "chi2_reduced": b.chi2_reduced, "n_equations": b.n_eq, "converged": bool(b.success)},
+                     "chi2_reduced": b.chi2_reduced, "n_equations": b.n_eq, "converged": bool(b.success),
+                     "error": err(b.theta)},
            "ekf": {}, "identification": out.ident_stats}
     for (case, model), e in out.ekf.items():
         if model not in ekf_models:
@@ -134,7 +163,47 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
         res["ekf"][f"{case}/{model}"] = {
             "case": case, "model": model, "estimated": list(e.names), "state": e.x.tolist(), "theta": e.theta.tolist(),
             "covariance": covariance_block(list(e.names), e.P, [THETA_UNITS[THETA_NAMES.index(n)] for n in e.names]),
-            "mean_nis": float(np.nanmean(e.nis)) if np.isfinite(e.nis).any() else None}
+            "mean_nis": float(np.nanmean(e.nis)) if np.isfinite(e.nis).any() else None,
+            "error": err(e.theta)}
     res["ekf_cases"] = {"f_nominal": "state (u0, v0), f fixed at the nominal value",
                         "f_joint": "state (f, u0, v0)"}
+    # each frame's attitude refitted with the batch-calibrated camera (weighted Wahba, scipy's SVD), beside the
+    # identification's (the nominal camera); its covariance = centroid noise + the batch θ's covariance (J Σθ Jᵀ,
+    # J by central differences of the refit)
+    th = np.asarray(b.theta, float)
+    idx = [THETA_NAMES.index(n) for n in b.names]
+    steps = np.array([1e-3, 1e-3, 1e-3, 1e-6, 1e-6])
+
+    def fit(fo, theta, sig):
+        cam = out.nominal.sensor.camera(f_px=theta[0], principal_point_px=theta[1:3], k1=theta[3], k2=theta[4])
+        bc = cam.unproject(fo.uv)
+        return Rotation.align_vectors(bc, fo.dirs_icrs, weights=1.0 / sig**2)[0].as_matrix(), bc
+
+    att = []
+    for k, (name, ident, fo) in enumerate(zip(names, out.ident, out.frames_obs)):
+        rec = {"frame": name, "identified": bool(ident.ok), "n_stars": len(fo),
+               "residual_rms_px": float(ident.residual_rms_px) if ident.ok else None}
+        true_k = None if true_R is None else true_R[k]
+        if ident.ok and len(fo) >= 3:
+            sig = fo.sigma_uv.mean(axis=1) / th[0]
+            R, bc = fit(fo, th, sig)
+            J = np.zeros((3, len(idx)))
+            for j, i in enumerate(idx):
+                d = np.zeros(5)
+                d[i] = steps[i]
+                Rp, Rm = fit(fo, th + d, sig)[0], fit(fo, th - d, sig)[0]
+                J[:, j] = Rotation.from_matrix(Rp @ Rm.T).as_rotvec() / (2 * steps[i])
+            cov = attitude_covariance_rad2(bc, sig) + J @ np.asarray(b.cov) @ J.T
+            rec["R_cam_from_icrs"] = rotation_block(R, cov, true_k)
+            rec["R_cam_from_icrs_nominal"] = rotation_block(ident.R_cam_from_icrs, attitude_covariance_rad2(
+                fo.dirs_icrs @ ident.R_cam_from_icrs.T, fo.sigma_uv.mean(axis=1) / out.nominal.sensor.theta[0]), true_k)
+        else:
+            rec["identified"] = False
+        att.append(rec)
+    res["attitudes"] = att
+    res["attitude_note"] = ("R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
+                            "(weighted Wahba), covariance = centroid noise + the batch θ covariance propagated; "
+                            "R_cam_from_icrs_nominal: the identification's with the nominal camera, covariance from the "
+                            "centroid noise only (it is biased by the nominal intrinsics' error). Covariances in arcsec² "
+                            f"about the camera axes (1 px ≈ {ARCSEC_PER_RAD / th[0]:.1f}″).")
     return res

@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from rigsim.estimation.star_calibration import MODELS
+from rigsim.files import write_json
 from rigsim.files.atomic import atomic_write_text, output_folder, save_figure
 from rigsim.procedures.star.pipeline import per_star_residuals
 from rigsim.procedures.star.study import CASES, CLAIM
 
-__all__ = ["write_report", "summary_lines"]
+__all__ = ["summary_lines", "write_report"]
 
 MODEL_LABEL = {"ad": "AD", "ads": "ADS (exact, eq 10)", "ads_improved": "improved ADS (eq 12)"}
 CASE_LABEL = {"f_known": "f known", "f_biased": "f biased", "f_joint": "f estimated jointly",
@@ -193,9 +193,8 @@ def summary_lines(res, study=None) -> list[str]:
              f"error/σ rms {cs['chi_rms'][0]:.2f} / {cs['chi_rms'][1]:.2f}, error/CRLB {cs['error_over_crlb_rms']:.3f}")
     b = res.batch
     e = b.theta - t
-    L.append("batch LSQ (f, u0, v0, k1, k2) − truth: f {:+.3f}±{:.3f} px, u0 {:+.3f}±{:.3f} px, v0 {:+.3f}±{:.3f} px, "
-             "k1 {:+.5f}±{:.5f}, k2 {:+.4f}±{:.4f} (χ²/dof {:.2f})".format(
-                 e[0], b.sigma[0], e[1], b.sigma[1], e[2], b.sigma[2], e[3], b.sigma[3], e[4], b.sigma[4], b.chi2_reduced))
+    L.append(f"batch LSQ (f, u0, v0, k1, k2) − truth: f {e[0]:+.3f}±{b.sigma[0]:.3f} px, u0 {e[1]:+.3f}±{b.sigma[1]:.3f} px, v0 {e[2]:+.3f}±{b.sigma[2]:.3f} px, "
+             f"k1 {e[3]:+.5f}±{b.sigma[3]:.5f}, k2 {e[4]:+.4f}±{b.sigma[4]:.4f} (χ²/dof {b.chi2_reduced:.2f})")
     for case in sorted({c for c, _ in res.ekf}, key=list(CASE_LABEL).index):
         parts = []
         for model in MODELS:
@@ -350,20 +349,24 @@ def write_report(out_dir, res, study=None, *, command: str | None = None, rig_pa
     md += ["## Wall time (s)", "", ", ".join(f"{k} {v:.2f}" for k, v in res.times.items()), ""]
     files["report"] = out / "report.md"
     atomic_write_text(files["report"], "\n".join(md) + "\n")
-    data = {"seed": res.seed, "renderer": res.renderer, "truth_theta": t.tolist(),
-            "ident": {k: v for k, v in res.ident_stats.items()}, "centroids": res.centroid_stats,
-            "batch": {"theta": b.theta.tolist(), "sigma": b.sigma.tolist(), "chi2_reduced": b.chi2_reduced},
-            "ekf": {f"{c}/{m}": {"theta": r.theta.tolist(), "sigma": r.sigma.tolist()} for (c, m), r in res.ekf.items()},
-            "observability": {f"{m}/{lab}": {"raw": o.sv_raw.tolist(), "whitened": o.sv_whitened.tolist()}
-                              for (m, lab), o in res.observability.items()},
-            "times_s": res.times}
+    from rigsim.procedures.star.files import star_result_json
+
+    models = tuple(dict.fromkeys(m for _, m in res.ekf))
+    data = star_result_json(res.output, [f"star_{k:03d}" for k in range(len(res.ident))], models,
+                            mode="analytic" if res.renderer == "analytic" else "rendered", seed=res.seed,
+                            true_theta=t, true_R=res.true_R)
+    data.update({"renderer": res.renderer, "centroids": res.centroid_stats,
+                 "identification": res.ident_stats,
+                 "observability": {f"{m}/{lab}": {"raw": o.sv_raw.tolist(), "whitened": o.sv_whitened.tolist()}
+                                   for (m, lab), o in res.observability.items()},
+                 "times_s": res.times})
     if study is not None:
         w = study.weightings[0]
         data["study"] = {"trials": study.trials, "weighting": w, "noise_scale": study.noise.scale,
                          "rms_px": {f"{c}/{m}": study.rms((c, m, w)).tolist() for c in CASES for m in study.models},
                          "verdict": claim_verdict(study)}
     files["json"] = out / "star_calibration.json"
-    atomic_write_text(files["json"], json.dumps(data, indent=1, default=float))
+    write_json(files["json"], data)
     from rigsim.reporting import markdown_to_html
 
     files["html"] = markdown_to_html(files["report"])

@@ -71,7 +71,7 @@ def compare(out: PipelineOutput, truths: list, rig: StarRig, sky: StarSky) -> tu
     noise = CentroidNoise.from_rig(rig, background_photons_per_px=sky.background_photons_per_px)
     crlb = noise.sigma(cs["photons"]) if len(err) else np.zeros(0)
     centroid_stats = {
-        "n": int(len(err)),
+        "n": len(err),
         "rms_px": np.sqrt(np.mean(err**2, axis=0)).tolist() if len(err) else [np.nan, np.nan],
         "mean_px": np.mean(err, axis=0).tolist() if len(err) else [np.nan, np.nan],
         "chi_rms": np.sqrt(np.mean((err / sig) ** 2, axis=0)).tolist() if len(err) else [np.nan, np.nan],
@@ -99,6 +99,8 @@ class PipelineResult:
     sample_frame: object = None           # the first rendered Frame (dn + truth) for the report
     R_est: list = field(default_factory=list)
     noise_scale: float = 1.0
+    output: PipelineOutput | None = None  # what the pipeline recovered (for the result JSON)
+    true_R: list = field(default_factory=list)  # per frame: the true mid-exposure R(cam←ICRS)
 
 
 def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mitsuba=None, noiseless: bool = False,
@@ -131,4 +133,5 @@ def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mit
     return PipelineResult(rig, int(seed), renderer, out.frames_obs, out.ident, ident_stats, centroid_stats, out.ekf,
                           out.batch, out.observability, np.array([s.f_px, *s.principal_point_px, s.k1, s.k2]),
                           np.array(nominal.sensor.theta, dtype=float), times, sample, out.R_est,
-                          noise_scale=float(centroid_stats["error_over_crlb_rms"]))
+                          noise_scale=float(centroid_stats["error_over_crlb_rms"]), output=out,
+                          true_R=[tr.R_cam_from_icrs for tr in truths])
