@@ -73,6 +73,12 @@ def add_cli(groups: dict) -> None:
     v.add_argument("--method", default="dvad", choices=["dvad", "simplified"], help="DVAD or the simplified eqs")
     v.add_argument("--reading", default="consistent", choices=["consistent", "as_printed"], help="reading of the equations")
     v.add_argument("--stream", action="store_true", help="rows on stdin (a header line first) → rows on stdout (DVAD)")
+    v.add_argument("--json-out", default=None, metavar="FILE",
+                   help="also write the result as JSON (rigsim.boresight-result/1): each estimate with its covariance, "
+                        "and the change of the angle between the cameras per sample measured by both")
+    v.add_argument("--centroid-sigma-px", type=number(1e-6, 10), default=None, metavar="PX",
+                   help="centroid σ per coordinate for the JSON's covariances (default: the tables' sigma_* columns "
+                        "when every table has them, else the rig's study.centroid_sigma_px)")
     v.set_defaults(func=cmd_boresight_solve)
     return p
 
@@ -111,14 +117,16 @@ def cmd_boresight_solve(args) -> int:
     _, rcams, ruv = _merged_rows(args.reference, rig, "reference table")
     ref = {c: ruv[[k for k, x in enumerate(rcams) if x == c]].mean(axis=0) for c in dict.fromkeys(rcams)}
     if args.stream:
-        if args.measured or args.method != "dvad" or args.reading != "consistent":
-            raise CliError("--stream solves rows from stdin with DVAD (consistent reading); drop --measured/--method/--reading")
+        if args.measured or args.method != "dvad" or args.reading != "consistent" or args.json_out:
+            raise CliError("--stream solves rows from stdin with DVAD (consistent reading); drop --measured/--method/--reading/--json-out")
         return _stream(rig, ref)
     if not args.measured:
         raise CliError("--measured FILE... is required (or --stream)")
     samples, cams, uv = _merged_rows(args.measured, rig, "spot table")
     est = F.solve_rows(rig, ref, cams, uv, method=args.method, reading=args.reading)
     cols = F.estimate_columns(samples, cams, est)
+    if args.json_out:
+        _write_solve_json(args, rig, rcams, ref, samples, cams, uv)
     if args.out:
         write_table(args.out, cols)
         print(f"{len(samples)} rows solved ({args.method}, {args.reading}) → {args.out}")
@@ -127,6 +135,41 @@ def cmd_boresight_solve(args) -> int:
         for row in zip(*cols.values()):
             print(",".join(str(x) for x in row))
     return 0
+
+
+def _table_sigmas(paths):
+    from rigsim.procedures.boresight.files import spot_sigmas
+
+    got = [spot_sigmas(p) for p in paths]
+    return None if any(g is None for g in got) else np.concatenate(got)
+
+
+def _write_solve_json(args, rig, rcams, ref, samples, cams, uv) -> None:
+    """The JSON result of ``boresight solve``: covariances from the centroid σ (option, the tables' columns, or
+    the rig's study value, in that order; the source is written in the file)."""
+    from rigsim.files import write_json
+    from rigsim.procedures.boresight.files import camera_geometry
+    from rigsim.procedures.boresight.result_json import boresight_result_json
+
+    n_ref = {c: rcams.count(c) for c in ref}
+    sig_m, sig_r = _table_sigmas(args.measured), _table_sigmas(args.reference)
+    if args.centroid_sigma_px is not None:
+        s = float(args.centroid_sigma_px)
+        sig_m, source = np.full((len(cams), 4), s), f"--centroid-sigma-px {s:g}"
+        sig_r = {c: np.full(4, s / np.sqrt(n_ref[c])) for c in ref}
+    elif sig_m is not None and sig_r is not None:
+        source = "the spot tables' sigma_* columns (the centroider's per-spot σ)"
+        sig_r = {c: np.sqrt(np.mean(sig_r[[k for k, x in enumerate(rcams) if x == c]] ** 2, axis=0) / n_ref[c])
+                 for c in ref}
+    else:
+        s = rig.study.centroid_sigma_px
+        sig_m, source = np.full((len(cams), 4), s), f"the rig's study.centroid_sigma_px = {s:g} (the tables have no sigma_* columns)"
+        sig_r = {c: np.full(4, s / np.sqrt(n_ref[c])) for c in ref}
+    geoms = {c: camera_geometry(rig, c) for c in dict.fromkeys([*cams, *ref])}
+    data = boresight_result_json(rig, geoms, ref, samples, cams, uv, sig_m, sig_r, method=args.method,
+                                 reading=args.reading, mode="files", rig_file=args.rig, sigma_source=source)
+    write_json(args.json_out, data)
+    print(f"→ {args.json_out} (covariances from {source})")
 
 
 def _stream(rig, ref) -> int:

@@ -21,7 +21,7 @@ from rigsim.imaging.rois import centroid_rois
 from rigsim.optics.line_camera import CameraGeometry
 from rigsim.rig.boresight import BoresightRig
 
-__all__ = ["SPOT_COLUMNS", "camera_geometry", "centroid_roi_files", "read_spot_rows", "reference_spots",
+__all__ = ["SIGMA_COLUMNS", "SPOT_COLUMNS", "camera_geometry", "spot_sigmas", "centroid_roi_files", "read_spot_rows", "reference_spots",
            "solve_rows", "estimate_columns", "streaming_solver"]
 
 SPOT_COLUMNS = [Column("camera", kind="str"), Column("u_m1", "px"), Column("v_m1", "px"), Column("u_m2", "px"),
@@ -79,6 +79,19 @@ def read_spot_rows(path, rig: BoresightRig, *, what: str = "spot table") -> tupl
     uv = np.stack([np.column_stack([t["u_m1_px"], t["v_m1_px"]]), np.column_stack([t["u_m2_px"], t["v_m2_px"]])], axis=1)
     samples = list(t["sample"]) if "sample" in t else [str(i) for i in range(len(uv))]
     return samples, [str(c) for c in t["camera"]], uv
+
+
+SIGMA_COLUMNS = [Column(f"sigma_{a}_m{j}", "px", required=False) for j in (1, 2) for a in ("u", "v")]
+
+
+def spot_sigmas(path) -> np.ndarray | None:
+    """(n, 4) the per-row centroid σ (u1, v1, u2, v2 px) of a spot table that has all four sigma columns
+    (``boresight centroid`` writes them), else None."""
+    t = read_table(path, [Column("camera", kind="str"), *SIGMA_COLUMNS], what="spot table")
+    keys = [c.key for c in SIGMA_COLUMNS]
+    if not all(k in t for k in keys):
+        return None
+    return np.column_stack([t[k] for k in keys])
 
 
 def reference_spots(path, rig: BoresightRig) -> dict[str, np.ndarray]:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from rigsim.files import write_json
 from rigsim.files.atomic import atomic_write_text, output_folder, save_figure
 from rigsim.procedures.boresight.studies import PARAMS
 
@@ -369,11 +369,12 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
             L.append(f"![ROIs]({files['rois']})\n")
     L.append(f"Analyses: {res['analysis_seconds']:.1f} s; total {res['seconds']:.0f} s.\n")
     atomic_write_text((out / "report.md"), "\n".join(L))
-    js = {k: v for k, v in res.items() if k not in ("fig5",)}
+    # the one result shape (header, samples, relative: estimate, covariance, truth) first, then the analyses
+    js = {**res.get("_result", {}), **{k: v for k, v in res.items() if k not in ("fig5",) and not k.startswith("_")}}
     js["fig5"] = {k: v for k, v in res["fig5"].items() if k != "errors"}
     if "orbit" in js:
         js["orbit"] = {k: v for k, v in js["orbit"].items() if not k.startswith("_")}
-    atomic_write_text((out / "boresight.json"), json.dumps(js, indent=1, ensure_ascii=False, default=float))
+    write_json(out / "boresight.json", js)
     from rigsim.reporting import markdown_to_html
 
     markdown_to_html(out / "report.md")

@@ -288,6 +288,8 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         "centroid_error_px": {"mean": ce.mean(axis=0).tolist(), "std": ce.std(axis=0, ddof=1).tolist(),
                               "max_abs": np.abs(ce).max(axis=0).tolist()},
         "render_fidelity_max_px": float(max(fidelity)),
+        "_spots": {"geoms": geoms, "ref_uv": ref_uv, "meas": meas, "truth": truth, "reference_frames": o.reference_frames,
+                   "ref_std": np.std(ref_single, axis=1, ddof=1)},
         "frames_rendered": int(4 * (o.reference_frames + n_meas)),
         "seconds": time.perf_counter() - t_start, "warm_up_seconds": t_warm,
         "spp": next(iter(rends.values())).spp, "window_px": next(iter(rends.values())).window_px,
@@ -483,5 +485,12 @@ def run_study(rig: BoresightRig, *, seed: int | None = None, runs: int | None = 
         res["orbit"] = run_orbit(rig, seed=seed, progress=(lambda n: progress(n, "orbit")) if progress else None,
                                  reading=reading, **(orbit_kw or {}))
     res["claims"] = claims(res)
+    from rigsim.procedures.boresight.result_json import boresight_result_json, orbit_result_json
+
+    if orbit:
+        res["_result"] = orbit_result_json(rig, res["orbit"]["_spots"], seed=seed, reading=reading)
+    else:  # the analyses only: the result's header, no sample measured
+        res["_result"] = boresight_result_json(rig, {}, {}, [], [], np.zeros((0, 2, 2)), np.zeros((0, 4)), {},
+                                               reading=reading, mode="analytic", seed=seed)
     res["seconds"] = time.perf_counter() - t0
     return res
