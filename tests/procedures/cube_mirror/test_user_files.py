@@ -44,7 +44,23 @@ def _file_route(d, rig, capsys):
     assert main(["compose", "--cube-from-rot", str(d / "cube.json"), "--sun-from-rot", str(d / "sun.json"),
                  "--out", str(d / "cs.json")]) == 0
     capsys.readouterr()
-    return {k: json.loads((d / f).read_text()) for k, f in (("sun", "sun.json"), ("cube", "cube.json"), ("cs", "cs.json"))}
+    out = {k: json.loads((d / f).read_text()) for k, f in (("sun", "sun.json"), ("cube", "cube.json"), ("cs", "cs.json"))}
+    _validate_stages(out)
+    return out
+
+
+def _validate_stages(out):
+    """Each stage's JSON against the packaged schema; a stage's block missing is caught."""
+    from importlib.resources import files
+
+    import jsonschema
+
+    schema = json.loads(files("rigsim").joinpath("schemas/cube-mirror-stages.schema.json").read_text())
+    for rec in out.values():
+        jsonschema.validate(rec, schema)
+    assert [r["format"] for r in out.values()] == ["rigsim.sun-sensor-calibration/1", "rigsim.triad/1", "rigsim.compose/1"]
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({k: v for k, v in out["cube"].items() if k != "R_cube_from_rot"}, schema)
 
 
 def _null_frames_round_trip(exp, tmp_path, rig, capsys):

@@ -146,6 +146,7 @@ def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: st
     n_int = len(cal.param_names) - 3
     units = {"fx": "px", "fy": "px", "cx": "px", "cy": "px"}
     return {
+        "format": "rigsim.sun-sensor-calibration/1", "procedure": "cube-mirror", "stage": "calibrate",
         "kind": "sun-sensor calibration", "rig": rig.name, "axis_order": axis_order,
         "intrinsics": {"fx_px": cam.fx, "fy_px": cam.fy, "cx_px": cam.cx, "cy_px": cam.cy,
                        "width_px": cam.width, "height_px": cam.height},
@@ -252,7 +253,7 @@ def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: 
 
 
 def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, readings, sigma_rad: dict, rig_name="") -> dict:
-    return {"kind": "TRIAD", "rig": rig_name, "faces": list(faces), "axis_order": axis_order,
+    return {"format": "rigsim.triad/1", "procedure": "cube-mirror", "stage": "triad", "kind": "TRIAD", "rig": rig_name, "faces": list(faces), "axis_order": axis_order,
             "readings_deg": [{k: float(np.degrees(v)) for k, v in r.items()} for r in readings],
             "reading_sigma_arcsec": {k: v * ARCSEC_PER_RAD for k, v in sigma_rad.items()},
             "R_cube_from_rot": rotation_block(R, cov_rad2)}
@@ -282,5 +283,5 @@ def compose_rotations(cube_path, sun_path) -> dict:
     Rs, Cs = _rotation_from(sun_path, "R_sun_from_rot")
     R = Rc @ Rs.T
     C = Cc + R @ Cs @ R.T
-    return {"kind": "compose", "inputs": {"cube_from_rot": str(cube_path), "sun_from_rot": str(sun_path)},
+    return {"format": "rigsim.compose/1", "procedure": "cube-mirror", "stage": "compose", "kind": "compose", "inputs": {"cube_from_rot": str(cube_path), "sun_from_rot": str(sun_path)},
             "R_cube_from_sun": rotation_block(R, C)}
