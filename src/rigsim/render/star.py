@@ -65,9 +65,10 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
     return fr
 
 
-def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0) -> list:
-    """The FITS header cards of a star frame of ``rig`` at an attitude: the true camera's WCS (TAN-SIP), the
-    exposure, gain, observation time (the rig's epoch plus ``time_s``), units, seed and detector model."""
+def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0, camera=None, wcs_name: str = "") -> list:
+    """The FITS header cards of a star frame of ``rig`` at an attitude: the WCS (TAN-SIP) of ``camera`` (default the
+    true camera), the exposure, gain, observation time (the rig's epoch plus ``time_s``), units, seed and detector
+    model; ``wcs_name`` (WCSNAME) says where the WCS comes from."""
     import astropy.units as u
     from astropy.time import Time
 
@@ -77,9 +78,12 @@ def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0) -> 
     d = s.detector
     t = Time(rig.sky.epoch_year, format="jyear", scale="tt") + time_s * u.s
     model = f"QE {d.quantum_efficiency:g} K {d.gain_dn_per_e:g}/e read {d.read_noise_e:g}e {d.adc_bits}b"
-    return [list(c) for c in star_frame_header(s.camera(), R_cam_from_icrs, exposure_s=d.exposure_s,
-                                                gain_e_per_dn=1.0 / d.gain_dn_per_e, date_obs=t.utc.isot,
-                                                seed=seed, detector=model)]
+    cards = [list(c) for c in star_frame_header(s.camera() if camera is None else camera, R_cam_from_icrs,
+                                                 exposure_s=d.exposure_s, gain_e_per_dn=1.0 / d.gain_dn_per_e,
+                                                 date_obs=t.utc.isot, seed=seed, detector=model)]
+    if wcs_name:
+        cards.append(["WCSNAME", wcs_name[:68], "where the WCS comes from"])
+    return cards
 
 
 def render_sequence(sky: StarSky, seq, *, seed: int, renderer: str = "analytic", noiseless: bool = False,

@@ -31,7 +31,9 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--mitsuba-spp", type=SPP, default=256, help="samples per pixel of the Mitsuba windows (power of 4)")
     p.add_argument("--out", default=None, help="report folder (default renders/star_calibration)")
     p.add_argument("--export-frames", default=None, metavar="DIR", help="also write the frames as bare image files "
-                   "(no truth) with attitudes.csv (frame, time_s, qw..qz commanded), for `rigsim star calibrate`")
+                   "(no truth) with attitudes.csv (frame, time_s, qw..qz commanded), for `rigsim star calibrate`; FITS "
+                   "frames carry a TAN-SIP WCS from the commanded attitude and the nominal camera (what the spacecraft "
+                   "knows), EXPTIME, GAIN, DATE-OBS, BUNIT")
     p.add_argument("--frame-format", default="fits", choices=["fits", "png", "tiff"], help="file type of --export-frames")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     st = groups["top"].add_parser("star", help="seed 004 stages on your own star frames")
@@ -139,9 +141,17 @@ def cmd_run_star_calibration(args) -> int:
               file=sys.stderr, dynamic_ncols=True) as bar:
         exported: list = []
 
+        nominal_camera = rig.nominal_rig().sensor.camera()
+
         def export(obs):
             name = f"star_{obs.index:03d}.{ {'fits': 'fits', 'png': 'png', 'tiff': 'tif'}[args.frame_format]}"
-            write_image(Path(args.export_frames) / name, obs.dn)
+            header = None
+            if args.frame_format == "fits":  # what the spacecraft knows: commanded attitude, nominal camera
+                from rigsim.render.star import frame_seed, star_fits_cards
+
+                header = star_fits_cards(rig, obs.R_commanded, seed=frame_seed(args.seed, obs.index), time_s=obs.time_s,
+                                         camera=nominal_camera, wcs_name="commanded attitude, nominal camera")
+            write_image(Path(args.export_frames) / name, obs.dn, header)
             exported.append((name, obs.time_s, obs.R_commanded))
 
         res = run_pipeline(rig, seed=args.seed, renderer=args.renderer, mitsuba=mitsuba, progress=bar,
