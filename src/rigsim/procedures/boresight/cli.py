@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError
-from rigsim.files.atomic import atomic_write_text
 from rigsim.files.options import SEED, SPP, integer, number
 
 __all__ = ["add_cli", "cmd_run_boresight"]
@@ -38,7 +37,8 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--spp", type=SPP, default=None, help="light paths per ROI pixel (default: the rig's)")
     p.add_argument("--jitter-px", type=number(0, 5), default=0.1,
                    help="also evaluate the orbit frames with this equivalent centroid error added (0: off)")
-    p.add_argument("--json-out", default=None, metavar="FILE", help="also write the key numbers as JSON")
+    p.add_argument("--json-out", default=None, metavar="FILE",
+                   help="also write the result (boresight.json's shape, rigsim.boresight-result/1) to FILE")
     p.add_argument("--export-frames", default=None, metavar="DIR", help="also write the orbit's ROI frames as bare "
                    "image files (ref_/meas_<camera>_m1|m2_<k>.png, no truth) for `rigsim boresight centroid`")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -209,12 +209,12 @@ def _stream(rig, ref) -> int:
 
 
 def cmd_run_boresight(args) -> int:
-    import json
 
     from tqdm import tqdm
 
     import rigsim
-    from rigsim.procedures.boresight.report import key_numbers, write_report
+    from rigsim.files import write_json
+    from rigsim.procedures.boresight.report import result_record, write_report
     from rigsim.procedures.boresight.studies import run_study
     from rigsim.rig.load import load_boresight_rig, resolve_rig_path
 
@@ -280,6 +280,6 @@ def cmd_run_boresight(args) -> int:
         print(f"  [{c['verdict']:>13s}] {c['claim']}\n                  {c['measured']}")
     print(f"\nreport: {report}  ({time.perf_counter() - t0:.0f} s)")
     if args.json_out:
-        atomic_write_text(Path(args.json_out), json.dumps(key_numbers(res), indent=1, default=float))
+        write_json(args.json_out, result_record(res))
         print(f"wrote {args.json_out}")
     return 0

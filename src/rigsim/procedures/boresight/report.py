@@ -231,6 +231,17 @@ def key_numbers(res: dict) -> dict:
     return out
 
 
+def result_record(res: dict) -> dict:
+    """boresight.json (and ``run boresight --json-out``): the one result shape (header, samples, relative:
+    estimate, covariance, truth) first, then the key numbers and the analyses."""
+    js = {**res.get("_result", {}), "key_numbers": key_numbers(res),
+          **{k: v for k, v in res.items() if k not in ("fig5",) and not k.startswith("_")}}
+    js["fig5"] = {k: v for k, v in res["fig5"].items() if k != "errors"}
+    if "orbit" in js:
+        js["orbit"] = {k: v for k, v in js["orbit"].items() if not k.startswith("_")}
+    return js
+
+
 def _fmt(x, nd=3):
     return "–" if x is None else f"{x:.{nd}f}"
 
@@ -369,12 +380,7 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
             L.append(f"![ROIs]({files['rois']})\n")
     L.append(f"Analyses: {res['analysis_seconds']:.1f} s; total {res['seconds']:.0f} s.\n")
     atomic_write_text((out / "report.md"), "\n".join(L))
-    # the one result shape (header, samples, relative: estimate, covariance, truth) first, then the analyses
-    js = {**res.get("_result", {}), **{k: v for k, v in res.items() if k not in ("fig5",) and not k.startswith("_")}}
-    js["fig5"] = {k: v for k, v in res["fig5"].items() if k != "errors"}
-    if "orbit" in js:
-        js["orbit"] = {k: v for k, v in js["orbit"].items() if not k.startswith("_")}
-    write_json(out / "boresight.json", js)
+    write_json(out / "boresight.json", result_record(res))
     from rigsim.reporting import markdown_to_html
 
     markdown_to_html(out / "report.md")
