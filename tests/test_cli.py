@@ -31,6 +31,17 @@ def test_triad_table1(capsys):
     assert data["axis_order"] == "XY"
     assert data["normal_angle_deg"] == pytest.approx(90.0121, abs=1e-4)
     assert "the other reading (YX) differs by 1.05" in out
+    assert data["eq8"] == "beam" and not data["triad_conditioning"]["degenerate"] and "DEGENERATE" not in out
+
+
+def test_triad_printed_eq8_reports_its_degeneracy(capsys):
+    assert main(["triad", "181.398", "0.528", "91.386", "-0.048", "--eq8", "printed", "--json"]) == 0
+    out = capsys.readouterr().out
+    data = json.loads(out.strip().splitlines()[-1])
+    assert data["eq8"] == "printed" and data["triad_conditioning"]["degenerate"]
+    assert data["normal_angle_deg"] == pytest.approx(0.576, abs=1e-3)
+    assert "DEGENERATE: r1 and r2 are 0.576° apart" in out and "amplified ×99" in out
+    assert "rigsim's reading (beam) differs by 88.799" in out
 
 
 @pytest.mark.parametrize("args,expected", [

@@ -27,6 +27,14 @@ AXIS_ORDERS_3AXIS = {
 }
 
 
+EQ8_READINGS = {
+    "beam": "each null's normal is R_rot_from_mount(θ)ᵀ·d, the beam direction, for both faces (default: at a null "
+            "the face normal is parallel to the beam, whatever the face)",
+    "printed": "seed 000 eqs 7–8 as printed: each null rotates its own face normal, r_i = R_rot_from_mount(θ_i)ᵀ·n_i "
+               "(degenerate: the two r's end up nearly parallel)",
+}
+
+
 def normal_in_mount(model: TurntableModel, pose_rad: Mapping[str, float], d_rot=(0.0, 0.0, 1.0)) -> np.ndarray:
     R = model.R_rot_from_mount(pose_rad)
     d = np.asarray(d_rot, float)
@@ -38,13 +46,18 @@ def cube_from_rot_triad(
     faces: Sequence[str],
     axis_order: str,
     d_rot=(0.0, 0.0, 1.0),
+    eq8: str = "beam",
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """TRIAD R(cube←rot) from the turntable readings at two nulls. Returns (R, r1, r2).
 
     ``poses_rad``: two :class:`~rigsim.rig.turntable.TurntableReading` (or mappings {label: rad});
-    a :class:`~rigsim.rig.turntable.TruePose` is refused."""
+    a :class:`~rigsim.rig.turntable.TruePose` is refused. ``eq8``: the reading of the normals
+    (:data:`EQ8_READINGS`)."""
+    if eq8 not in EQ8_READINGS:
+        raise ValueError(f"eq8 = {eq8!r}: allowed {', '.join(EQ8_READINGS)}")
     model = TurntableModel.nominal(list(axis_order))
-    r1 = normal_in_mount(model, as_reading(poses_rad[0]), d_rot)
-    r2 = normal_in_mount(model, as_reading(poses_rad[1]), d_rot)
     n1, n2 = FACE_NORMALS[faces[0]], FACE_NORMALS[faces[1]]
+    d1, d2 = (d_rot, d_rot) if eq8 == "beam" else (n1, n2)
+    r1 = normal_in_mount(model, as_reading(poses_rad[0]), d1)
+    r2 = normal_in_mount(model, as_reading(poses_rad[1]), d2)
     return triad(n1, n2, r1, r2), r1, r2

@@ -32,3 +32,21 @@ def triad(n1, n2, r1, r2) -> np.ndarray:
     M_b = frame(n1, n2)
     M_a = frame(r1, r2)
     return M_b @ np.swapaxes(M_a, -1, -2)
+
+
+def triad_conditioning(n1, n2, r1, r2) -> dict:
+    """How well two observed vectors r1, r2 determine a TRIAD attitude against the reference pair n1, n2:
+    the angle between r1 and r2 and between n1 and n2 (deg), their difference (a rigid body keeps it: a large
+    one means the observations cannot be of these two vectors), and the amplification 1/sin∠(r1, r2) of r2's
+    direction error into the rotation about r1; ``degenerate`` when the angle is under 10° or the
+    inconsistency over 1°."""
+    def ang(a, b):
+        a = np.asarray(a, float) / np.linalg.norm(a)
+        b = np.asarray(b, float) / np.linalg.norm(b)
+        return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)))
+
+    ar, an = ang(r1, r2), ang(n1, n2)
+    s = np.sin(np.radians(ar))
+    return {"angle_r_deg": ar, "angle_n_deg": an, "inconsistency_deg": ar - an,
+            "amplification": float(1.0 / s) if s > 0 else float("inf"),
+            "degenerate": bool(ar < 10.0 or abs(ar - an) > 1.0)}

@@ -55,11 +55,25 @@ def test_table1_readings():
 
 
 def test_printed_eq8_is_degenerate():
-    """Eq 8 as printed rotates n2 = (0,1,0) instead of the beam: r2 ends up almost along r1."""
+    """Eq 8 as printed rotates n2 = (0,1,0) instead of the beam: r2 ends up 0.576° from r1. The reading is
+    selectable (eq8="printed") and its conditioning says so: ×99 amplification, 89.4° inconsistent with a cube."""
+    from rigsim.estimation.triad import triad_conditioning
+
     t3, t4 = TABLE1[1]["X"], TABLE1[1]["Y"]
     r1 = Rot_Y(-TABLE1[0]["Y"]) @ Rot_X(-TABLE1[0]["X"]) @ FACE_NORMALS["+Z"]
     r2_printed = Rot_Y(-t4) @ Rot_X(-t3) @ FACE_NORMALS["+Y"]
-    assert np.degrees(angle_between(r1, r2_printed)) < 1.5
+    assert np.degrees(angle_between(r1, r2_printed)) == pytest.approx(0.5760, abs=1e-4)
+    R, q1, q2 = cube_from_rot_triad(TABLE1, ["+Z", "+Y"], "XY", eq8="printed")
+    np.testing.assert_allclose(q1, r1, atol=1e-15)
+    np.testing.assert_allclose(q2, r2_printed, atol=1e-15)
+    c = triad_conditioning(FACE_NORMALS["+Z"], FACE_NORMALS["+Y"], q1, q2)
+    assert c["degenerate"] and c["amplification"] == pytest.approx(1 / np.sin(np.radians(0.5760)), rel=1e-3)
+    assert c["inconsistency_deg"] == pytest.approx(0.5760 - 90.0, abs=1e-4)
+    Rb, _, _ = cube_from_rot_triad(TABLE1, ["+Z", "+Y"], "XY")
+    assert not triad_conditioning(FACE_NORMALS["+Z"], FACE_NORMALS["+Y"], *cube_from_rot_triad(TABLE1, ["+Z", "+Y"], "XY")[1:])["degenerate"]
+    assert np.degrees(rotation_angle(R, Rb)) > 80  # the printed reading's TRIAD is not the cube
+    with pytest.raises(ValueError, match="eq8"):
+        cube_from_rot_triad(TABLE1, ["+Z", "+Y"], "XY", eq8="rows")
 
 
 @pytest.mark.parametrize("order", ["XY", "YX"])

@@ -54,6 +54,9 @@ def add_cli(groups: dict) -> None:
     t.add_argument("--axis-order", default=None, help="nesting reading, outermost first (2-axis: XY or YX; 3-axis: YXZ or XYZ)")
     t.add_argument("--faces", nargs=2, default=None, choices=FACES, help="faces nulled first and second (default the rig's, +Z +Y)")
     t.add_argument("--sigma-arcsec", type=number(1e-6, 3600), default=None, help="1σ of each reading (default: the rig's encoder ⊕ null accuracy)")
+    t.add_argument("--eq8", default="beam", choices=["beam", "printed"],
+                   help="reading of seed 000 eqs 7–8: 'beam' rotates the beam direction for both nulls (rigsim's); "
+                        "'printed' rotates each face's own normal (degenerate; the conditioning is printed)")
     t.add_argument("--out", default=None, metavar="FILE", help="write R(cube←rot) and its covariance as JSON")
     t.add_argument("--json", action="store_true", help="also print the JSON result (last line)")
     t.set_defaults(func=cmd_triad)
@@ -149,25 +152,40 @@ def cmd_triad(args) -> int:
         sigma = {a.label: args.sigma_arcsec / ARCSEC_PER_RAD for a in rig.turntable.axes}
     else:
         sigma = F.reading_sigma_rad(rig)
-    R, C = F.triad_with_covariance(readings, faces, order, sigma)
-    res = F.triad_json(R, C, faces, order, readings, sigma, rig.name)
-    from rigsim.estimation.cube_attitude import cube_from_rot_triad
+    R, C = F.triad_with_covariance(readings, faces, order, sigma, eq8=args.eq8)
+    res = F.triad_json(R, C, faces, order, readings, sigma, rig.name, eq8=args.eq8)
+    from rigsim.estimation.cube_attitude import EQ8_READINGS, cube_from_rot_triad
+    from rigsim.estimation.triad import triad_conditioning
+    from rigsim.optics.cube import FACE_NORMALS
 
-    _, r1, r2 = cube_from_rot_triad(readings, faces, order)
+    _, r1, r2 = cube_from_rot_triad(readings, faces, order, eq8=args.eq8)
     ang = np.degrees(angle_between(r1, r2))
     res["normal_angle_deg"] = float(ang)
+    cond = triad_conditioning(FACE_NORMALS[faces[0]], FACE_NORMALS[faces[1]], r1, r2)
+    res["triad_conditioning"] = cond
     if args.out:
         write_json(args.out, res)
     print(f"R(cube←rot) by TRIAD, faces n1={faces[0]} n2={faces[1]} (cube frame), axis order {order}"
           + (f" — {AXIS_ORDERS_2AXIS[order]}" if order in AXIS_ORDERS_2AXIS else ""))
-    print("normals r = R_rot_from_mount(θ)ᵀ·d with d = (0,0,1), the beam direction (towards the source)")
+    if args.eq8 == "beam":
+        print("normals r = R_rot_from_mount(θ)ᵀ·d with d = (0,0,1), the beam direction (towards the source)")
+    else:
+        print(f"eq 8 reading 'printed': {EQ8_READINGS['printed']}")
     for f, r in zip(faces, readings):
         print(f"  {f}: " + ", ".join(f"{k}={np.degrees(v):.6f}°" for k, v in r.items()))
     _print_rotation("R(cube←rot)", res["R_cube_from_rot"])
     print(f"angle between the two measured normals: {ang:.5f}° (a perfect cube: 90°; deviation {(ang - 90) * 3600:+.1f}″)")
+    if cond["degenerate"]:
+        print(f"DEGENERATE: r1 and r2 are {cond['angle_r_deg']:.3f}° apart while the faces are {cond['angle_n_deg']:.1f}° "
+              f"apart (inconsistency {cond['inconsistency_deg']:+.2f}°); the rotation about r1 rests on a vector "
+              f"{cond['angle_r_deg']:.3f}° from it: reading errors are amplified ×{cond['amplification']:.0f}. "
+              "This result is not a measurement of the cube.")
+    if args.eq8 != "beam":
+        Rb, _, _ = cube_from_rot_triad(readings, faces, order)
+        print(f"rigsim's reading (beam) differs by {np.degrees(rotation_angle(R, Rb)):.4f}°")
     others = [o for o in F.axis_orders(rig) if o != order]
     for o in others:
-        R2, _, _ = cube_from_rot_triad(readings, faces, o)
+        R2, _, _ = cube_from_rot_triad(readings, faces, o, eq8=args.eq8)
         print(f"the other reading ({o}) differs by {np.degrees(rotation_angle(R, R2)):.4f}°")
     if args.out:
         print(f"→ {args.out}")

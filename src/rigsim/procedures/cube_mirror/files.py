@@ -232,10 +232,11 @@ def reading_sigma_rad(rig: CubeMirrorRig, free_axes: Sequence[str] = ("X", "Y"))
 
 
 def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: str, sigma_rad: dict[str, float],
-                          d_rot=(0.0, 0.0, 1.0), step_rad: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+                          d_rot=(0.0, 0.0, 1.0), step_rad: float = 1e-6, eq8: str = "beam") -> tuple[np.ndarray, np.ndarray]:
     """TRIAD R(cube←rot) and the covariance (rad²) of its small rotation δ, propagated from
-    independent reading errors of σ ``sigma_rad`` per axis (central differences)."""
-    R0, _, _ = cube_from_rot_triad(readings, faces, axis_order, d_rot)
+    independent reading errors of σ ``sigma_rad`` per axis (central differences). ``eq8``: the reading of
+    the normals (:data:`rigsim.estimation.cube_attitude.EQ8_READINGS`)."""
+    R0, _, _ = cube_from_rot_triad(readings, faces, axis_order, d_rot, eq8)
     cols = []
     for i in range(2):
         for lab, s in sigma_rad.items():
@@ -245,15 +246,17 @@ def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: 
             for sgn in (1.0, -1.0):
                 rr = [dict(r) for r in readings]
                 rr[i][lab] = rr[i].get(lab, 0.0) + sgn * step_rad
-                R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot)
+                R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot, eq8)
                 d.append(Rotation.from_matrix(R @ R0.T).as_rotvec())
             cols.append((d[0] - d[1]) / (2 * step_rad) * s)
     J = np.array(cols).T if cols else np.zeros((3, 0))
     return R0, J @ J.T
 
 
-def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, readings, sigma_rad: dict, rig_name="") -> dict:
-    return {"format": "rigsim.triad/1", "procedure": "cube-mirror", "stage": "triad", "kind": "TRIAD", "rig": rig_name, "faces": list(faces), "axis_order": axis_order,
+def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, readings, sigma_rad: dict, rig_name="",
+               eq8: str = "beam") -> dict:
+    return {"format": "rigsim.triad/1", "procedure": "cube-mirror", "stage": "triad", "kind": "TRIAD", "rig": rig_name,
+            "faces": list(faces), "axis_order": axis_order, "eq8": eq8,
             "readings_deg": [{k: float(np.degrees(v)) for k, v in r.items()} for r in readings],
             "reading_sigma_arcsec": {k: v * ARCSEC_PER_RAD for k, v in sigma_rad.items()},
             "R_cube_from_rot": rotation_block(R, cov_rad2)}
