@@ -15,6 +15,7 @@ from rigsim.errors import CliError, RigsimError
 from rigsim.families import FAMILIES, family_of
 from rigsim.files.options import number
 from rigsim.procedures import centroid as centroid_stage
+from rigsim.procedures import readings_commands
 from rigsim.procedures import target_commands
 from rigsim.view import cli as view_cli
 
@@ -180,6 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
         fam.add_cli(groups)
     centroid_stage.add_cli(groups)
     target_commands.add_cli(groups)
+    readings_commands.add_cli(groups)
     dataset_cli.add_cli(groups)
     view_cli.add_cli(groups)
     return p

