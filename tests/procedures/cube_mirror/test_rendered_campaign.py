@@ -166,6 +166,14 @@ def test_the_rendered_campaign_json_matches_its_published_schema(coarse_ideal_00
     tr = [np.trace(rec[k]["covariance"]["matrix"]) for k in ("R_cube_from_rot", "R_sun_from_rot", "R_cube_from_sun")]
     assert tr[2] == pytest.approx(tr[0] + tr[1], rel=1e-9)
     np.testing.assert_allclose(rec["R_cube_from_sun"]["error_arcsec"], c.result.error_arcsec, atol=1e-12)
+    # the readings block: this run's nulls under each (axis order, eq 8) reading; the default row is the result
+    rows = {(x["axis_order"], x["eq8"]): x for x in rec["readings"]["triad"]}
+    assert set(rows) == {("XY", "beam"), ("XY", "printed"), ("YX", "beam"), ("YX", "printed")}
+    d = rows[(c.result.axis_order, "beam")]
+    assert d["default"] and not d["degenerate"]
+    np.testing.assert_allclose(d["cube_from_sun_error_arcsec"], c.result.error_arcsec, atol=1e-9)
+    assert rows[("XY", "printed")]["degenerate"] and rows[("XY", "printed")]["cube_from_sun_error_norm_arcsec"] > 3600
+    assert "## Readings of the document" in files["report"].read_text()
 
 
 def test_the_analytic_campaign_json_matches_the_same_schema(tmp_path):

@@ -276,6 +276,10 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
                   "differences (σ1 from the search is smaller than the paper's 1 px; the sun-sensor calibration is left out of "
                   "the paper's budget)."]
         L += ["", "![budget histogram](budget_histogram.png)", ""]
+    from rigsim.procedures.cube_mirror.readings import campaign_readings, readings_markdown
+
+    rd = campaign_readings(r, rig)
+    L += readings_markdown(rd, 4.0 if rig.seed_document == "000" else None)
     if user is not None:
         from rigsim.procedures.cube_mirror.user_frames import comparison_markdown
 
@@ -291,7 +295,7 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
 
     rec = campaign_json(r, rig, mode="rendered", seed=campaign.seed, rig_file=rig_path)
     rec.update({"searches": [s.as_dict() for s in campaign.searches], "measured_noise": campaign.measured_noise,
-                "times_s": wall_times or campaign.times})
+                "times_s": wall_times or campaign.times, "readings": rd})
     if user is not None:
         rec["user_centroider"] = user
     if budget is not None:
