@@ -542,14 +542,15 @@ def _analyses(g: CameraGeometry, g2: CameraGeometry, st, seed: int, runs: int, s
     return res
 
 
-def loop_model_comparison(per_model: dict, primary: str, eq20: dict) -> dict:
+def loop_model_comparison(per_model: dict, primary: str, eq20: dict, beta_excess: float) -> dict:
     """The ``loop_models`` block: Fig 5 (1σ, mean, ratio to eqs 19–22 ÷ 3) and the claim verdicts under each
-    loop model, eqs 19–22 ÷ 3, the first-order β excess of the physical loop's DVAD and eq 20's threshold.
+    loop model, eqs 19–22 ÷ 3, the first-order β excess of the physical loop's DVAD (``beta_excess``,
+    :func:`beta_noise_excess`) and eq 20's thresholds (``eq20``).
     ``per_model``: {loop model: {"fig5": …, "claims": […]}}."""
     any_f5 = next(iter(per_model.values()))["fig5"]
     pred1 = {p: v / 3.0 for p, v in any_f5["pred3"].items()}
     out = {"primary": primary, "rendered_orbit": "physical", "sigma_px": any_f5["sigma_px"], "runs": any_f5["runs"],
-           "eq19_22_1sigma": pred1, "eq20_threshold": eq20}
+           "eq19_22_1sigma": pred1, "eq20_threshold": eq20, "beta_excess_first_order": beta_excess}
     for lm, r in per_model.items():
         st = r["fig5"]["stats"]
         out[lm] = {
@@ -616,7 +617,7 @@ def run_study(rig: BoresightRig, *, seed: int | None = None, runs: int | None = 
     for lm in LOOP_MODELS:
         if lm != loop_model:
             per_model[lm]["claims"] = claims(per_model[lm])
-    res["loop_models"] = loop_model_comparison(per_model, loop_model, eq20_block)
+    res["loop_models"] = loop_model_comparison(per_model, loop_model, eq20_block, beta_noise_excess(g))
     from rigsim.procedures.boresight.result_json import boresight_result_json, orbit_result_json
 
     if orbit:
