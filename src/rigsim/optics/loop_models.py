@@ -24,7 +24,7 @@ import numpy as np
 
 from rigsim.optics.line_camera import CameraGeometry, euler_xyz, loop_trace, spots_uv
 
-__all__ = ["LOOP_MODELS", "check_loop_model", "paper_loop_displacement", "paper_loop_trace", "loop_spots_uv"]
+__all__ = ["LOOP_MODELS", "check_loop_model", "loop_spots_uv", "paper_loop_displacement", "paper_loop_trace"]
 
 LOOP_MODELS = ("physical", "paper")
 

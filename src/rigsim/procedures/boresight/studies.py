@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 from rigsim.estimation.dvad import estimate
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.line_camera import CameraGeometry, relative_rotation, rotation_xyz, small_angles_arcsec
+from rigsim.optics.line_camera import spots_uv  # noqa: F401 (importable from here, as before)
 from rigsim.optics.loop_models import LOOP_MODELS, check_loop_model, loop_spots_uv
 from rigsim.rig.boresight import BoresightRig
 from rigsim.truth.boresight import OrbitTruth, orbit_truth
@@ -592,7 +593,7 @@ def run_study(rig: BoresightRig, *, seed: int | None = None, runs: int | None = 
     eq20 = {c: eq20_focal_threshold(g, st.centroid_sigma_px, 0.1, cos2beta=c) for c in EQ20_COS2BETA}
     eq20["reevaluated"]["label"] = "cos²β re-evaluated with F"
     eq20["fixed"]["label"] = f"cos²β fixed at F = {g.F / 1000:g} m"
-    other = [c for c in EQ20_COS2BETA if c != eq20_cos2beta][0]
+    other = next(c for c in EQ20_COS2BETA if c != eq20_cos2beta)
     eq20_claim = {**eq20[eq20_cos2beta], "other": eq20[other]}
     eq20_block = {"reading": eq20_cos2beta, "target_arcsec": 0.1, "sigma_px": st.centroid_sigma_px,
                   **{c: {"F_m": v["F_mm"] / 1000.0, "beta_half_angle_deg": v["beta_half_angle_deg"]}
