@@ -23,6 +23,11 @@ Two readings of the paper (docs/boresight.md gives every reason):
       length F' that keeps it is the true one), Δf = Kf·(F' − F).
     The round trip truth → exact forward model → DVAD is exact (tested ≤ 1e-9 rad).
 
+    The consistent DVAD inverts a loop model (``loop_model``, :mod:`rigsim.optics.loop_models`):
+    ``"physical"`` (default) as above; ``"paper"`` takes Δf from eq 15 alone (the paper's loop moves
+    the spots in y only, so there is nothing to refine and no x motion to separate from β), removes
+    its antisymmetric y shift from the spots and solves the rotation from the facet normals at F.
+
 ``"as_printed"``
     The printed formulas wherever they can be evaluated: eq 2's sign, DVAD on the spot vectors
     (eq 11) with the ½ and the ratios of eq 14, eq 14's ω mixing ``[[cos ω, sin ω], [sin ω, cos ω]]``
@@ -40,6 +45,7 @@ import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.line_camera import CameraGeometry, euler_xyz, rotation_xyz
+from rigsim.optics.loop_models import check_loop_model
 
 __all__ = ["BoresightEstimate", "DVADSolver", "READINGS", "METHODS", "simplified", "dvad", "estimate",
            "triad_columns"]
@@ -135,11 +141,13 @@ def _vectors(P: np.ndarray, Fp) -> np.ndarray:
 
 
 def dvad(geom: CameraGeometry, ref_uv, meas_uv, reading: str = "consistent", *,
-         iterations: int = 3) -> BoresightEstimate:
+         iterations: int = 3, loop_model: str = "physical") -> BoresightEstimate:
     """Eqs 7–15 (dual-vector attitude). See the module docstring for the two readings.
 
     ``iterations``: fixed-point steps of the rigidity equation for F' (consistent reading); the
-    eq-15 start is good to second order, so 2–3 steps reach machine precision (tested)."""
+    eq-15 start is good to second order, so 2–3 steps reach machine precision (tested).
+    ``loop_model``: the loop the consistent reading inverts (the printed DVAD has its own)."""
+    check_loop_model(loop_model)
     ref, meas = _check(geom, ref_uv, meas_uv, reading)
     F, Kf, w = geom.F, geom.telecentric_factor, geom.off_axis_rad
     P_ref = geom.xy_to_focal(ref)                       # eqs 8–11 (with d), nominal tilts
@@ -160,7 +168,7 @@ def dvad(geom: CameraGeometry, ref_uv, meas_uv, reading: str = "consistent", *,
         return BoresightEstimate(delta_f, alpha, beta, gamma, "dvad", reading, None,
                                  {"M_rot_ota": M})
     # consistent reading
-    sol = DVADSolver(geom, ref_uv, iterations=iterations)
+    sol = DVADSolver(geom, ref_uv, iterations=iterations, loop_model=loop_model)
     return sol.solve(meas_uv)
 
 
@@ -187,11 +195,16 @@ class DVADSolver:
        the start, then fixed-point steps with the reference slope d(n_A·n_B)/dF';
     4. eq 12 (unit columns) in the HRC frame, M_Rot = Mt·M0ᵀ → the camera rotation
        E = R(ref HRC ← perturbed HRC) = M0_hrc·Mt_hrcᵀ; XYZ Euler angles; Δf = Kf·(F' − F).
+
+    ``loop_model="paper"`` replaces step 3: F' − F = F·(Δy1 − Δy2)/(2L) (eq 15 in eq 1's form, no
+    refinement); the spots' y displacements are replaced by their mean (the paper's loop puts Δf
+    in their difference only) and the normals are taken at F.
     """
 
-    def __init__(self, geom: CameraGeometry, ref_uv=None, *, iterations: int = 3):
+    def __init__(self, geom: CameraGeometry, ref_uv=None, *, iterations: int = 3, loop_model: str = "physical"):
         self.geom = geom
         self.iterations = int(iterations)
+        self.loop_model = check_loop_model(loop_model)
         ref = np.asarray(geom.reference_uv if ref_uv is None else ref_uv, dtype=float)
         if ref.shape[-2:] != (2, 2):
             raise ValueError(f"ref_uv must have shape (..., 2 detectors, 2 [u, v]), got {ref.shape}")
@@ -247,10 +260,18 @@ class DVADSolver:
         P = g.xy_to_focal(g.uv_to_xy(meas))
         # eq 15 with eq 1's form and sign, as the loop focal change dF' = Δf/Kf
         dy = (P[..., 0, 1] - self._P0y[0]) - (P[..., 1, 1] - self._P0y[1])
-        dF = 0.5 * F * dy / (self._P0y[0] - self._P0y[1])
-        for _ in range(self.iterations):
-            dF = dF - (self._cos_at(P, F + dF) - self._cos0) / self._slope
-        a, b = self._normals(P, F + dF)
+        if self.loop_model == "paper":
+            dF = 0.5 * F * dy / g.L_mm
+            P = P.copy()
+            P[..., 0, 1] -= 0.5 * dy
+            P[..., 1, 1] += 0.5 * dy
+            Fn = F + np.zeros_like(dF)
+        else:
+            dF = 0.5 * F * dy / (self._P0y[0] - self._P0y[1])
+            for _ in range(self.iterations):
+                dF = dF - (self._cos_at(P, F + dF) - self._cos0) / self._slope
+            Fn = F + dF
+        a, b = self._normals(P, Fn)
         resid = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] - self._cos0
         B = self._triad_hrc(a, b)
         A = self._A
@@ -266,9 +287,12 @@ class DVADSolver:
 
 def estimate(geom: CameraGeometry, ref_uv, meas_uv, method: str = "dvad", reading: str = "consistent",
              **kw) -> BoresightEstimate:
+    """``method`` on the spots: DVAD (keywords ``iterations``, ``loop_model``) or the simplified eqs 1–4
+    (which assume the paper's loop by construction and take no keywords but ``loop_model``)."""
     if method == "dvad":
         return dvad(geom, ref_uv, meas_uv, reading, **kw)
     if method == "simplified":
+        check_loop_model(kw.pop("loop_model", "physical"))
         return simplified(geom, ref_uv, meas_uv, reading)
     raise ValueError(f"method = {method!r}: allowed {METHODS}")
 

@@ -47,10 +47,34 @@ def test_analytic_study_writes_report_and_is_reproducible(tmp_path):
     (["--jitter-px", "-1"], "argument --jitter-px: '-1' is not a number from 0 to 5"),
     (["--rig", "nope"], "no such rig file"),
     (["--rig", "sun_sensor_2axis_diaphragm"], "not a seed-003 rig"),
+    (["--loop-model", "exact"], "argument --loop-model: invalid choice: 'exact' (choose from 'physical', 'paper')"),
+    (["--eq20-cos2beta", "nominal"], "argument --eq20-cos2beta: invalid choice: 'nominal'"),
 ])
 def test_bad_input_is_a_clear_error(args, expected):
     r = run("run", "boresight", "--no-orbit", *args)
     assert r.returncode == 2 and expected in r.stderr and "Traceback" not in r.stderr
+
+
+def test_paper_loop_model_run_reports_both_loop_models(tmp_path):
+    """--loop-model paper: the analyses run on the paper's loop, boresight.json's loop_models carries Fig 5
+    and the verdicts under both loops; the DVAD's beta excess of the physical loop vanishes under the paper's."""
+    r = run("run", "boresight", "--no-orbit", "--runs", "400", "--quiet", "--loop-model", "paper", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert "loop model 'paper'" in r.stdout
+    js = json.loads((tmp_path / "boresight.json").read_text())
+    lm = js["loop_models"]
+    assert lm["primary"] == "paper" and lm["rendered_orbit"] == "physical"
+    assert lm["eq20_threshold"]["reading"] == "reevaluated"
+    assert lm["eq20_threshold"]["reevaluated"]["F_m"] < lm["eq20_threshold"]["fixed"]["F_m"]
+    tol = 4 / (2 * 400) ** 0.5 + 0.01                      # Monte-Carlo error at 400 runs, + reference noise
+    assert abs(lm["paper"]["fig5_ratio_to_eq19_22"]["dvad"]["beta_arcsec"] - 1) < tol
+    assert abs(lm["physical"]["fig5_ratio_to_eq19_22"]["dvad"]["beta_arcsec"] - lm["beta_excess_first_order"]) < 2 * tol
+    assert [c["claim"] for c in lm["paper"]["claims"]] == [c["claim"] for c in lm["physical"]["claims"]]
+    assert js["fig5"]["stats"]["dvad"]["beta_arcsec"]["std"] == lm["paper"]["fig5_1sigma"]["dvad"]["beta_arcsec"]
+    assert "dvad_physical_loop" in lm["paper"]["fig5_1sigma"]
+    rep = (tmp_path / "report.md").read_text()
+    assert "## Fig 5 and the claims under each loop model" in rep and "loop model `paper`" in rep
+    assert "| claim | physical loop | paper loop |" in rep
 
 
 def test_bad_rig_value_names_field_and_range(tmp_path):

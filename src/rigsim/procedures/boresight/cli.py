@@ -32,6 +32,12 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--runs", type=integer(10, 1_000_000), default=None, help="Monte-Carlo runs per point (default: the rig's, 1200)")
     p.add_argument("--reading", default="consistent", choices=["consistent", "as_printed"],
                    help="reading of the paper's equations used as 'the' method (both are always compared)")
+    p.add_argument("--loop-model", default="physical", choices=["physical", "paper"],
+                   help="loop of the Monte-Carlo and noise-free analyses: rigsim's exact ray trace, or the linear loop "
+                        "eqs 1-4 invert exactly (the rendered orbit is always physical; both are compared in the report)")
+    p.add_argument("--eq20-cos2beta", default="reevaluated", choices=["reevaluated", "fixed"],
+                   help="eq 20's focal-length threshold for 0.1″ quoted first: cos²β re-evaluated with F, or "
+                        "fixed at the rig's F (both are reported)")
     p.add_argument("--no-orbit", action="store_true", help="skip the rendered orbit scenario")
     p.add_argument("--measurements", type=integer(3, 100_000), default=None, help="orbit measurements (default: the rig's, 19)")
     p.add_argument("--spp", type=SPP, default=None, help="light paths per ROI pixel (default: the rig's)")
@@ -235,7 +241,8 @@ def cmd_run_boresight(args) -> int:
     n_meas = args.measurements or rig.orbit.measurements
     total = 5 + (0 if args.no_orbit else 4 * (rig.orbit.reference_frames + n_meas))
     print(f"rigsim {rigsim.__version__} — seed 003 boresight study, rig '{rig.name}' ({rig_path.name}), "
-          f"reading '{args.reading}'")
+          f"reading '{args.reading}', loop model '{args.loop_model}'"
+          + (" (the rendered orbit scenario stays physical)" if args.loop_model != "physical" and not args.no_orbit else ""))
     t0 = time.perf_counter()
     with tqdm(total=total, desc="boresight", unit="step", disable=True if args.quiet else None, file=sys.stderr,
               dynamic_ncols=True) as bar:
@@ -255,12 +262,13 @@ def cmd_run_boresight(args) -> int:
 
             orbit_kw["on_frame"] = export
         res = run_study(rig, seed=args.seed, runs=args.runs, reading=args.reading, orbit=not args.no_orbit,
-                        progress=progress, orbit_kw=orbit_kw)
+                        progress=progress, orbit_kw=orbit_kw, loop_model=args.loop_model,
+                        eq20_cos2beta=args.eq20_cos2beta)
     cmd = "rigsim run boresight" + "".join(f" {a}" for a in sys.argv[3:]) if sys.argv[1:3] == ["run", "boresight"] else ""
     rel = rig_path.relative_to(Path.cwd()) if rig_path.is_relative_to(Path.cwd()) else rig_path
     report = write_report(res, args.out, rig_path=str(rel), command=cmd)
     f5 = res["fig5"]
-    print(f"\nFig 5: {f5['runs']} runs at σ = {f5['sigma_px']} px (3σ; eqs 19–22 in brackets)")
+    print(f"\nFig 5: {f5['runs']} runs at σ = {f5['sigma_px']} px, {args.loop_model} loop (3σ; eqs 19–22 in brackets)")
     for p, u in (("delta_f_um", "µm"), ("alpha_arcsec", "″"), ("beta_arcsec", "″"), ("gamma_arcsec", "″")):
         print(f"  {p.split('_')[0]:6s} DVAD {f5['stats']['dvad'][p]['three_sigma']:8.4f}{u}   simplified "
               f"{f5['stats']['simplified'][p]['three_sigma']:8.4f}{u} (mean {f5['stats']['simplified'][p]['mean']:+.4f})   "

@@ -8,6 +8,10 @@ spots (N reference measurements, eqs 16–17); both methods estimate; the errors
 reported as 1σ (RMS about the mean) and 3σ (the paper's eqs 19–22 are 3σ). Fig 8 is noise-free
 (the systematic residual; with noise both methods share the same spots, so the difference of their
 means converges to it). Numbers are in µm (Δf) and arcsec (angles).
+
+Every analysis runs under a loop model (``loop_model``, :mod:`rigsim.optics.loop_models`): it sets
+the forward model that makes the spots and the loop the consistent DVAD inverts. The rendered orbit
+scenario is always the physical loop (Mitsuba renders physics).
 """
 
 from __future__ import annotations
@@ -20,15 +24,19 @@ from scipy.spatial.transform import Rotation
 
 from rigsim.estimation.dvad import estimate
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.optics.line_camera import CameraGeometry, relative_rotation, rotation_xyz, small_angles_arcsec, spots_uv
+from rigsim.optics.line_camera import CameraGeometry, relative_rotation, rotation_xyz, small_angles_arcsec
+from rigsim.optics.line_camera import spots_uv  # noqa: F401 (importable from here, as before)
+from rigsim.optics.loop_models import LOOP_MODELS, check_loop_model, loop_spots_uv
 from rigsim.rig.boresight import BoresightRig
 from rigsim.truth.boresight import OrbitTruth, orbit_truth
 
 __all__ = ["PARAMS", "mc_errors", "predicted_3sigma", "sweep", "fig8_residual", "rotation_order",
-           "orbit_truth", "run_orbit", "claims", "run_study"]
+           "orbit_truth", "run_orbit", "claims", "run_study", "EQ20_COS2BETA", "eq20_focal_threshold",
+           "beta_noise_excess", "loop_model_comparison"]
 
 PARAMS = ("delta_f_um", "alpha_arcsec", "beta_arcsec", "gamma_arcsec")
 AS = ARCSEC_PER_RAD
+EQ20_COS2BETA = ("reevaluated", "fixed")
 
 
 def predicted_3sigma(geom: CameraGeometry, sigma_px: float) -> dict:
@@ -43,25 +51,70 @@ def predicted_3sigma(geom: CameraGeometry, sigma_px: float) -> dict:
     }
 
 
+def eq20_focal_threshold(geom: CameraGeometry, sigma_px: float, target_arcsec: float = 0.1, *,
+                         cos2beta: str = "reevaluated", tol_mm: float = 1e-9) -> dict:
+    """Focal length (mm) at which eq 20's 3σ α error reaches ``target_arcsec`` for centroid error σ.
+
+    Eq 20 is 3·√2·d·cos²β·σ/(4F): ``cos2beta="fixed"`` keeps β (half the angle between OA0 and OB0)
+    at ``geom``'s focal length; ``"reevaluated"`` recomputes β with the focal length being solved for
+    (L and ω fixed), F = K·cos²β(F), by fixed-point iteration. Returns {"F_mm", "beta_half_angle_deg",
+    "cos2beta"}."""
+    if cos2beta not in EQ20_COS2BETA:
+        raise ValueError(f"cos2beta = {cos2beta!r}: allowed {EQ20_COS2BETA}")
+    K = 3 * math.sqrt(2.0) * geom.pitch_mm * sigma_px / (4 * target_arcsec / AS)
+    beta = geom.beta_half_angle_rad
+    F = K * math.cos(beta) ** 2
+    if cos2beta == "reevaluated":
+        for _ in range(200):
+            beta = geom.with_(focal_length_mm=F).beta_half_angle_rad
+            F_new = K * math.cos(beta) ** 2
+            done = abs(F_new - F) < tol_mm
+            F = F_new
+            if done:
+                break
+        else:
+            raise RuntimeError("eq 20 threshold: the fixed-point iteration did not converge")
+    return {"F_mm": F, "beta_half_angle_deg": math.degrees(beta), "cos2beta": cos2beta}
+
+
+def beta_noise_excess(geom: CameraGeometry) -> float:
+    """σ_β of the physical-loop DVAD over eq 21's, to first order: √(1 + (2F·tan ω / L)²) / cos²ω.
+
+    Under the physical loop a focal change moves both spots in x by (2/Kf)·Δf·tan ω and β moves them
+    apart in y by β·L·tan ω, so β and Δf are solved from the mean x and the y difference together."""
+    F, L, w = geom.F, geom.L_mm, geom.off_axis_rad
+    return math.sqrt(1.0 + (2.0 * F * math.tan(w) / L) ** 2) / math.cos(w) ** 2
+
+
 def _state(geom, arcsec, df_um, n=1):
     a = arcsec / AS
     E = rotation_xyz(a, a, a)
     return np.broadcast_to(E, (n, 3, 3)), np.full(n, df_um * 1e-3)
 
 
+def _estimate(geom, ref, meas, method, reading, loop_model):
+    if method == "dvad_physical_loop":      # the physical loop's DVAD, whatever made the spots
+        return estimate(geom, ref, meas, "dvad", reading, loop_model="physical")
+    return estimate(geom, ref, meas, method, reading, loop_model=loop_model)
+
+
 def mc_errors(geom: CameraGeometry, sigma_px: float, runs: int, rng: np.random.Generator, *,
               arcsec: float = 10.0, df_um: float = 10.0, n_ref: int = 100, reading: str = "consistent",
-              methods=("dvad", "simplified")) -> dict:
-    """Monte-Carlo errors against truth: {method: {param: (runs,) errors}} (µm / arcsec)."""
+              methods=("dvad", "simplified"), loop_model: str = "physical") -> dict:
+    """Monte-Carlo errors against truth: {method: {param: (runs,) errors}} (µm / arcsec).
+
+    ``loop_model`` makes the true spots and is the loop DVAD inverts; method ``"dvad_physical_loop"``
+    is the physical loop's DVAD on the same spots."""
+    check_loop_model(loop_model)
     E, df = _state(geom, arcsec, df_um)
-    truth_ref = spots_uv(geom)
-    truth_meas = spots_uv(geom, E[0], df[0])
+    truth_ref = loop_spots_uv(geom, loop_model=loop_model)
+    truth_meas = loop_spots_uv(geom, E[0], df[0], loop_model=loop_model)
     ref = truth_ref + rng.normal(0.0, sigma_px / math.sqrt(n_ref), (runs, 2, 2))
     meas = truth_meas + rng.normal(0.0, sigma_px, (runs, 2, 2))
     true = np.array([df_um, arcsec, arcsec, arcsec])
     out = {}
     for m in methods:
-        est = estimate(geom, ref, meas, m, reading)
+        est = _estimate(geom, ref, meas, m, reading, loop_model)
         vals = np.column_stack([est.delta_f_mm * 1e3, est.angles_arcsec])
         out[m] = {p: vals[:, k] - true[k] for k, p in enumerate(PARAMS)}
         out[m]["_R"] = est.rotation()
@@ -75,21 +128,23 @@ def _stats(err: np.ndarray) -> dict:
 
 
 def sweep(geoms: list[CameraGeometry], xs, sigma_px, runs: int, seed: int, *, arcsec=10.0, df_um=10.0,
-          n_ref=100, reading="consistent", relative_with: CameraGeometry | None = None) -> dict:
+          n_ref=100, reading="consistent", relative_with: CameraGeometry | None = None,
+          loop_model: str = "physical") -> dict:
     """One Monte Carlo per point (geometry and σ may both vary): rows of 1σ/3σ per method/param,
     the eqs 19–22 prediction, and (if ``relative_with``) the 3σ of the relative angle between this
-    camera and a second, identical-noise camera."""
+    camera and a second, identical-noise camera; all under ``loop_model``."""
     rng = np.random.default_rng(seed)
     rows = []
     sigmas = np.broadcast_to(np.asarray(sigma_px, float), (len(xs),))
     for x, g, s in zip(xs, geoms, sigmas):
-        e = mc_errors(g, float(s), runs, rng, arcsec=arcsec, df_um=df_um, n_ref=n_ref, reading=reading)
+        e = mc_errors(g, float(s), runs, rng, arcsec=arcsec, df_um=df_um, n_ref=n_ref, reading=reading,
+                      loop_model=loop_model)
         row = {"x": float(x), "sigma_px": float(s), "pred3": predicted_3sigma(g, float(s))}
         for m in ("dvad", "simplified"):
             row[m] = {p: _stats(e[m][p]) for p in PARAMS}
         if relative_with is not None:
             e2 = mc_errors(relative_with, float(s), runs, rng, arcsec=arcsec, df_um=df_um, n_ref=n_ref, reading=reading,
-                           methods=("dvad",))
+                           methods=("dvad",), loop_model=loop_model)
             Rt = relative_rotation(e["_E_true"], e2["_E_true"], g, relative_with)
             Re = relative_rotation(e["dvad"]["_R"], e2["dvad"]["_R"], g, relative_with)
             err = small_angles_arcsec(Re @ np.swapaxes(Rt, -1, -2)[None])
@@ -98,21 +153,23 @@ def sweep(geoms: list[CameraGeometry], xs, sigma_px, runs: int, seed: int, *, ar
     return {"rows": rows}
 
 
-def fig8_residual(geom: CameraGeometry, ranges_px, tilts_deg, *, reading="consistent", df_um: float = 0.0) -> dict:
+def fig8_residual(geom: CameraGeometry, ranges_px, tilts_deg, *, reading="consistent", df_um: float = 0.0,
+                  loop_model: str = "physical") -> dict:
     """Noise-free |DVAD − simplified| and each method's error against truth, for perturbations
-    α = β = γ = r·d/(2F) (a rotation that alone would move a spot by r px) and tilts θm1 = −θm2."""
+    α = β = γ = r·d/(2F) (a rotation that alone would move a spot by r px) and tilts θm1 = −θm2,
+    under ``loop_model``."""
     out = {"ranges_px": list(map(float, ranges_px)), "tilts_deg": list(map(float, tilts_deg)), "rows": []}
     for t in tilts_deg:
         g = geom.with_(tilt_rad=(math.radians(t), -math.radians(t)))
         for r in ranges_px:
             a = r * g.pitch_mm / (2 * g.F)
             E = rotation_xyz(a, a, a)
-            ref = spots_uv(g)
-            meas = spots_uv(g, E, df_um * 1e-3)
+            ref = loop_spots_uv(g, loop_model=loop_model)
+            meas = loop_spots_uv(g, E, df_um * 1e-3, loop_model=loop_model)
             true = np.array([df_um, a * AS, a * AS, a * AS])
             res = {}
             for m in ("dvad", "simplified"):
-                est = estimate(g, ref, meas, m, reading)
+                est = estimate(g, ref, meas, m, reading, loop_model=loop_model)
                 res[m] = np.concatenate([np.atleast_1d(est.delta_f_mm * 1e3), np.ravel(est.angles_arcsec)])
             pdvad = estimate(g, ref, meas, "dvad", "as_printed")
             res["dvad_as_printed"] = np.concatenate([np.atleast_1d(pdvad.delta_f_mm * 1e3), np.ravel(pdvad.angles_arcsec)])
@@ -302,8 +359,33 @@ def _verdict(ok: bool | None) -> str:
     return {True: "holds", False: "does not hold", None: "partly"}[ok]
 
 
+_NOTES = {
+    "eqs19_22": {
+        "physical": "they describe the simplified method; the exact DVAD separates Δf from β (a focal change moves both "
+                    "off-axis spots in x by 2Δf·tan ω/Kf), which costs β noise; the simplified method is quieter in β "
+                    "but biased by Δf (0.007″ per µm)",
+        "paper": "under the paper's loop a focal change moves the spots in y only: the DVAD takes Δf from eq 15 alone and "
+                 "pays no β noise; its rotation step keeps the off-axis geometry's gains, 0.55 % off eqs 2 and 4"},
+    "fig8": {
+        "physical": "the cause is not the rotation order: eqs 2 and 4 carry a 0.55 % first-order gain error in the "
+                    "off-axis geometry (ω = 6°). The printed DVAD (eq 12's bisector of unnormalised vectors) has a "
+                    "0.69 % gain error of its own, so printed DVAD and simplified agree to 0.03″ at 200 px",
+        "paper": "under the paper's loop eqs 1–4 are its exact inverse at zero tilt, so the difference is the DVAD's: "
+                 "its rotation step maps spot motion with the off-axis geometry's gains, 0.55 % off eqs 2 and 4"},
+    "delta_f": {
+        "physical": "the simplified method's Δf error is β·Kf·F·tan ω (β moves the two spots apart in y)",
+        "paper": "under the paper's loop β moves no spot in y: eq 1 is exact at zero tilt; only the detector tilt leaks"},
+    "rotation_order": {
+        "physical": "the order effect is as stated, but it is not what limits the simplified method",
+        "paper": "the paper's loop is linear in tan of the XYZ angles: the simplified method inverts it exactly, so "
+                 "the order effect does not arise in it"},
+}
+
+
 def claims(results: dict) -> list[dict]:
-    """Each claim of the paper, the measured numbers and a verdict (see docs/boresight.md)."""
+    """Each claim of the paper, the measured numbers and a verdict (see docs/boresight.md), under the
+    loop model of ``results["_loop_model"]`` (default physical)."""
+    lm = results.get("_loop_model", "physical")
     out = []
     f4 = results["fig4"]["rows"]
     sig = np.array([r["sigma_px"] for r in f4])
@@ -346,9 +428,7 @@ def claims(results: dict) -> list[dict]:
                 "measured": "Monte Carlo / eq at 0.1 px — simplified: " + ", ".join(f"{short[p]} {v:.2f}" for p, v in rat["simplified"].items())
                             + "; DVAD: " + ", ".join(f"{short[p]} {v:.2f}" for p, v in rat["dvad"].items()),
                 "verdict": _verdict(True if (ok_s and ok_d) else (None if ok_s else False)),
-                "note": "they describe the simplified method; the exact DVAD separates Δf from β (a focal change moves both "
-                        "off-axis spots in x by 2Δf·tan ω/Kf), which costs β noise; the simplified method is quieter in β "
-                        "but biased by Δf (0.007″ per µm)"})
+                "note": _NOTES["eqs19_22"][lm]})
     # focal length
     f6 = results["fig6"]["rows"]
     F = np.array([r["x"] for r in f6])
@@ -366,10 +446,13 @@ def claims(results: dict) -> list[dict]:
             Fx = float(np.exp(np.log(F[i - 1]) + w * (np.log(F[i]) - np.log(F[i - 1]))))
         thr[m] = (Fx / 1000.0, ab[np.argmin(np.abs(F - 6000))])
     gm = np.array([r["dvad"]["gamma_arcsec"]["three_sigma"] for r in f6])
+    eq20 = results.get("_eq20")
+    eq20_text = (f"; eq 20 reaches 0.1″ at F = {eq20['F_mm'] / 1000:.2f} m ({eq20['label']}; "
+                 f"{eq20['other']['F_mm'] / 1000:.2f} m with {eq20['other']['label']})" if eq20 else "")
     out.append({"claim": "a focal length ≥ 6 m is needed for better than 0.1″ (Fig 6)",
                 "measured": f"α and β 3σ at 0.1 px fall below 0.1″ at F ≈ {thr['simplified'][0]:.1f} m (simplified) / "
                             f"{thr['dvad'][0]:.1f} m (DVAD); at 6 m: {thr['simplified'][1]:.3f}″ / {thr['dvad'][1]:.3f}″; "
-                            f"γ stays at {gm.mean():.2f}″ for every F",
+                            f"γ stays at {gm.mean():.2f}″ for every F" + eq20_text,
                 "verdict": _verdict(False),
                 "note": "for α and β 6 m is more than needed; for γ no focal length gives 0.1″ (it depends on L, not F: "
                         "3σ, σ = 0.1 px, L = 1 m)"})
@@ -395,16 +478,14 @@ def claims(results: dict) -> list[dict]:
                             f"printed DVAD vs simplified: {float(np.interp(200.0, rng_px, dpa)):.3f}″ at 200 px",
                 "verdict": _verdict(True if (at200 > 0.1 and float(np.interp(200.0, rng_px, dpa)) > 0.1)
                                     else (None if at200 > 0.1 else False)),
-                "note": "the cause is not the rotation order: eqs 2 and 4 carry a 0.55 % first-order gain error in the "
-                        "off-axis geometry (ω = 6°). The printed DVAD (eq 12's bisector of unnormalised vectors) has a "
-                        "0.69 % gain error of its own, so printed DVAD and simplified agree to 0.03″ at 200 px"})
+                "note": _NOTES["fig8"][lm]})
     f8df = [r for r in results["fig8"]["rows"] if r["tilt_deg"] <= 0.1 + 1e-9]
     dfs = max(abs(r["err_simplified"]["delta_f_um"]) for r in f8df if r["range_px"] <= 200)
     dfd = max(abs(r["err_dvad"]["delta_f_um"]) for r in f8df if r["range_px"] <= 200)
     out.append({"claim": "both methods measure Δf better than 0.02 mm (Fig 8a; tilt ≤ 0.1°)",
                 "measured": f"up to 200 px: DVAD {dfd:.3g} µm, simplified {dfs:.1f} µm systematic error",
                 "verdict": _verdict(dfs < 20.0 and dfd < 20.0),
-                "note": "the simplified method's Δf error is β·Kf·F·tan ω (β moves the two spots apart in y)"})
+                "note": _NOTES["delta_f"][lm]})
     g2 = max(r["diff"]["gamma_arcsec"] for r in results["fig8"]["rows"] if r["tilt_deg"] <= 0.1 + 1e-9 and r["range_px"] <= 200)
     out.append({"claim": "the γ difference stays below 2″ at the process level (tilt ≤ 0.1°) (Fig 8d)",
                 "measured": f"max |Δγ| = {g2:.3f}″ for tilt ≤ 0.1°, range ≤ 200 px",
@@ -415,7 +496,7 @@ def claims(results: dict) -> list[dict]:
                             f"({ro['max_between_orders_arcsec']:.3f}″ between matrices); the simplified method's actual "
                             f"error at 2′ is {results['two_arcmin_simplified_error_arcsec']:.2f}″ (worst axis)",
                 "verdict": _verdict(0.05 <= ro["max_per_axis_arcsec"] <= 0.2),
-                "note": "the order effect is as stated, but it is not what limits the simplified method"})
+                "note": _NOTES["rotation_order"][lm]})
     orb = results.get("orbit")
     if orb:
         rms = orb["estimates"]["dvad"]["relative_rms_arcsec"]
@@ -424,7 +505,8 @@ def claims(results: dict) -> list[dict]:
                                 f"z {rms[2]:.4f}″; fitted pitch amplitude {orb['estimates']['dvad']['pitch_fit']['amplitude_arcsec']:.3f}″ "
                                 f"(true {orb['estimates']['dvad']['pitch_fit']['true_amplitude_arcsec']:.3f}″)",
                     "verdict": _verdict(max(rms[:2]) < 0.1),
-                    "note": f"centroid noise of these frames {np.mean(orb['reference_centroid_std_px']):.4f} px, far "
+                    "note": ("rendered with the physical loop whatever the loop model of the analyses; " if lm != "physical" else "")
+                            + f"centroid noise of these frames {np.mean(orb['reference_centroid_std_px']):.4f} px, far "
                             "below the paper's 0.1 px"
                             + (f"; with an equivalent centroid error of {orb['jitter_px']:g} px added: RMS x "
                                f"{orb['estimates_jitter']['dvad']['relative_rms_arcsec'][0]:.3f}″, y "
@@ -433,9 +515,66 @@ def claims(results: dict) -> list[dict]:
     return out
 
 
+def _analyses(g: CameraGeometry, g2: CameraGeometry, st, seed: int, runs: int, sweep_runs: int, kw: dict,
+              loop_model: str, fig5_methods=("dvad", "simplified")) -> dict:
+    """Figs 4–8, rotation order and the simplified method's error at 2′ under one loop model."""
+    kw = {**kw, "loop_model": loop_model}
+    res = {}
+    sigmas = [0.02, 0.05, 0.1, 0.2, 0.3, 0.5]
+    res["fig4"] = sweep([g] * len(sigmas), sigmas, sigmas, sweep_runs, seed + 4, relative_with=g2, **kw)
+    e5 = mc_errors(g, st.centroid_sigma_px, runs, np.random.default_rng(seed + 5), methods=fig5_methods, **kw)
+    res["fig5"] = {"runs": runs, "sigma_px": st.centroid_sigma_px,
+                   "errors": {m: {p: e5[m][p].tolist() for p in PARAMS} for m in ("dvad", "simplified")},
+                   "stats": {m: {p: _stats(e5[m][p]) for p in PARAMS} for m in fig5_methods},
+                   "pred3": predicted_3sigma(g, st.centroid_sigma_px)}
+    focals = [1000, 2000, 3000, 4000, 6000, 8000, 10000, 12000]
+    res["fig6"] = sweep([g.with_(focal_length_mm=float(f)) for f in focals], focals, st.centroid_sigma_px,
+                        sweep_runs, seed + 6, **kw)
+    Ls = [200, 400, 600, 800, 1000, 1400, 2000]
+    res["fig7"] = sweep([g.with_(center_y_mm=(L / 2.0, -L / 2.0)) for L in Ls], Ls, st.centroid_sigma_px,
+                        sweep_runs, seed + 7, **kw)
+    res["fig8"] = fig8_residual(g, [0, 25, 50, 100, 150, 200, 300, 400, 600, 800, 1000], [0.0, 0.05, 0.1, 0.5, 1.0],
+                                reading=kw["reading"], loop_model=loop_model)
+    res["rotation_order"] = rotation_order(120.0)
+    a = 120.0 / AS
+    est = estimate(g, loop_spots_uv(g, loop_model=loop_model),
+                   loop_spots_uv(g, rotation_xyz(a, a, a), loop_model=loop_model), "simplified", kw["reading"])
+    res["two_arcmin_simplified_error_arcsec"] = float(np.abs(est.angles_arcsec - 120.0).max())
+    return res
+
+
+def loop_model_comparison(per_model: dict, primary: str, eq20: dict, beta_excess: float) -> dict:
+    """The ``loop_models`` block: Fig 5 (1σ, mean, ratio to eqs 19–22 ÷ 3) and the claim verdicts under each
+    loop model, eqs 19–22 ÷ 3, the first-order β excess of the physical loop's DVAD (``beta_excess``,
+    :func:`beta_noise_excess`) and eq 20's thresholds (``eq20``).
+    ``per_model``: {loop model: {"fig5": …, "claims": […]}}."""
+    any_f5 = next(iter(per_model.values()))["fig5"]
+    pred1 = {p: v / 3.0 for p, v in any_f5["pred3"].items()}
+    out = {"primary": primary, "rendered_orbit": "physical", "sigma_px": any_f5["sigma_px"], "runs": any_f5["runs"],
+           "eq19_22_1sigma": pred1, "eq20_threshold": eq20, "beta_excess_first_order": beta_excess}
+    for lm, r in per_model.items():
+        st = r["fig5"]["stats"]
+        out[lm] = {
+            "fig5_1sigma": {m: {p: st[m][p]["std"] for p in PARAMS} for m in st},
+            "fig5_mean": {m: {p: st[m][p]["mean"] for p in PARAMS} for m in st},
+            "fig5_ratio_to_eq19_22": {m: {p: st[m][p]["std"] / pred1[p] for p in PARAMS} for m in st},
+            "claims": [{"claim": c["claim"], "measured": c["measured"], "verdict": c["verdict"]} for c in r["claims"]],
+        }
+    return out
+
+
 def run_study(rig: BoresightRig, *, seed: int | None = None, runs: int | None = None, reading: str = "consistent",
-              orbit: bool = True, progress=None, orbit_kw: dict | None = None, sweep_runs: int | None = None) -> dict:
-    """The default study: Figs 4–8, rotation order, orbit scenario, claims. ``progress(n, stage)``."""
+              orbit: bool = True, progress=None, orbit_kw: dict | None = None, sweep_runs: int | None = None,
+              loop_model: str = "physical", eq20_cos2beta: str = "reevaluated") -> dict:
+    """The default study: Figs 4–8, rotation order, orbit scenario, claims. ``progress(n, stage)``.
+
+    ``loop_model`` (:data:`~rigsim.optics.loop_models.LOOP_MODELS`): the loop of the Monte-Carlo and
+    noise-free analyses (the rendered orbit scenario is always physical); the other loop model's analyses
+    are run too, for the ``loop_models`` comparison (Fig 5 and the claims under each). ``eq20_cos2beta``:
+    which eq-20 focal-length threshold the Fig 6 claim quotes first (both are computed)."""
+    check_loop_model(loop_model)
+    if eq20_cos2beta not in EQ20_COS2BETA:
+        raise ValueError(f"eq20_cos2beta = {eq20_cos2beta!r}: allowed {EQ20_COS2BETA}")
     st = rig.study
     seed = st.seed if seed is None else seed
     runs = st.monte_carlo_runs if runs is None else runs
@@ -445,46 +584,41 @@ def run_study(rig: BoresightRig, *, seed: int | None = None, runs: int | None = 
     kw = dict(arcsec=st.perturbation_arcsec, df_um=st.perturbation_delta_f_um, n_ref=st.reference_measurements,
               reading=reading)
     t0 = time.perf_counter()
-
-    def tick(stage):
-        if progress:
-            progress(1, stage)
-
     res = {"rig": rig.name, "seed": seed, "runs": runs, "reading": reading, "sigma_px": st.centroid_sigma_px,
            "camera": {"F_mm": g.F, "omega_deg": math.degrees(g.off_axis_rad), "Kf": g.telecentric_factor,
                       "pitch_um": g.pitch_mm * 1e3, "L_mm": g.L_mm,
                       "beta_half_angle_deg": math.degrees(g.beta_half_angle_rad)},
            "state": {"arcsec": st.perturbation_arcsec, "df_um": st.perturbation_delta_f_um,
                      "n_ref": st.reference_measurements}}
-    sigmas = [0.02, 0.05, 0.1, 0.2, 0.3, 0.5]
-    res["fig4"] = sweep([g] * len(sigmas), sigmas, sigmas, sweep_runs, seed + 4, relative_with=g2, **kw)
-    tick("fig4")
-    e5 = mc_errors(g, st.centroid_sigma_px, runs, np.random.default_rng(seed + 5), **{k: v for k, v in kw.items()})
-    res["fig5"] = {"runs": runs, "sigma_px": st.centroid_sigma_px,
-                   "errors": {m: {p: e5[m][p].tolist() for p in PARAMS} for m in ("dvad", "simplified")},
-                   "stats": {m: {p: _stats(e5[m][p]) for p in PARAMS} for m in ("dvad", "simplified")},
-                   "pred3": predicted_3sigma(g, st.centroid_sigma_px)}
-    tick("fig5")
-    focals = [1000, 2000, 3000, 4000, 6000, 8000, 10000, 12000]
-    res["fig6"] = sweep([g.with_(focal_length_mm=float(f)) for f in focals], focals, st.centroid_sigma_px,
-                        sweep_runs, seed + 6, **kw)
-    tick("fig6")
-    Ls = [200, 400, 600, 800, 1000, 1400, 2000]
-    res["fig7"] = sweep([g.with_(center_y_mm=(L / 2.0, -L / 2.0)) for L in Ls], Ls, st.centroid_sigma_px,
-                        sweep_runs, seed + 7, **kw)
-    tick("fig7")
-    res["fig8"] = fig8_residual(g, [0, 25, 50, 100, 150, 200, 300, 400, 600, 800, 1000], [0.0, 0.05, 0.1, 0.5, 1.0],
-                                reading=reading)
-    tick("fig8")
-    res["rotation_order"] = rotation_order(120.0)
-    a = 120.0 / AS
-    est = estimate(g, spots_uv(g), spots_uv(g, rotation_xyz(a, a, a)), "simplified", reading)
-    res["two_arcmin_simplified_error_arcsec"] = float(np.abs(est.angles_arcsec - 120.0).max())
+    eq20 = {c: eq20_focal_threshold(g, st.centroid_sigma_px, 0.1, cos2beta=c) for c in EQ20_COS2BETA}
+    eq20["reevaluated"]["label"] = "cos²β re-evaluated with F"
+    eq20["fixed"]["label"] = f"cos²β fixed at F = {g.F / 1000:g} m"
+    other = next(c for c in EQ20_COS2BETA if c != eq20_cos2beta)
+    eq20_claim = {**eq20[eq20_cos2beta], "other": eq20[other]}
+    eq20_block = {"reading": eq20_cos2beta, "target_arcsec": 0.1, "sigma_px": st.centroid_sigma_px,
+                  **{c: {"F_m": v["F_mm"] / 1000.0, "beta_half_angle_deg": v["beta_half_angle_deg"]}
+                     for c, v in eq20.items()}}
+    per_model = {}
+    for lm in [loop_model] + [m for m in LOOP_MODELS if m != loop_model]:
+        methods = ("dvad", "simplified") + (("dvad_physical_loop",) if lm != "physical" else ())
+        per_model[lm] = _analyses(g, g2, st, seed, runs, sweep_runs, kw, lm, methods)
+        per_model[lm]["_loop_model"] = lm
+        per_model[lm]["_eq20"] = eq20_claim
+        if progress:
+            progress(4 if lm == loop_model else 1, "analyses" if lm == loop_model else f"analyses ({lm} loop)")
+    res.update({k: v for k, v in per_model[loop_model].items() if not k.startswith("_")})
+    res["_loop_model"] = loop_model
+    res["_eq20"] = eq20_claim
     res["analysis_seconds"] = time.perf_counter() - t0
     if orbit:
         res["orbit"] = run_orbit(rig, seed=seed, progress=(lambda n: progress(n, "orbit")) if progress else None,
                                  reading=reading, **(orbit_kw or {}))
     res["claims"] = claims(res)
+    per_model[loop_model]["claims"] = res["claims"]
+    for lm in LOOP_MODELS:
+        if lm != loop_model:
+            per_model[lm]["claims"] = claims(per_model[lm])
+    res["loop_models"] = loop_model_comparison(per_model, loop_model, eq20_block, beta_noise_excess(g))
     from rigsim.procedures.boresight.result_json import boresight_result_json, orbit_result_json
 
     if orbit:
