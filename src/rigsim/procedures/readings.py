@@ -129,20 +129,31 @@ READINGS: tuple[Reading, ...] = (
             "docs/boresight.md, Readings"),
     Reading("003", "loop_model", "How the laser loop moves the spots",
             "Eqs 1–4 and 19–22 imply a y-only focal scaling and a doubled rotation about every axis.",
-            {"physical": "the exact ray trace of the loop (both off-axis spots move in x when f changes)",
-             "paper": "the linear model the paper's equations imply"},
-            "physical", "rigsim renders physics; the paper's model is its first-order idealisation",
+            {"physical": "the exact ray trace of the loop (both off-axis spots move in x when f changes); DVAD "
+                         "inverts it exactly",
+             "paper": "the linear loop whose exact inverse is eqs 1–4 (Δf in the y difference only, every rotation "
+                      "doubled with the paper's gains); DVAD takes Δf from eq 15 alone"},
+            "physical", "rigsim renders physics (the rendered orbit is always physical); the paper's loop is its "
+            "first-order idealisation",
             "rigsim run boresight --loop-model paper; run_study(..., loop_model=)",
-            (("DVAD's β noise is ≈1.67× eqs 19–22 under 'physical' and matches them under 'paper' (the report's "
-             "loop-model table)"),),
-            "docs/boresight.md, loop models"),
-    Reading("003", "eq20_cos2beta", "Eq 20's threshold for 0.1″",
-            "The focal length needed for 0.1″ from eq 20, with cos²β.",
-            {"fixed": "cos²β at the nominal geometry", "reevaluated": "cos²β re-evaluated with each F"},
-            "see docs/boresight.md", "β depends on F through the geometry",
-            "reported under both in rigsim run boresight's claims",
-            ("the 'focal length ≥ 6 m' claim's threshold moves between the two (the report gives both)",),
-            "docs/boresight.md, loop models"),
+            ("'eqs 19–22 give the errors, for DVAD as for the simplified method': partly under 'physical' (DVAD's β "
+             "1σ is 1.64× eqs 19–22 ÷ 3, in closed form √(1 + (2F·tan ω/L)²)/cos²ω = 1.63), holds under 'paper' "
+             "(1.01×)",
+             "'both methods measure Δf better than 0.02 mm': does not hold under 'physical' (simplified 52.7 µm), "
+             "holds under 'paper' (10.6 µm)",
+             "the other seven claims keep their verdict (the report's loop-model table)"),
+            "docs/boresight.md, Loop models"),
+    Reading("003", "eq20_cos2beta", "Eq 20's focal-length threshold for 0.1″",
+            "The focal length at which eq 20 reaches 0.1″, with cos²β.",
+            {"reevaluated": "cos²β with β of each focal length's own geometry (β = half the angle between OA0 and "
+                            "OB0, which depends on F)",
+             "fixed": "cos²β held at the nominal 6 m geometry"},
+            "reevaluated", "β depends on F through the geometry, and Figs 4–8 already evaluate eqs 19–22 at each "
+            "focal length's own geometry",
+            "rigsim run boresight --eq20-cos2beta fixed",
+            ("the 0.1″ threshold: 2.068 m (re-evaluated, β = 13.52°) vs 2.173 m (fixed, β = 4.74°); the 'focal length "
+             "≥ 6 m' claim does not hold under either",),
+            "docs/boresight.md, Loop models"),
     # ------------------------------------------------------------------ seed 004
     Reading("004", "equations", "Which star pairs and triplets enter the EKF",
             "The patent's equation sets were lost; AD uses angular distances of pairs, ADS differences over triplets.",
