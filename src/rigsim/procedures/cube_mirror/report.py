@@ -204,8 +204,9 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
     if command:
         L += [f"Command: `{command}`", ""]
     L += [rig.description, "",
-          f"Rig file: `{rig_path or '—'}` · campaign seed {campaign.seed} · axis order {r.axis_order} · "
-          f"faces {', '.join(rig.procedure.faces)}", ""]
+          f"Rig file: `{rig_path or '—'}` · campaign seed {campaign.seed} · faces {', '.join(rig.procedure.faces)} · "
+          f"readings: axis order {r.axis_order}, eq 8 `beam` (every number below unless a table says otherwise; "
+          "`rigsim readings`)", ""]
     L += rig_summary_md(rig)
     first = r.null_poses_deg[0] if r.null_poses_deg else None
     pic, why = _rig_picture(rig, out, {k: v for k, v in first.items()} if first else None)
