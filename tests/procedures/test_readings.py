@@ -74,3 +74,17 @@ def test_check_matrix_command(capsys):
         assert main(["check-matrix", bad]) == 2
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and "expected" in err
+
+
+def test_seed000_budget_under_each_sigma1_reading():
+    """Eq 14 with the printed σ1 = 2.34″ gives the paper's RSS 3.69″; the text's 15 µm/65 cm give σ1 = 2.380″ (RSS
+    3.72″); Table 1's implied ~30 µm pixel doubles σ1 and the < 4″ claim fails (5.55″)."""
+    from rigsim.procedures.readings import seed000_budget_readings
+    from rigsim.rig import load_rig
+
+    b = {r["sigma1_reading"].split(" ")[0]: r for r in seed000_budget_readings()}
+    assert b["printed"]["rss_arcsec"] == pytest.approx(3.69, abs=0.005) and b["printed"]["claim_holds"]
+    assert b["derived"]["sigma1_arcsec"] == pytest.approx(2.380, abs=1e-3) and b["derived"]["rss_arcsec"] == pytest.approx(3.72, abs=0.005)
+    assert b["Table"]["rss_arcsec"] == pytest.approx((4.760**2 + 8.16) ** 0.5, abs=0.002) and not b["Table"]["claim_holds"]
+    rig = seed000_budget_readings(load_rig("sun_sensor_2axis_diaphragm"))
+    assert rig[1]["sigma1_arcsec"] == pytest.approx(b["derived"]["sigma1_arcsec"], rel=1e-9)  # the default rig is the text's

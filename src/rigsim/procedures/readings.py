@@ -9,7 +9,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["PATENT_R_REF_FROM_SUN", "READINGS", "TABLE1_DEG", "Reading", "evaluate", "find"]
+__all__ = ["PAPER_SIGMAS_ARCSEC", "PATENT_R_REF_FROM_SUN", "READINGS", "TABLE1_DEG", "Reading", "evaluate", "find",
+           "seed000_budget_readings"]
+
+PAPER_SIGMAS_ARCSEC = {"σ2": 2.0, "σ3": 2.0, "σ4": 0.4}
+"""Seed 000 eq 14's other three sources (turntable perpendicularity, aiming-camera mounting, angle readout)."""
 
 TABLE1_DEG = ({"X": 181.398, "Y": 0.528}, {"X": 91.386, "Y": -0.048})
 """Seed 000 Table 1's final null readings (θ1, θ2) and (θ3, θ4), degrees."""
@@ -184,6 +188,26 @@ def find(seed: str | None = None, key: str | None = None) -> list[Reading]:
     return out
 
 
+def seed000_budget_readings(rig=None) -> list[dict]:
+    """Seed 000's error budget (eq 14: σ1 ⊕ σ2 ⊕ σ3 ⊕ σ4) and its < 4″ claim under each reading of σ1: as printed
+    (2.34″), derived from the text's 15 µm pixel and 65 cm lever (or from ``rig``: null_sigma_px × object pixel /
+    (2 × distance)), and with the ~30 µm pixel that Table 1's steps imply (twice the derived value)."""
+    import math
+
+    if rig is None:
+        s1 = math.atan(15e-3 / 650.0) / 2.0
+    else:
+        s1 = rig.null_sigma_rad
+    s1 = math.degrees(s1) * 3600.0
+    rest = sum(v * v for v in PAPER_SIGMAS_ARCSEC.values())
+    rows = []
+    for name, v in (("printed (eq 13: 2.34″)", 2.34), ("derived (text: 15 µm, 65 cm)", s1),
+                    ("Table 1's pixel scale (~30 µm)", 2.0 * s1)):
+        rss = math.sqrt(v * v + rest)
+        rows.append({"sigma1_reading": name, "sigma1_arcsec": v, "rss_arcsec": rss, "claim_holds": rss < 4.0})
+    return rows
+
+
 def evaluate() -> dict:
     """The numbers of the readings that the documents' own data decide, recomputed: seed 000's Table 1 under
     both axis orders and both eq-8 readings, and seed 001's printed matrix."""
@@ -204,4 +228,5 @@ def evaluate() -> dict:
     ref = R[("XY", "beam")]
     table1 = [{"axis_order": o, "eq8": e, "deg_from_default": float(np.degrees(rotation_angle(R[(o, e)], ref))),
                **cond[(o, e)]} for (o, e) in R]
-    return {"seed000_table1": table1, "seed001_printed_matrix": analyse_rotation_matrix(PATENT_R_REF_FROM_SUN)}
+    return {"seed000_table1": table1, "seed000_budget": seed000_budget_readings(),
+            "seed001_printed_matrix": analyse_rotation_matrix(PATENT_R_REF_FROM_SUN)}

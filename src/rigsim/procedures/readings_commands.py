@@ -80,6 +80,10 @@ def cmd_readings(args) -> int:
         for t in ev["seed000_table1"]:
             print(f"  {t['axis_order']:10s}  {t['eq8']:7s}  {t['angle_r_deg']:9.4f}°  ×{t['amplification']:<13.1f} "
                   f"{t['deg_from_default']:9.4f}°                {'yes' if t['degenerate'] else 'no'}")
+        print("Seed 000 budget (eq 14) under each reading of σ1, with σ2 = σ3 = 2″, σ4 = 0.4″:")
+        for b in ev["seed000_budget"]:
+            print(f"  {b['sigma1_reading']:32s} σ1 {b['sigma1_arcsec']:.3f}″  RSS {b['rss_arcsec']:.2f}″  "
+                  f"< 4″ {'holds' if b['claim_holds'] else 'fails'}")
         m = ev["seed001_printed_matrix"]
         rep = m["sign_repair"]
         print(f"Seed 001 printed R(ref←sun): det {m['determinant']:+.4f}, max |M·Mᵀ − I| {m['max_abs_MMt_minus_I']:.4f}; "

@@ -37,6 +37,10 @@ def campaign_readings(result, rig) -> dict:
                          "cube_from_rot_error_arcsec": e_cube.tolist(), "cube_from_sun_error_arcsec": e_cs.tolist(),
                          "cube_from_sun_error_norm_arcsec": float(np.linalg.norm(e_cs)), **c})
     out = {"triad": rows}
+    if rig.procedure.method == "diaphragm":
+        from rigsim.procedures.readings import seed000_budget_readings
+
+        out["budget"] = seed000_budget_readings(rig)
     if rig.seed_document == "001":
         from rigsim.estimation.rotation_check import analyse_rotation_matrix
         from rigsim.procedures.readings import PATENT_R_REF_FROM_SUN
@@ -65,6 +69,12 @@ def readings_markdown(rd: dict, claim_arcsec: float | None) -> list[str]:
             line += f" {'holds' if ok else 'fails'} (< {claim_arcsec:g}″ per axis) |"
         L.append(line)
     L.append("")
+    if "budget" in rd:
+        L += ["The paper's budget (eq 14: σ1 ⊕ 2″ ⊕ 2″ ⊕ 0.4″) and its < 4″ claim under each reading of σ1 (σ1 derived "
+              "from this rig's aiming camera):", "", "| σ1 reading | σ1 [″] | RSS [″] | < 4″ |", "|---|---:|---:|---|"]
+        L += [f"| {b['sigma1_reading']} | {b['sigma1_arcsec']:.3f} | {b['rss_arcsec']:.2f} | "
+              f"{'holds' if b['claim_holds'] else 'fails'} |" for b in rd["budget"]]
+        L.append("")
     if "printed_matrix" in rd:
         m = rd["printed_matrix"]
         rep = m["sign_repair"]
