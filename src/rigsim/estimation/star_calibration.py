@@ -377,15 +377,19 @@ class BatchResult:
         return self.chi2 / max(1, self.n_eq - len(self.names))
 
 
-def _whitener(sysm: FrameSystem) -> np.ndarray:
-    """W (r, M) with WᵀW = R⁻¹ (or the pseudo-inverse on R's range) for the frame's weighting."""
+def _whitener(sysm: FrameSystem):
+    """The map A ↦ W A with WᵀW = R⁻¹ (or the pseudo-inverse on R's range) for the frame's weighting."""
     T, R = sysm.reduced()
     if R.ndim == 1:
-        W = np.diag(1.0 / np.sqrt(R))
+        d = 1.0 / np.sqrt(R)
+        if T is None:
+            return lambda A: (A.T * d).T
+        W = T * d[:, None]
     else:
         L = np.tril(_cho(R)[0])
         W = solve_triangular(L, np.eye(R.shape[0]), lower=True)  # L⁻¹
-    return W if T is None else W @ T
+        W = W if T is None else W @ T
+    return lambda A: W @ A
 
 
 def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weighting: str = "propagated",
@@ -430,8 +434,8 @@ def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weight
                     H = np.einsum("msc,mscp->mp", coef, dx_dth[idx])[:, est]
                     r_out.append(h - z)
                     j_out.append(H)
-                r = np.concatenate([Li @ ri for Li, ri in zip(Ls, r_out)])
-                J = np.concatenate([Li @ ji for Li, ji in zip(Ls, j_out)])
+                r = np.concatenate([Li(ri) for Li, ri in zip(Ls, r_out)])
+                J = np.concatenate([Li(ji) for Li, ji in zip(Ls, j_out)])
                 cache.update(key=key, r=r, J=J)
             return cache
 
