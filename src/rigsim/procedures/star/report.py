@@ -232,7 +232,8 @@ def summary_lines(res, study=None, readings=None) -> list[str]:
         L.append(f"EKF u0/v0 error [px], {CASE_LABEL[case]}: " + "; ".join(parts))
     if study is not None:
         w = study.weightings[0]
-        L.append(f"study ({study.trials} trials, weighting {w}): RMS u0 / v0 error [px]")
+        eq = "" if study.equations == "framework" else f", equations {study.equations}"
+        L.append(f"study ({study.trials} trials, weighting {w}{eq}): RMS u0 / v0 error [px]")
         for case in CASES:
             a = study.rms((case, "ad", w))
             s_ = study.rms((case, "ads", w))
