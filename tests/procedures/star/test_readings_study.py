@@ -22,8 +22,8 @@ def f_plus_one(star_rig, star_sky):
 
 def test_biased_f_ads_gain_depends_on_the_estimator(f_plus_one):
     """With f 1 px long, exact ADS lowers the principal-point RMS error by ~40 % relative to AD
-    when every pair/triplet is used with equal weights (200 trials, seed 0: u0 +44 % / v0 +41 %,
-    docs/star_calibration.md), and by only ~1–2 % under rigsim's framework/propagated estimator.
+    when every pair/triplet is used with equal weights (200 trials, the rig's seed 4: u0 +42.6 % / v0
+    +42.0 %, docs/star_calibration.md), and by only ~1.4 % under rigsim's framework/propagated estimator.
     The per-trial errors are dominated by the f bias, so the paired ratio is tight: the bootstrap
     95 % interval at 40 trials is ±3 points; the bounds below leave ≥ 3 such half-widths."""
     imp = f_plus_one.improvements()
