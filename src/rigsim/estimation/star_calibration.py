@@ -23,9 +23,17 @@ Measurement models (one frame, stars ordered by brightness, (a, b) the pair fart
   f²(1/(D_iD_j) − 1/(D_jD_k)) ≈ (r_k² − r_i²)/(2f²), which is of the same order as h itself:
   this model is biased by construction (measured in the docs).
 
-Noise: ``weighting='propagated'`` — R = G Σ Gᵀ with G = ∂h/∂(centroids) and Σ the centroid
-covariance (from the centroider); ``'diagonal'`` — only the diagonal of that R (each equation
-treated as independent, the usual reading of "R is the measurement noise covariance").
+Equation sets (``equations``): ``'framework'`` (default) — the pairs and triplets above;
+``'all'`` — every pair i < j (N(N−1)/2) and every triplet (i, j, k) with j the shared middle star
+and i < k, i, k ≠ j (N(N−1)(N−2)/2); ``'chain'`` — consecutive stars in brightness order: pairs
+(i, i+1) (N − 1) and triplets (i, i+1, i+2) (N − 2).
+
+Noise (``weighting``): ``'propagated'`` — R = G Σ Gᵀ with G = ∂h/∂(centroids) and Σ the centroid
+covariance (from the centroider); where a set has more equations than the 2N − 3 independent
+angles (``'all'``), R is singular and the equations are projected onto its range (the
+pseudo-inverse solution); ``'diagonal'`` — only the diagonal of that R (each equation treated as
+independent, the usual reading of "R is the measurement noise covariance"); ``'unweighted'`` —
+R = σ²I with σ² the mean of the propagated diagonal over the frame's equations.
 
 EKF (eqs 13-19): state a subset of θ (default (u0, v0); the patent's state is the principal point),
 identity transition, process noise Q = q²I, one update per frame with the frame's vector of
@@ -41,11 +49,14 @@ from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
 from rigsim.optics.camera import unproject
 
-__all__ = ["THETA_NAMES", "MODELS", "FrameObs", "FrameSystem", "frame_system", "EKFResult", "run_ekf",
-           "BatchResult", "batch_lsq", "normalized_with_jacobians", "pair_sets"]
+__all__ = ["EQUATIONS", "MODELS", "THETA_NAMES", "WEIGHTINGS", "BatchResult", "EKFResult", "FrameObs",
+           "FrameSystem", "batch_lsq", "equation_sets", "frame_system", "normalized_with_jacobians", "pair_sets",
+           "run_ekf"]
 
 THETA_NAMES = ("f", "u0", "v0", "k1", "k2")
 MODELS = ("ad", "ads", "ads_improved")
+EQUATIONS = ("framework", "all", "chain")
+WEIGHTINGS = ("propagated", "diagonal", "unweighted")
 
 
 @dataclass(frozen=True)
@@ -102,16 +113,82 @@ def pair_sets(uv: np.ndarray):
     return pairs, trip
 
 
+def equation_sets(uv: np.ndarray, equations: str = "framework", flux: np.ndarray | None = None):
+    """AD pairs (M, 2) and ADS triplets (M', 3) of one frame's stars for an equation set of
+    :data:`EQUATIONS` (module docstring); ``chain`` orders the stars by decreasing ``flux`` (the
+    given order without it)."""
+    if equations == "framework":
+        return pair_sets(uv)
+    n = uv.shape[0]
+    if equations == "all":
+        pairs = np.stack(np.triu_indices(n, 1), 1).astype(np.int64)
+        i, k = np.triu_indices(n, 1)
+        jj = np.repeat(np.arange(n), i.size)
+        ii, kk = np.tile(i, n), np.tile(k, n)
+        keep = (ii != jj) & (kk != jj)
+        return pairs, np.stack([ii[keep], jj[keep], kk[keep]], 1).astype(np.int64)
+    if equations == "chain":
+        o = np.argsort(-np.asarray(flux, float), kind="stable") if flux is not None else np.arange(n)
+        return (np.stack([o[:-1], o[1:]], 1).astype(np.int64),
+                np.stack([o[:-2], o[1:-1], o[2:]], 1).astype(np.int64))
+    raise ValueError(f"equations = {equations!r}: allowed {', '.join(EQUATIONS)}")
+
+
 @dataclass
 class FrameSystem:
-    """One frame's equations at θ: z, h, H = ∂h/∂θ (M, 5), G = ∂h/∂centroids (M, 2N), R."""
+    """One frame's equations at θ: z, h, H = ∂h/∂θ (M, 5), G = ∂h/∂centroids (M, 2N), the centroid
+    variances ``var`` (2N,) and the ``weighting``; R (M, M) is formed on demand."""
 
     z: np.ndarray
     h: np.ndarray
     H: np.ndarray
     G: np.ndarray
-    R: np.ndarray
+    var: np.ndarray
+    weighting: str
     valid: bool
+
+    @property
+    def r_diag(self) -> np.ndarray:
+        """Diagonal of the propagated R = G Σ Gᵀ (M,), without forming R."""
+        return np.einsum("mq,q,mq->m", self.G, self.var, self.G)
+
+    @property
+    def sigma2(self) -> float:
+        """The ``unweighted`` variance: the mean of the propagated diagonal."""
+        return float(np.mean(self.r_diag))
+
+    @property
+    def R(self) -> np.ndarray:
+        if self.weighting == "diagonal":
+            return np.diag(self.r_diag)
+        if self.weighting == "unweighted":
+            return self.sigma2 * np.eye(self.h.size)
+        R = (self.G * self.var[None, :]) @ self.G.T
+        # 1e-9 relative floor: a nearly degenerate framework (near-collinear stars) must not make
+        # R numerically singular; it changes no weight by more than 1e-9 of the mean variance
+        R[np.diag_indices_from(R)] += 1e-9 * np.mean(np.diag(R))
+        return R
+
+    def reduced(self):
+        """(T, R') with which the frame's equations enter an estimator: T (r, M) maps z, h, H
+        (None = identity), R' is the covariance of T(z − h), as variances (1-D) when diagonal.
+        Propagated sets with more equations than the 2N − 3 independent angles are projected onto
+        the range of R (its pseudo-inverse)."""
+        if self.weighting == "diagonal":
+            return None, self.r_diag
+        if self.weighting == "unweighted":
+            return None, np.full(self.h.size, self.sigma2)
+        if self.h.size <= self.G.shape[1] - 3:
+            return None, self.R
+        # R = A Aᵀ with A = G Σ^½ (M, 2N): its range from the small eigenproblem AᵀA = V Λ Vᵀ,
+        # U = A V Λ^-½; the 3 attitude directions (Λ ≈ 0) and rounding (< 1e-10 Λmax) are dropped
+        # (einsum, not BLAS: multithreaded BLAS on these thin products thrashes a loaded machine)
+        A = self.G * np.sqrt(self.var)[None, :]
+        lam, V = np.linalg.eigh(np.einsum("mp,mq->pq", A, A))
+        keep = lam > 1e-10 * lam[-1]
+        lam, V = lam[keep], V[:, keep]
+        Ut = np.einsum("pk,mp->km", V, A) / np.sqrt(lam)[:, None]
+        return Ut, lam + 1e-9 * np.mean(lam)
 
 
 def _model_terms(model: str, x: np.ndarray, pairs, trip):
@@ -156,12 +233,13 @@ def _measurement(model: str, V: np.ndarray, pairs, trip) -> np.ndarray:
 
 
 def frame_system(fo: FrameObs, theta, model: str = "ad", weighting: str = "propagated",
-                 p12=(0.0, 0.0), sets=None) -> FrameSystem:
-    """All of one frame's equations at intrinsics ``theta`` (see the module docstring)."""
-    if weighting not in ("propagated", "diagonal"):
-        raise ValueError(f"weighting = {weighting!r}: allowed 'propagated' or 'diagonal'")
+                 p12=(0.0, 0.0), sets=None, equations: str = "framework") -> FrameSystem:
+    """All of one frame's equations at intrinsics ``theta`` (see the module docstring); ``sets``
+    (pairs, triplets) overrides ``equations``."""
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"weighting = {weighting!r}: allowed {', '.join(WEIGHTINGS)}")
     N = len(fo)
-    pairs, trip = sets if sets is not None else pair_sets(fo.uv)
+    pairs, trip = sets if sets is not None else equation_sets(fo.uv, equations, fo.flux)
     x, dx_dth, dx_duv, ok = normalized_with_jacobians(fo.uv, theta, p12)
     h, idx, coef = _model_terms(model, x, pairs, trip)
     z = _measurement(model, fo.dirs_icrs, pairs, trip)
@@ -173,14 +251,7 @@ def frame_system(fo: FrameObs, theta, model: str = "ad", weighting: str = "propa
     np.add.at(G, (rows, idx.ravel()), gs.reshape(-1, 2))
     G = G.reshape(M, 2 * N)
     var = (np.asarray(fo.sigma_uv, float) ** 2).reshape(-1)
-    R = (G * var[None, :]) @ G.T
-    if weighting == "diagonal":
-        R = np.diag(np.diag(R))
-    else:
-        # 1e-9 relative floor: a nearly degenerate framework (near-collinear stars) must not make
-        # R numerically singular; it changes no weight by more than 1e-9 of the mean variance
-        R[np.diag_indices_from(R)] += 1e-9 * np.mean(np.diag(R))
-    return FrameSystem(z, h, H, G, R, bool(np.all(ok)))
+    return FrameSystem(z, h, H, G, var, weighting, bool(np.all(ok)))
 
 
 # ------------------------------------------------------------------------------ EKF
@@ -209,19 +280,45 @@ class EKFResult:
     nis: np.ndarray             # (K,) normalised innovation squared per frame
     n_eq: np.ndarray            # (K,) equations per frame
     theta: np.ndarray           # full θ with the estimated entries replaced
+    dof: np.ndarray | None = None  # (K,) dimension of each update (= n_eq unless R was rank-deficient)
 
     @property
     def sigma(self) -> np.ndarray:
         return np.sqrt(np.diag(self.P))
 
 
+def _update(P, nu, H, T, R):
+    """One measurement update of state covariance P with innovation ν, Jacobian H and (T, R) from
+    :meth:`FrameSystem.reduced`: (Δx, P⁺, NIS). Diagonal R: information form (cost linear in the
+    number of equations); full R: gain form with the Joseph update."""
+    if T is not None:
+        nu, H = T @ nu, T @ H
+    if R.ndim == 1:
+        HtRi = H.T / R[None, :]
+        A = np.linalg.inv(P) + HtRi @ H
+        Pn = np.linalg.inv(A)
+        Pn = 0.5 * (Pn + Pn.T)
+        g = HtRi @ nu
+        dx = Pn @ g
+        return dx, Pn, float(nu @ (nu / R) - g @ dx)
+    n = P.shape[0]
+    S = H @ P @ H.T + R
+    cf = _cho(S)
+    K = cho_solve(cf, H @ P).T  # P Hᵀ S⁻¹
+    IKH = np.eye(n) - K @ H
+    return K @ nu, IKH @ P @ IKH.T + K @ R @ K.T, float(nu @ cho_solve(cf, nu))
+
+
 def run_ekf(frames, theta0, *, model: str = "ad", estimate=("u0", "v0"), prior_sigma=None,
             process_sigma: float = 0.0, weighting: str = "propagated", p12=(0.0, 0.0),
-            max_stars: int | None = None) -> EKFResult:
+            max_stars: int | None = None, equations: str = "framework") -> EKFResult:
     """EKF over a sequence of :class:`FrameObs` (eqs 13-19). θ entries not in ``estimate`` stay at
-    ``theta0`` (known or assumed). ``prior_sigma`` per estimated entry (default 10 px / 10 px…)."""
+    ``theta0`` (known or assumed). ``prior_sigma`` per estimated entry (default 10 px / 10 px…).
+    ``equations`` ∈ :data:`EQUATIONS`, ``weighting`` ∈ :data:`WEIGHTINGS` (module docstring)."""
     if model not in MODELS:
         raise ValueError(f"model = {model!r}: allowed {MODELS}")
+    if equations not in EQUATIONS:
+        raise ValueError(f"equations = {equations!r}: allowed {', '.join(EQUATIONS)}")
     est = [THETA_NAMES.index(e) for e in estimate]
     theta = np.asarray(theta0, dtype=float).copy()
     n = len(est)
@@ -230,32 +327,30 @@ def run_ekf(frames, theta0, *, model: str = "ad", estimate=("u0", "v0"), prior_s
     Q = np.eye(n) * process_sigma**2
     hx = [theta[est].copy()]
     hs = [np.sqrt(np.diag(P))]
-    nis, neq = [], []
+    nis, neq, dof = [], [], []
     for fo in frames:
         if max_stars is not None:
             fo = fo.brightest(max_stars)
         if len(fo) < 4:
             nis.append(np.nan)
             neq.append(0)
+            dof.append(0)
             hx.append(theta[est].copy())
             hs.append(np.sqrt(np.diag(P)))
             continue
         P = P + Q
-        sysm = frame_system(fo, theta, model, weighting, p12)
-        H = sysm.H[:, est]
+        sysm = frame_system(fo, theta, model, weighting, p12, equations=equations)
+        T, R = sysm.reduced()
         nu = sysm.z - sysm.h
-        S = H @ P @ H.T + sysm.R
-        cf = _cho(S)
-        K = cho_solve(cf, H @ P).T  # P Hᵀ S⁻¹
-        theta[est] = theta[est] + K @ nu
-        IKH = np.eye(n) - K @ H
-        P = IKH @ P @ IKH.T + K @ sysm.R @ K.T
-        nis.append(float(nu @ cho_solve(cf, nu)))
+        dx, P, q = _update(P, nu, sysm.H[:, est], T, R)
+        theta[est] = theta[est] + dx
+        nis.append(q)
         neq.append(nu.size)
+        dof.append(nu.size if T is None else T.shape[0])
         hx.append(theta[est].copy())
         hs.append(np.sqrt(np.diag(P)))
     return EKFResult(model, tuple(estimate), theta[est].copy(), P, np.array(hx), np.array(hs),
-                     np.array(nis), np.array(neq), theta)
+                     np.array(nis), np.array(neq), theta, np.array(dof))
 
 
 # ------------------------------------------------------------------------------ batch LSQ
@@ -282,28 +377,39 @@ class BatchResult:
         return self.chi2 / max(1, self.n_eq - len(self.names))
 
 
+def _whitener(sysm: FrameSystem):
+    """The map A ↦ W A with WᵀW = R⁻¹ (or the pseudo-inverse on R's range) for the frame's weighting."""
+    T, R = sysm.reduced()
+    if R.ndim == 1:
+        d = 1.0 / np.sqrt(R)
+        if T is None:
+            return lambda A: (A.T * d).T
+        W = T * d[:, None]
+    else:
+        L = np.tril(_cho(R)[0])
+        W = solve_triangular(L, np.eye(R.shape[0]), lower=True)  # L⁻¹
+        W = W if T is None else W @ T
+    return lambda A: W @ A
+
+
 def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weighting: str = "propagated",
-              p12=(0.0, 0.0), max_stars: int | None = None, passes: int = 2) -> BatchResult:
+              p12=(0.0, 0.0), max_stars: int | None = None, passes: int = 2,
+              equations: str = "framework") -> BatchResult:
     """Weighted least squares of the chosen θ entries over all frames' equations (Gauss–Newton
     through ``scipy.optimize.least_squares``), whitened by each frame's R (re-evaluated at the
-    solution for a second pass). Covariance = (Jᵀ R⁻¹ J)⁻¹ at the solution."""
+    solution for a second pass). Covariance = (Jᵀ R⁻¹ J)⁻¹ at the solution. ``equations`` and
+    ``weighting`` as in :func:`run_ekf`."""
     from scipy.optimize import least_squares
 
     est = [THETA_NAMES.index(e) for e in estimate]
     fos = [fo.brightest(max_stars) if max_stars else fo for fo in frames]
     fos = [fo for fo in fos if len(fo) >= 4]
-    sets = [pair_sets(fo.uv) for fo in fos]
+    sets = [equation_sets(fo.uv, equations, fo.flux) for fo in fos]
     theta = np.asarray(theta0, dtype=float).copy()
     scale = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3])[est]
 
     def whiteners(th):
-        Ls = []
-        for fo, st in zip(fos, sets):
-            R = frame_system(fo, th, model, weighting, p12, st).R
-            L = _cho(R)[0]
-            L = np.tril(L)
-            Ls.append(solve_triangular(L, np.eye(R.shape[0]), lower=True))  # L⁻¹: whitening matrix
-        return Ls
+        return [_whitener(frame_system(fo, th, model, weighting, p12, st)) for fo, st in zip(fos, sets)]
 
     def full(xe):
         th = theta.copy()
@@ -328,8 +434,8 @@ def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weight
                     H = np.einsum("msc,mscp->mp", coef, dx_dth[idx])[:, est]
                     r_out.append(h - z)
                     j_out.append(H)
-                r = np.concatenate([Li @ ri for Li, ri in zip(Ls, r_out)])
-                J = np.concatenate([Li @ ji for Li, ji in zip(Ls, j_out)])
+                r = np.concatenate([Li(ri) for Li, ri in zip(Ls, r_out)])
+                J = np.concatenate([Li(ji) for Li, ji in zip(Ls, j_out)])
                 cache.update(key=key, r=r, J=J)
             return cache
 

@@ -26,7 +26,15 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--rig", default="star_sensor", help="star-sensor rig file (path or default name)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the rendered run (same seed, same numbers)")
     p.add_argument("--trials", type=integer(1, 100_000), default=None, help="Monte-Carlo trials of the study (default: the rig's)")
-    p.add_argument("--no-study", action="store_true", help="skip the Monte-Carlo study")
+    p.add_argument("--no-study", action="store_true", help="skip the Monte-Carlo studies (both)")
+    p.add_argument("--equations", default="framework",
+                   help="equation sets of the EKFs, batch fit and study: framework (2N-3 pairs, 2N-4 triplets) | all "
+                        "(every pair, every triplet) | chain (consecutive stars in brightness order)")
+    p.add_argument("--weighting", default=None,
+                   help="measurement noise R: propagated (G Σ Gᵀ) | diagonal | unweighted (σ²I) (default: the rig's)")
+    p.add_argument("--readings-trials", type=integer(1, 100_000), default=30,
+                   help="trials per cell of the AD-vs-ADS study under every estimator (equation set × weighting × "
+                        "focal-length case)")
     p.add_argument("--renderer", default="analytic", help="frame renderer: analytic | mitsuba")
     p.add_argument("--mitsuba-spp", type=SPP, default=256, help="samples per pixel of the Mitsuba windows (power of 4)")
     p.add_argument("--out", default=None, help="report folder (default renders/star_calibration)")
@@ -63,10 +71,18 @@ def add_cli(groups: dict) -> None:
 
 
 def _check(args) -> None:
+    from rigsim.estimation.star_calibration import EQUATIONS, WEIGHTINGS
+
     if args.renderer not in RENDERERS:
         raise CliError(f"--renderer = {args.renderer!r}: allowed one of {', '.join(RENDERERS)}")
     if args.trials is not None and not 2 <= args.trials <= 100000:
         raise CliError(f"--trials = {args.trials}: allowed range is 2 to 100000")
+    if args.equations not in EQUATIONS:
+        raise CliError(f"--equations = {args.equations!r}: allowed one of {', '.join(EQUATIONS)}")
+    if args.weighting is not None and args.weighting not in WEIGHTINGS:
+        raise CliError(f"--weighting = {args.weighting!r}: allowed one of {', '.join(WEIGHTINGS)}")
+    if not 2 <= args.readings_trials <= 100000:
+        raise CliError(f"--readings-trials = {args.readings_trials}: allowed range is 2 to 100000")
     if args.seed < 0:
         raise CliError(f"--seed = {args.seed}: allowed range is ≥ 0")
     spp = args.mitsuba_spp
@@ -118,6 +134,7 @@ def cmd_run_star_calibration(args) -> int:
 
     import rigsim
     from rigsim.files import write_image, write_table
+    from rigsim.procedures.star.estimators import readings_study
     from rigsim.procedures.star.files import attitude_log_columns
     from rigsim.procedures.star.report import summary_lines, write_report
     from rigsim.procedures.star.run import run_pipeline
@@ -155,12 +172,13 @@ def cmd_run_star_calibration(args) -> int:
             exported.append((name, obs.time_s, obs.R_commanded))
 
         res = run_pipeline(rig, seed=args.seed, renderer=args.renderer, mitsuba=mitsuba, progress=bar,
-                           on_frame=export if args.export_frames else None)
+                           on_frame=export if args.export_frames else None, equations=args.equations,
+                           weighting=args.weighting)
     if args.export_frames:
         write_table(Path(args.export_frames) / "attitudes.csv",
                     attitude_log_columns(*zip(*exported)) if exported else {})
         print(f"exported {len(exported)} frames to {args.export_frames}/ with attitudes.csv")
-    study = None
+    study = readings = None
     if not args.no_study:
         from rigsim.truth.star import StarSky
 
@@ -169,18 +187,24 @@ def cmd_run_star_calibration(args) -> int:
         t1 = time.perf_counter()
         with tqdm(total=trials, desc="AD vs ADS study", unit="trial", disable=True if args.quiet else None,
                   file=sys.stderr, dynamic_ncols=True) as bar:
-            study = run_study(rig, sky, trials=trials, noise=noise, progress=bar)
+            study = run_study(rig, sky, trials=trials, noise=noise, progress=bar, equations=args.equations,
+                              weightings=None if args.weighting is None else (args.weighting,))
         res.times["study"] = time.perf_counter() - t1
+        t1 = time.perf_counter()
+        with tqdm(total=args.readings_trials, desc="AD vs ADS under every estimator", unit="trial",
+                  disable=True if args.quiet else None, file=sys.stderr, dynamic_ncols=True) as bar:
+            readings = readings_study(rig, sky, trials=args.readings_trials, noise=noise, progress=bar)
+        res.times["readings study"] = time.perf_counter() - t1
     res.times["wall"] = time.perf_counter() - t0
     print()
-    for line in summary_lines(res, study):
+    for line in summary_lines(res, study, readings):
         print(line)
     try:
         rig_path = os.path.relpath(resolve_star_rig_path(args.rig))
     except Exception:
         rig_path = args.rig
     cmd = "rigsim " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rigsim") else None
-    files = write_report(out, res, study, command=cmd, rig_path=rig_path)
+    files = write_report(out, res, study, command=cmd, rig_path=rig_path, readings=readings)
     print(f"\nwall time {res.times['wall']:.1f} s; report: {files['report']} (plots: "
           + ", ".join(p.name for k, p in files.items() if k not in ("report", "json")) + ")")
     return 0

@@ -125,8 +125,12 @@ class StarPipeline:
             self.frames_obs.append(FrameObs(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros(0)))
         return ident
 
-    def calibrate(self) -> PipelineOutput:
+    def calibrate(self, *, equations: str = "framework", weighting: str | None = None) -> PipelineOutput:
+        """EKFs, batch least squares and observability over the frames added; ``equations`` and
+        ``weighting`` (default: the rig's) as in :func:`rigsim.estimation.star_calibration.run_ekf`
+        (the observability analysis always uses the framework sets)."""
         s, c = self.nominal.sensor, self.nominal.calibration
+        weighting = c.weighting if weighting is None else weighting
         p12 = (s.p1, s.p2)
         ident_stats = {"frames": len(self.ident), "frames_identified": int(sum(i.ok for i in self.ident)),
                        **self.counts, "identified": int(sum(len(i) for i in self.ident)),
@@ -138,17 +142,17 @@ class StarPipeline:
             th0, est, ps = pipeline_case_setup(self.nominal, case)
             for model in MODELS:
                 out.ekf[(case, model)] = run_ekf(self.frames_obs, th0, model=model, estimate=est, prior_sigma=ps,
-                                                 weighting=c.weighting, process_sigma=c.process_noise_px, p12=p12,
-                                                 max_stars=c.max_stars_per_frame)
+                                                 weighting=weighting, process_sigma=c.process_noise_px, p12=p12,
+                                                 max_stars=c.max_stars_per_frame, equations=equations)
         out.times[f"ekf ({len(out.ekf)} runs)"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        out.batch = batch_lsq(self.frames_obs, np.array(s.theta, dtype=float), weighting=c.weighting, p12=p12,
-                              max_stars=c.max_stars_per_frame)
+        out.batch = batch_lsq(self.frames_obs, np.array(s.theta, dtype=float), weighting=weighting, p12=p12,
+                              max_stars=c.max_stars_per_frame, equations=equations)
         out.times["batch LSQ"] = time.perf_counter() - t0
         for model in MODELS:
             for label, est in OBSERVABILITY_STATES:
                 out.observability[(model, label)] = observability(self.frames_obs, out.batch.theta, model=model,
-                                                                  estimate=est, weighting=c.weighting, p12=p12,
+                                                                  estimate=est, weighting=weighting, p12=p12,
                                                                   max_stars=c.max_stars_per_frame)
         return out
 

@@ -104,9 +104,11 @@ class PipelineResult:
 
 
 def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mitsuba=None, noiseless: bool = False,
-                 progress=None, sky: StarSky | None = None, on_frame=None) -> PipelineResult:
+                 progress=None, sky: StarSky | None = None, on_frame=None, equations: str = "framework",
+                 weighting: str | None = None) -> PipelineResult:
     """generate → pipeline → compare on the rig's sequence (module docstring). ``on_frame(obs)``
-    sees every observation (e.g. to write it as a file)."""
+    sees every observation (e.g. to write it as a file); ``equations`` and ``weighting`` go to
+    :meth:`StarPipeline.calibrate`."""
     t0 = time.perf_counter()
     sky = sky if sky is not None else StarSky(rig)
     times = {"catalogue": time.perf_counter() - t0}
@@ -125,7 +127,7 @@ def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mit
         if progress is not None:
             progress.update(1)
         tr0 = time.perf_counter()
-    out = pipe.calibrate()
+    out = pipe.calibrate(equations=equations, weighting=weighting)
     times.update(render=t_render, **out.times)
     ident_stats, centroid_stats = compare(out, truths, rig, sky)
     s = rig.sensor

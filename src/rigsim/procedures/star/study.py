@@ -131,6 +131,7 @@ class StudyResult:
     batch_errors: np.ndarray | None = None       # (nb, 5) θ error of batch LSQ
     batch_sigmas: np.ndarray | None = None
     n_stars: list = field(default_factory=list)
+    equations: str = "framework"
 
     def rms(self, key) -> np.ndarray:
         return np.sqrt(np.mean(self.errors[key] ** 2, axis=0))
@@ -147,7 +148,9 @@ class StudyResult:
 
 def run_study(rig, sky, *, trials: int | None = None, seed: int | None = None, noise: CentroidNoise | None = None,
               models=("ad", "ads", "ads_improved"), weightings=None, batch_trials: int = 40,
-              progress=None) -> StudyResult:
+              progress=None, equations: str = "framework") -> StudyResult:
+    """The Monte-Carlo AD-vs-ADS study (module docstring) with the given weightings (default: the
+    rig's) and equation set."""
     trials = rig.study.trials if trials is None else int(trials)
     seed = rig.study.seed if seed is None else int(seed)
     weightings = (rig.calibration.weighting,) if weightings is None else tuple(weightings)
@@ -157,7 +160,7 @@ def run_study(rig, sky, *, trials: int | None = None, seed: int | None = None, n
     n = rig.nominal_rig().sensor
     p12 = (n.p1, n.p2)  # the estimators' tangential distortion: the nominal one
     true = np.array([s.f_px, *s.principal_point_px, s.k1, s.k2])
-    res = StudyResult(trials, tuple(models), weightings, noise)
+    res = StudyResult(trials, tuple(models), weightings, noise, equations=equations)
     setups = {case: case_setup(rig, case) for case in CASES}
     th_batch = np.array(n.theta, dtype=float)
     rng_master = np.random.default_rng(seed)
@@ -172,14 +175,14 @@ def run_study(rig, sky, *, trials: int | None = None, seed: int | None = None, n
             for model in models:
                 for w in weightings:
                     r = run_ekf(frames, th0, model=model, estimate=est, prior_sigma=ps, weighting=w,
-                                process_sigma=c.process_noise_px, p12=p12)
+                                process_sigma=c.process_noise_px, p12=p12, equations=equations)
                     key = (case, model, w)
                     res.errors.setdefault(key, []).append(r.theta[1:3] - true[1:3])
                     res.sigmas.setdefault(key, []).append(r.sigma[-2:])
                     if case == "f_joint":
                         res.f_errors.setdefault(key, []).append(r.theta[0] - true[0])
         if t < batch_trials:
-            b = batch_lsq(frames, th_batch, p12=p12, weighting=weightings[0])
+            b = batch_lsq(frames, th_batch, p12=p12, weighting=weightings[0], equations=equations)
             if res.batch_errors is None:
                 res.batch_errors, res.batch_sigmas = [], []
             res.batch_errors.append(b.theta - true)
