@@ -69,3 +69,18 @@ def test_cli_option_errors(capsys, args, message):
     assert main(["run", "star-calibration", *args, "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1, err
+
+
+def test_verdict_needs_a_narrow_interval_to_call_the_claim_reproduced(f_plus_one):
+    """Three synthetic outcomes through the study's verdict rule: an interval that reaches +64 % / +21.7 % and is
+    narrow → reproduced; one that reaches it only by being wide (few trials) → inconclusive; none → not reproduced."""
+    st = f_plus_one
+    key = next(iter(st.improvements()))
+    a = np.array
+
+    def one(m, lo, hi):
+        return {key: (a(m), a(lo), a(hi))}
+
+    assert st.verdict(one([0.66, 0.25], [0.60, 0.20], [0.72, 0.30])).startswith("reproduced")
+    assert st.verdict(one([0.40, 0.10], [0.05, -0.20], [0.75, 0.40])).startswith("inconclusive at")
+    assert st.verdict(one([0.40, 0.40], [0.35, 0.35], [0.45, 0.45])).startswith("NOT reproduced")
