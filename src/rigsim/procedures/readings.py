@@ -140,11 +140,11 @@ READINGS: tuple[Reading, ...] = (
             "physical", "rigsim renders physics (the rendered orbit is always physical); the paper's loop is its "
             "first-order idealisation",
             "rigsim run boresight --loop-model paper; run_study(..., loop_model=)",
-            ("'eqs 19–22 give the errors, for DVAD as for the simplified method': partly under 'physical' (DVAD's β "
+            (("'eqs 19–22 give the errors, for DVAD as for the simplified method': partly under 'physical' (DVAD's β "
              "1σ is 1.64× eqs 19–22 ÷ 3, in closed form √(1 + (2F·tan ω/L)²)/cos²ω = 1.63), holds under 'paper' "
-             "(1.01×)",
-             "'both methods measure Δf better than 0.02 mm': does not hold under 'physical' (simplified 52.7 µm), "
-             "holds under 'paper' (10.6 µm)",
+             "(1.01×)"),
+             ("'both methods measure Δf better than 0.02 mm': does not hold under 'physical' (simplified 52.7 µm), "
+             "holds under 'paper' (10.6 µm)"),
              "the other seven claims keep their verdict (the report's loop-model table)"),
             "docs/boresight.md, Loop models"),
     Reading("003", "eq20_cos2beta", "Eq 20's focal-length threshold for 0.1″",
@@ -155,8 +155,8 @@ READINGS: tuple[Reading, ...] = (
             "reevaluated", "β depends on F through the geometry, and Figs 4–8 already evaluate eqs 19–22 at each "
             "focal length's own geometry",
             "rigsim run boresight --eq20-cos2beta fixed",
-            ("the 0.1″ threshold: 2.068 m (re-evaluated, β = 13.52°) vs 2.173 m (fixed, β = 4.74°); the 'focal length "
-             "≥ 6 m' claim does not hold under either",),
+            (("the 0.1″ threshold: 2.068 m (re-evaluated, β = 13.52°) vs 2.173 m (fixed, β = 4.74°); the 'focal length "
+             "≥ 6 m' claim does not hold under either"),),
             "docs/boresight.md, Loop models"),
     # ------------------------------------------------------------------ seed 004
     Reading("004", "equations", "Which star pairs and triplets enter the EKF",
@@ -166,13 +166,13 @@ READINGS: tuple[Reading, ...] = (
              "chain": "consecutive stars in brightness order: pairs (i, i+1), triplets (i, i+1, i+2)"},
             "framework", "independent equations with a full-rank covariance: no information counted twice",
             "rigsim run star-calibration --equations; run_ekf(..., equations=)",
-            ("'ADS improves u0 by +64 %, v0 by +21.7 % over AD': not reproduced under any of the 9 estimators × 6 "
+            (("'ADS improves u0 by +64 %, v0 by +21.7 % over AD': not reproduced under any of the 9 estimators × 6 "
              "focal-length cases (200 trials each): the largest gain is +49.9 % / +48.5 % under all/unweighted with f "
              "3 px short (+42.6 % / +42.0 % with f 1 px long); under rigsim's framework/propagated it is 1.2–1.5 %; "
-             "the gain is symmetric in u0 and v0, so the 64/21.7 split appears nowhere",
-             "the mechanism the patent names (ADS reduces the influence of a wrong f) exists only with a biased f and "
+             "the gain is symmetric in u0 and v0, so the 64/21.7 split appears nowhere"),
+             ("the mechanism the patent names (ADS reduces the influence of a wrong f) exists only with a biased f and "
              "an estimator that ignores the equations' correlations; with f estimated jointly every estimator's gain "
-             "is within ±5 % or negative, and the joint estimate is 16× closer to the truth than the best biased-f ADS",
+             "is within ±5 % or negative, and the joint estimate is 16× closer to the truth than the best biased-f ADS"),
              "all/propagated is the framework's information exactly (all pairs span 2N−3 dimensions): AD and ADS agree"),
             "docs/star_calibration.md"),
     Reading("004", "weighting", "The EKF's measurement noise R",
@@ -181,9 +181,9 @@ READINGS: tuple[Reading, ...] = (
              "diagonal": "its diagonal only", "unweighted": "R = σ²·I, σ² the frame's mean propagated variance"},
             "propagated", "the equations share stars, so their errors are correlated",
             "rigsim run star-calibration --weighting; run_ekf(..., weighting=)",
-            ("see 'equations': the ADS gain and the claim's verdict depend on the pair (equations, weighting); with "
+            (("see 'equations': the ADS gain and the claim's verdict depend on the pair (equations, weighting); with "
              "the all sets and diagonal or equal weights the filters are over-confident (ADS σ 0.011 px reported, "
-             "0.15 / 0.12 px scatter)",),
+             "0.15 / 0.12 px scatter)"),),
             "docs/star_calibration.md"),
 )
 
