@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from star_frames import noisy_frames, true_theta
 
 from rigsim.estimation.observability import observability
 from rigsim.estimation.star_calibration import (
@@ -13,27 +14,15 @@ from rigsim.estimation.star_calibration import (
     pair_sets,
     run_ekf,
 )
-from rigsim.optics import attitude as att
 from rigsim.procedures.star.study import CentroidNoise, random_slew, simulate_frames
 
 
 def _truth(star_rig):
-    s = star_rig.sensor
-    return np.array([s.f_px, *s.principal_point_px, s.k1, s.k2])
+    return true_theta(star_rig)
 
 
 def _frames(star_rig, star_sky, sigma, rng, n=None):
-    seq = att.from_rig(star_rig.sequence)
-    if n:
-        seq = seq.subset(slice(0, n))
-    out = []
-    for k in range(len(seq)):
-        tr = star_sky.field(seq.R_cam_from_icrs[k])
-        inside = star_sky.camera.on_detector(tr.uv, 5.0)
-        idx = np.flatnonzero(inside)[np.argsort(-tr.photons[inside])][:20]
-        uv = tr.uv[idx] + rng.normal(0, sigma, (idx.size, 2))
-        out.append(FrameObs(uv, np.full((idx.size, 2), max(sigma, 1e-4)), tr.dirs_icrs[idx], tr.photons[idx]))
-    return out
+    return noisy_frames(star_rig, star_sky, sigma, rng, n)
 
 
 def test_jacobians_match_finite_differences(star_rig, star_sky):

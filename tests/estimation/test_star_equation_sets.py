@@ -5,40 +5,26 @@ import itertools
 
 import numpy as np
 import pytest
+from star_frames import noisy_frames, true_theta
 
 from rigsim.estimation.star_calibration import (
     EQUATIONS,
     WEIGHTINGS,
-    FrameObs,
     batch_lsq,
     equation_sets,
     frame_system,
     run_ekf,
 )
-from rigsim.optics import attitude as att
 from rigsim.optics.camera import PinholeBrown
 
 
 def _truth(star_rig):
-    s = star_rig.sensor
-    return np.array([s.f_px, *s.principal_point_px, s.k1, s.k2])
+    return true_theta(star_rig)
 
 
 def _frames(star_rig, star_sky, sigma, rng, n=None, n_stars=20):
-    seq = att.from_rig(star_rig.sequence)
-    if n:
-        seq = seq.subset(slice(0, n))
-    out = []
-    for k in range(len(seq)):
-        tr = star_sky.field(seq.R_cam_from_icrs[k])
-        inside = star_sky.camera.on_detector(tr.uv, 5.0)
-        idx = np.flatnonzero(inside)[np.argsort(-tr.photons[inside])][:n_stars]
-        # shuffle so that the stored order is not the brightness order (chain must sort by flux)
-        idx = rng.permutation(idx)
-        uv = tr.uv[idx] + rng.normal(0, sigma, (idx.size, 2))
-        sig = np.full((idx.size, 2), max(sigma, 1e-6)) * rng.uniform(0.5, 2.0, (idx.size, 1))
-        out.append(FrameObs(uv, sig, tr.dirs_icrs[idx], tr.photons[idx]))
-    return out
+    # shuffled so that the stored order is not the brightness order (chain must sort by flux)
+    return noisy_frames(star_rig, star_sky, sigma, rng, n, n_stars, shuffle=True, spread_sigma=True, sigma_floor=1e-6)
 
 
 def _directions(star_rig, fo, th):
