@@ -11,6 +11,7 @@ import textwrap
 import numpy as np
 
 from rigsim.errors import CliError
+from rigsim.files.options import number
 
 __all__ = ["add_cli", "parse_matrix"]
 
@@ -39,7 +40,8 @@ def add_cli(groups: dict) -> None:
                "  rigsim check-matrix \"0.9998 -0.0204 -0.0028; 0.0203 -0.9989 -0.0430; 0.0037 0.0430 0.9991\"")
     m.add_argument("matrix", nargs="?", default=None,
                    help="nine numbers, rows separated by ';' (default: seed 001's printed example)")
-    m.add_argument("--tolerance", type=float, default=None, help="largest |M·Mᵀ − I| entry the print allows (default 3e-4)")
+    m.add_argument("--tolerance", type=number(1e-12, 1), default=None,
+                   help="largest |M·Mᵀ − I| entry the print allows (default 3e-4, a 4-decimal print)")
     m.add_argument("--json", action="store_true", help="print the analysis as JSON")
     m.set_defaults(func=cmd_check_matrix)
 
@@ -115,8 +117,6 @@ def cmd_check_matrix(args) -> int:
     from rigsim.estimation.rotation_check import analyse_rotation_matrix
     from rigsim.procedures.readings import PATENT_R_REF_FROM_SUN
 
-    if args.tolerance is not None and not (np.isfinite(args.tolerance) and 0 < args.tolerance <= 1):
-        raise CliError(f"--tolerance = {args.tolerance}: allowed range is (0, 1]")
     M = np.array(PATENT_R_REF_FROM_SUN) if args.matrix is None else parse_matrix(args.matrix)
     a = analyse_rotation_matrix(M, tolerance=args.tolerance)
     if args.json:

@@ -63,7 +63,7 @@ def test_readings_study_refuses_unknown_cases(star_rig, star_sky):
 @pytest.mark.parametrize(("args", "message"), [
     (["--equations", "every"], "--equations = 'every': allowed one of framework, all, chain"),
     (["--weighting", "equal"], "--weighting = 'equal': allowed one of propagated, diagonal, unweighted"),
-    (["--readings-trials", "1"], "--readings-trials = 1: allowed range is 2 to 100000"),
+    (["--readings-trials", "1"], "argument --readings-trials: '1' is not an integer from 2 to 100000"),
 ])
 def test_cli_option_errors(capsys, args, message):
     assert main(["run", "star-calibration", *args, "--quiet"]) == 2

@@ -32,7 +32,7 @@ def add_cli(groups: dict) -> None:
                         "(every pair, every triplet) | chain (consecutive stars in brightness order)")
     p.add_argument("--weighting", default=None,
                    help="measurement noise R: propagated (G Σ Gᵀ) | diagonal | unweighted (σ²I) (default: the rig's)")
-    p.add_argument("--readings-trials", type=integer(1, 100_000), default=30,
+    p.add_argument("--readings-trials", type=integer(2, 100_000), default=30,
                    help="trials per cell of the AD-vs-ADS study under every estimator (equation set × weighting × "
                         "focal-length case)")
     p.add_argument("--renderer", default="analytic", help="frame renderer: analytic | mitsuba")
