@@ -313,9 +313,12 @@ def test_rendered_default_rig_both_faces_with_detector_noise(optics):
         assert res.converged and res.n_frames <= 4
         _check_frames((s.measured, s.true) for s in res.steps)
         assert _face_angle_arcsec(REAL, face, res.final_true_pose_rad, a.axis_rot) <= math.sqrt(2) * (THR + READ_TOL)
-        # the same seed gives the same readings
+    # the same seed gives the same readings, to the renderer's reproducibility: Mitsuba's multi-threaded sample
+    # accumulation sums in a thread-dependent order, so a busy machine changes a photon image by ~1e-7 relative and
+    # a reading by ~1e-5″ (measured 8e-6″ and 5e-5″ in a full CI run); 1e-3″ is 50× that and far below the noise
     res2 = ac.autocollimator_face_search(RIG, REAL, 1, a.axis_rot, err, rendered=True, seed=31)
-    assert [s.measured.tolist() for s in res2.steps] == [s.measured.tolist() for s in res.steps]
+    assert len(res2.steps) == len(res.steps)
+    np.testing.assert_allclose([s.measured for s in res2.steps], [s.measured for s in res.steps], rtol=0, atol=1e-3)
 
 
 @pytest.mark.slow
