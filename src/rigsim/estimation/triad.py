@@ -40,12 +40,9 @@ def triad_conditioning(n1, n2, r1, r2) -> dict:
     one means the observations cannot be of these two vectors), and the amplification 1/sin∠(r1, r2) of r2's
     direction error into the rotation about r1; ``degenerate`` when the angle is under 10° or the
     inconsistency over 1°."""
-    def ang(a, b):
-        a = np.asarray(a, float) / np.linalg.norm(a)
-        b = np.asarray(b, float) / np.linalg.norm(b)
-        return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)))
+    from rigsim.frames import angle_between
 
-    ar, an = ang(r1, r2), ang(n1, n2)
+    ar, an = (float(np.degrees(angle_between(a, b))) for a, b in ((r1, r2), (n1, n2)))
     s = np.sin(np.radians(ar))
     return {"angle_r_deg": ar, "angle_n_deg": an, "inconsistency_deg": ar - an,
             "amplification": float(1.0 / s) if s > 0 else float("inf"),
