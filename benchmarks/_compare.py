@@ -1,0 +1,121 @@
+"""Old vs new, side by side, in one run: the harness every speed benchmark uses.
+
+The old code path is the package as it was at a git commit (``--base``, default the last commit
+before the speed work), extracted with ``git archive`` into a temporary folder. Each case runs the
+same Python snippet in fresh subprocesses, once with that old ``src/`` on ``PYTHONPATH`` and once
+with the working tree's, alternating old and new so that load on a shared machine hits both alike.
+Per side it reports the best and median wall time of the timed statement, the child's peak
+resident memory, and whatever the snippet stored in ``result`` (a dict of numbers: accuracy).
+
+A case where the old path no longer exists passes ``old=False`` and prints the measured figure
+only. Thread pools are limited by the snippet itself (see docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+BASE = "03aff45"  # the commit before the speed work: "today's code path"
+
+_CHILD = r"""
+import json, resource, sys, time
+_setup = {setup!r}
+_stmt = {stmt!r}
+ns = {{}}
+exec(compile(_setup, "<setup>", "exec"), ns)
+times = []
+for _ in range({repeat}):
+    t0 = time.perf_counter()
+    exec(compile(_stmt, "<stmt>", "exec"), ns)
+    times.append(time.perf_counter() - t0)
+rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+res = ns.get("result", {{}})
+sys.stdout.write("\n@@RESULT@@" + json.dumps({{"times": times, "rss_mb": rss_mb,
+                 "result": {{k: float(v) for k, v in dict(res).items()}}}}) + "\n")
+"""
+
+
+@dataclass
+class Side:
+    times: list[float] = field(default_factory=list)
+    rss_mb: float = 0.0
+    result: dict = field(default_factory=dict)
+
+    @property
+    def best(self) -> float:
+        return min(self.times)
+
+    @property
+    def median(self) -> float:
+        t = sorted(self.times)
+        return t[len(t) // 2]
+
+
+def old_src(base: str = BASE) -> Path:
+    """The package at ``base`` (extracted once per process into a temporary folder)."""
+    cache = getattr(old_src, "_cache", {})
+    if base not in cache:
+        d = Path(tempfile.mkdtemp(prefix=f"rigsim-old-{base}-"))
+        arc = subprocess.run(["git", "-C", str(REPO), "archive", base, "src"], check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(d)], input=arc, check=True)
+        cache[base] = d / "src"
+        old_src._cache = cache
+    return cache[base]
+
+
+def run_side(src: Path, setup: str, stmt: str, repeat: int, env: dict | None = None) -> Side:
+    code = _CHILD.format(setup=textwrap.dedent(setup), stmt=textwrap.dedent(stmt), repeat=int(repeat))
+    e = dict(os.environ)
+    e.update(env or {})
+    e["PYTHONPATH"] = str(src)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=e, cwd=str(REPO))
+    if p.returncode:
+        raise RuntimeError(f"benchmark child failed ({src}):\n{p.stderr[-4000:]}")
+    payload = p.stdout.rsplit("@@RESULT@@", 1)[1]
+    d = json.loads(payload)
+    return Side(d["times"], d["rss_mb"], d["result"])
+
+
+def compare(name: str, setup: str, stmt: str, *, repeat: int = 3, rounds: int = 2, old: bool = True,
+            base: str = BASE, env: dict | None = None, target: str = "") -> dict:
+    """Run ``stmt`` (after ``setup``) under the old and the new package; print one row; return both."""
+    sides = {"old": Side(), "new": Side()}
+    new_src = REPO / "src"
+    for _ in range(int(rounds)):
+        order = (("old", old_src(base)), ("new", new_src)) if old else (("new", new_src),)
+        for label, src in order:
+            s = run_side(src, setup, stmt, repeat, env)
+            sides[label].times += s.times
+            sides[label].rss_mb = max(sides[label].rss_mb, s.rss_mb)
+            sides[label].result = s.result
+    _print_row(name, sides, old, target)
+    return sides
+
+
+_HEADER_DONE = False
+
+
+def _print_row(name: str, sides: dict, old: bool, target: str) -> None:
+    global _HEADER_DONE
+    if not _HEADER_DONE:
+        print(f"{'case':<38} {'old best s':>10} {'new best s':>10} {'speed-up':>8} {'old MB':>8} {'new MB':>8}  target")
+        _HEADER_DONE = True
+    n = sides["new"]
+    if old:
+        o = sides["old"]
+        print(f"{name:<38} {o.best:>10.3f} {n.best:>10.3f} {o.best / n.best:>7.2f}x {o.rss_mb:>8.0f} {n.rss_mb:>8.0f}  {target}")
+    else:
+        print(f"{name:<38} {'—':>10} {n.best:>10.3f} {'—':>8} {'—':>8} {n.rss_mb:>8.0f}  {target}")
+    for label in ("old", "new") if old else ("new",):
+        r = sides[label].result
+        if r:
+            print(f"{'':<6}{label} result: " + ", ".join(f"{k} {v:.6g}" for k, v in r.items()))
+    sys.stdout.flush()
