@@ -76,7 +76,7 @@ def run_side(src: Path, setup: str, stmt: str, repeat: int, env: dict | None = N
     e = dict(os.environ)
     e.update(env or {})
     e["PYTHONPATH"] = str(src)
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=e, cwd=str(REPO))
+    p = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, env=e, cwd=str(REPO))
     if p.returncode:
         raise RuntimeError(f"benchmark child failed ({src}):\n{p.stderr[-4000:]}")
     payload = p.stdout.rsplit("@@RESULT@@", 1)[1]
