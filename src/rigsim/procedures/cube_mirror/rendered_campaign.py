@@ -227,21 +227,55 @@ def _exact_null_rig(rig: CubeMirrorRig) -> CubeMirrorRig:
     return rig.model_copy(update=upd)
 
 
+def _layout_key(real: Realization, face_index: int) -> bytes:
+    """Everything of ``real`` the diaphragm layout and geometry of a face depend on (the true
+    turntable axes, beam, cube orientation and that face's normal); not the null bias or encoders."""
+    face_normals = [real.face_normals_mount[f] for f in sorted(real.face_normals_mount)]
+    parts = [np.array([a.wobble_rad, a.wobble_phase_rad]) for a in real.turntable.axes]
+    parts += [a.direction for a in real.turntable.axes] + [real.d_sun_rot, real.R_cube_from_mount] + face_normals
+    labels = "".join(a.label for a in real.turntable.axes)
+    return f"{face_index}:{labels}".encode() + b"".join(np.asarray(p, np.float64).tobytes() for p in parts)
+
+
+class _GeometryMemo:
+    """Diaphragm geometry per (rig, face, true geometry), computed once per budget: a row whose draws
+    leave the turntable and cube ideal (σ1, σ3, σ4, centroid) has one layout for all its trials."""
+
+    def __init__(self, maxsize: int = 64):
+        self.maxsize, self._d = maxsize, {}
+
+    def __call__(self, rig: CubeMirrorRig, real: Realization, face_index: int):
+        from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
+
+        key = (id(rig), _layout_key(real, face_index))
+        g = self._d.get(key)
+        if g is None:
+            g = diaphragm_geometry(rig, real, face_index)
+            if len(self._d) >= self.maxsize:
+                self._d.pop(next(iter(self._d)))
+            self._d[key] = g
+        return g
+
+
 def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator, *,
                        null_sigma: float, null_mode: str = "search", axis_order: str | None = None,
-                       fit_calibration: bool = True) -> CampaignResult:
+                       fit_calibration: bool = True, geometry=None, exact_rig: CubeMirrorRig | None = None
+                       ) -> CampaignResult:
     """The rendered campaign's procedure with exact measurements plus measured noise.
 
     ``null_sigma``: 1σ per axis of the null measurement (px for seed 000, arcsec for 001).
     ``null_mode``: ``"search"`` (the rig's threshold and command steps; the start is scattered by
     ± half a command step, the phase of the command grid against the null) or ``"exact"`` (the
     search ends on the null: isolates the other sources).
+    ``geometry(rig, real, face_index)``: where the diaphragm geometry comes from (a
+    :class:`_GeometryMemo` in the budget; default: computed here). ``exact_rig``: ``_exact_null_rig(rig)``
+    if the caller already has it.
     """
     order = axis_order or default_axis_order(rig)
     sweep_readings = sweep_uv = None
     if fit_calibration:  # without it the budget row isolates the other sources (compare: step 1 exact)
         sweep_readings, sweep_uv = simulate_sweep(rig, real, noise, rng)
-    r = rig if null_mode == "search" else _exact_null_rig(rig)
+    r = rig if null_mode == "search" else (exact_rig if exact_rig is not None else _exact_null_rig(rig))
     sig = null_sigma if null_mode == "search" else 0.0
     null_readings = []
     if rig.procedure.method == "diaphragm":
@@ -249,7 +283,8 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
 
         q = math.radians(r.procedure.command_resolution_deg)
         for fi in range(2):
-            meas = OffsetMeasurer(r, real, fi, renderer=None, sigma_px=sig, rng=rng)
+            geom = geometry(r, real, fi) if geometry is not None else None
+            meas = OffsetMeasurer(r, real, fi, renderer=None, sigma_px=sig, rng=rng, geometry=geom)
             jitter = {a: float(rng.uniform(-q / 2, q / 2)) for a in ("X", "Y")} if q > 0 else None
             res = concentricity_search(r, real, fi, meas, _encoder_errors(rig, noise, rng), axis_order=order,
                                        start_offset_rad=jitter)
@@ -324,6 +359,8 @@ def rendered_error_budget(rig: CubeMirrorRig, n_trials: int, seed: int, *, null_
     sources = rendered_budget_sources(rig, null_sigma, centroid_sigma_px)
     rows: list[BudgetRow] = []
     errs: dict[str, np.ndarray] = {}
+    memo = _GeometryMemo() if rig.procedure.method == "diaphragm" else None
+    exact_rig = _exact_null_rig(rig)
 
     def trials(name: str, drawn: set, noise: Noise, mode: str, paper) -> None:
         pb.set_description(f"budget: {name[:40]}")
@@ -332,7 +369,8 @@ def rendered_error_budget(rig: CubeMirrorRig, n_trials: int, seed: int, *, null_
         for t in range(n_trials):
             real = draw_realization(rig, rng, drawn)
             e[t] = surrogate_campaign(rig, real, noise, rng, null_sigma=null_sigma, null_mode=mode,
-                                      axis_order=axis_order, fit_calibration=fit).error_arcsec
+                                      axis_order=axis_order, fit_calibration=fit, geometry=memo,
+                                      exact_rig=exact_rig).error_arcsec
             pb.update(1)
         errs[name] = e
         rows.append(BudgetRow(name, e.std(axis=0, ddof=1), paper, n_trials))
