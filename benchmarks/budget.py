@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _compare import REPO, compare  # noqa: E402
+from _compare import REPO, compare
 
 
 def main() -> None:

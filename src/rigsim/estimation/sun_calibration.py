@@ -87,9 +87,15 @@ class SweepModel:
         R = Rotation.from_rotvec(x[-3:]).as_matrix() @ R_ref
         s = self.m_dirs @ R.T
         _, du_ds, du_dq = project(s, self.params(x), get_gradients=True)
-        ds_dd = -_skew(s) @ _so3_left_jacobian(x[-3:])
-        J = np.concatenate([du_dq[:, :, self.cols], du_ds @ ds_dd], axis=2)
-        return J.reshape(-1, len(self.names) + 3)
+        # ∂uv/∂s·(−[s]×): each row g of ∂uv/∂s becomes (s × g)ᵀ; then one (2N, 3)·J_l(δ) product
+        g0, g1, g2 = du_ds[..., 0], du_ds[..., 1], du_ds[..., 2]
+        s0, s1, s2 = (c[:, None] for c in s.T)
+        sxg = np.stack([s1 * g2 - s2 * g1, s2 * g0 - s0 * g2, s0 * g1 - s1 * g0], axis=-1)
+        n = len(self.names)
+        J = np.empty(du_ds.shape[:2] + (n + 3,))
+        J[..., :n] = du_dq[..., self.cols]
+        J[..., n:] = (sxg.reshape(-1, 3) @ _so3_left_jacobian(x[-3:])).reshape(sxg.shape)
+        return J.reshape(-1, n + 3)
 
 
 def sun_directions_in_mount(model: TurntableModel, poses: Mapping[str, np.ndarray], d_rot=(0.0, 0.0, 1.0)) -> np.ndarray:
