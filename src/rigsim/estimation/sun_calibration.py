@@ -50,10 +50,9 @@ class SunCalibration:
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
-    """[v]× for vectors (..., 3) → (..., 3, 3)."""
-    z = np.zeros(v.shape[:-1])
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+    """[v]× of one 3-vector."""
+    x, y, w = (float(c) for c in v)
+    return np.array([[0.0, -w, y], [w, 0.0, -x], [-y, x, 0.0]])
 
 
 def _so3_left_jacobian(d: np.ndarray) -> np.ndarray:
@@ -145,13 +144,12 @@ def calibrate_sun_sensor(
     sm = SweepModel(m_dirs, uv, names)
     residual, jacobian = sm.residual, sm.jacobian
 
-    x = np.concatenate([x_int, np.zeros(3)])
-    R_ref = R0
-    for _ in range(2):  # second pass re-linearises δ around the estimate (δ ≈ 0 at the end)
-        sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-14, ftol=1e-14,
-                            gtol=1e-14, x_scale="jac")
-        R_ref = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
-        x = np.concatenate([sol.x[:-3], np.zeros(3)])
+    # first pass from the start; the second re-linearises δ around its estimate (δ ≈ 0 at the end,
+    # so the covariance of δ is that of R(sun←rot) about the sensor axes)
+    sol = least_squares(residual, np.concatenate([x_int, np.zeros(3)]), jac=jacobian, args=(R0,), method="lm",
+                        xtol=1e-14, ftol=1e-14, gtol=1e-14, x_scale="jac")
+    R_ref = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R0
+    x = np.concatenate([sol.x[:-3], np.zeros(3)])
     sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
                         x_scale="jac")
     R_fin = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
