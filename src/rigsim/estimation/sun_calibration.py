@@ -50,10 +50,9 @@ class SunCalibration:
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
-    """[v]× for vectors (..., 3) → (..., 3, 3)."""
-    z = np.zeros(v.shape[:-1])
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+    """[v]× of one 3-vector."""
+    x, y, w = (float(c) for c in v)
+    return np.array([[0.0, -w, y], [w, 0.0, -x], [-y, x, 0.0]])
 
 
 def _so3_left_jacobian(d: np.ndarray) -> np.ndarray:
@@ -87,9 +86,15 @@ class SweepModel:
         R = Rotation.from_rotvec(x[-3:]).as_matrix() @ R_ref
         s = self.m_dirs @ R.T
         _, du_ds, du_dq = project(s, self.params(x), get_gradients=True)
-        ds_dd = -_skew(s) @ _so3_left_jacobian(x[-3:])
-        J = np.concatenate([du_dq[:, :, self.cols], du_ds @ ds_dd], axis=2)
-        return J.reshape(-1, len(self.names) + 3)
+        # ∂uv/∂s·(−[s]×): each row g of ∂uv/∂s becomes (s × g)ᵀ; then one (2N, 3)·J_l(δ) product
+        g0, g1, g2 = du_ds[..., 0], du_ds[..., 1], du_ds[..., 2]
+        s0, s1, s2 = (c[:, None] for c in s.T)
+        sxg = np.stack([s1 * g2 - s2 * g1, s2 * g0 - s0 * g2, s0 * g1 - s1 * g0], axis=-1)
+        n = len(self.names)
+        J = np.empty(du_ds.shape[:2] + (n + 3,))
+        J[..., :n] = du_dq[..., self.cols]
+        J[..., n:] = (sxg.reshape(-1, 3) @ _so3_left_jacobian(x[-3:])).reshape(sxg.shape)
+        return J.reshape(-1, n + 3)
 
 
 def sun_directions_in_mount(model: TurntableModel, poses: Mapping[str, np.ndarray], d_rot=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -139,13 +144,12 @@ def calibrate_sun_sensor(
     sm = SweepModel(m_dirs, uv, names)
     residual, jacobian = sm.residual, sm.jacobian
 
-    x = np.concatenate([x_int, np.zeros(3)])
-    R_ref = R0
-    for _ in range(2):  # second pass re-linearises δ around the estimate (δ ≈ 0 at the end)
-        sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-14, ftol=1e-14,
-                            gtol=1e-14, x_scale="jac")
-        R_ref = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
-        x = np.concatenate([sol.x[:-3], np.zeros(3)])
+    # first pass from the start; the second re-linearises δ around its estimate (δ ≈ 0 at the end,
+    # so the covariance of δ is that of R(sun←rot) about the sensor axes)
+    sol = least_squares(residual, np.concatenate([x_int, np.zeros(3)]), jac=jacobian, args=(R0,), method="lm",
+                        xtol=1e-14, ftol=1e-14, gtol=1e-14, x_scale="jac")
+    R_ref = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R0
+    x = np.concatenate([sol.x[:-3], np.zeros(3)])
     sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
                         x_scale="jac")
     R_fin = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref

@@ -49,12 +49,14 @@ class OffsetMeasurer:
     fitted by :func:`hole_spot_offset`. ``renderer=None``: the surrogate — the exact trace plus
     N(0, ``sigma_px``) per axis — for Monte-Carlo budgets whose noise was measured on renders.
     Raises :class:`SearchError` when the spot cannot be measured (off the detector, cut by its
-    edge, beam off the face, saturated).
+    edge, beam off the face, saturated). ``geometry``: this face's
+    :func:`~rigsim.truth.cube_mirror.diaphragm.diaphragm_geometry` if the caller already has it
+    (its layout is then not solved again).
     """
 
     def __init__(self, rig: CubeMirrorRig, real: Realization, face_index: int, *, renderer=None, seed: int = 0,
                  sigma_px: float = 0.0, rng: np.random.Generator | None = None, noiseless: bool = False,
-                 keep_frames: bool = False, on_frame=None):
+                 keep_frames: bool = False, on_frame=None, geometry=None):
         from rigsim.truth.cube_mirror.placement import diaphragm_layout
 
         self.rig, self.real, self.face_index = rig, real, int(face_index)
@@ -65,11 +67,11 @@ class OffsetMeasurer:
         self.rng = rng if rng is not None else np.random.default_rng(seed)
         self.noiseless = noiseless
         self.bias_px = null_bias_offset_px(rig, real, face_index)
-        self.layout = diaphragm_layout(rig, real, face_index)
+        self.layout = geometry.layout if geometry is not None else diaphragm_layout(rig, real, face_index)
         # the operator's screen → image homography: from the nominal aiming-camera spec only
         self.H_screen_to_uv = nominal_screen_homography(rig.aiming_camera)
         self.calls = 0
-        self._geom = None
+        self._geom = geometry
         self.keep_frames = keep_frames
         self.frames: list = []
         self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at

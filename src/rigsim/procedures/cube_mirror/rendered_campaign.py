@@ -227,6 +227,36 @@ def _exact_null_rig(rig: CubeMirrorRig) -> CubeMirrorRig:
     return rig.model_copy(update=upd)
 
 
+def _layout_key(real: Realization, face_index: int) -> bytes:
+    """Everything of ``real`` the diaphragm layout and geometry of a face depend on (the true
+    turntable axes, beam, cube orientation and that face's normal); not the null bias or encoders."""
+    face_normals = [real.face_normals_mount[f] for f in sorted(real.face_normals_mount)]
+    parts = [np.array([a.wobble_rad, a.wobble_phase_rad]) for a in real.turntable.axes]
+    parts += [a.direction for a in real.turntable.axes] + [real.d_sun_rot, real.R_cube_from_mount] + face_normals
+    labels = "".join(a.label for a in real.turntable.axes)
+    return f"{face_index}:{labels}".encode() + b"".join(np.asarray(p, np.float64).tobytes() for p in parts)
+
+
+class _GeometryMemo:
+    """Diaphragm geometry per (rig, face, true geometry), computed once per budget: a row whose draws
+    leave the turntable and cube ideal (σ1, σ3, σ4, centroid) has one layout for all its trials."""
+
+    def __init__(self, maxsize: int = 64):
+        self.maxsize, self._d = maxsize, {}
+
+    def __call__(self, rig: CubeMirrorRig, real: Realization, face_index: int):
+        from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
+
+        key = (id(rig), _layout_key(real, face_index))
+        g = self._d.get(key)
+        if g is None:
+            g = diaphragm_geometry(rig, real, face_index)
+            if len(self._d) >= self.maxsize:
+                self._d.pop(next(iter(self._d)))
+            self._d[key] = g
+        return g
+
+
 def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator, *,
                        null_sigma: float, null_mode: str = "search", axis_order: str | None = None,
                        fit_calibration: bool = True) -> CampaignResult:
@@ -237,11 +267,28 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
     ± half a command step, the phase of the command grid against the null) or ``"exact"`` (the
     search ends on the null: isolates the other sources).
     """
+    order, null_readings, sweep_readings, sweep_uv = surrogate_observations(
+        rig, real, noise, rng, null_sigma=null_sigma, null_mode=null_mode, axis_order=axis_order,
+        fit_calibration=fit_calibration)
+    est = estimate(rig, null_readings, order, sweep_readings=sweep_readings, sweep_uv=sweep_uv)
+    return compare(rig, est, real)
+
+
+def surrogate_observations(rig: CubeMirrorRig, real: Realization, noise: Noise, rng: np.random.Generator, *,
+                           null_sigma: float, null_mode: str = "search", axis_order: str | None = None,
+                           fit_calibration: bool = True, geometry=None, exact_rig: CubeMirrorRig | None = None):
+    """The random part of :func:`surrogate_campaign` (every draw from ``rng``): the sweep and the null
+    searches → (axis order, null readings, sweep readings or None, sweep centroids or None).
+
+    ``geometry(rig, real, face_index)``: where the diaphragm geometry comes from (a
+    :class:`_GeometryMemo` in the budget; default: computed here). ``exact_rig``: ``_exact_null_rig(rig)``
+    if the caller already has it.
+    """
     order = axis_order or default_axis_order(rig)
     sweep_readings = sweep_uv = None
     if fit_calibration:  # without it the budget row isolates the other sources (compare: step 1 exact)
         sweep_readings, sweep_uv = simulate_sweep(rig, real, noise, rng)
-    r = rig if null_mode == "search" else _exact_null_rig(rig)
+    r = rig if null_mode == "search" else (exact_rig if exact_rig is not None else _exact_null_rig(rig))
     sig = null_sigma if null_mode == "search" else 0.0
     null_readings = []
     if rig.procedure.method == "diaphragm":
@@ -249,7 +296,8 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
 
         q = math.radians(r.procedure.command_resolution_deg)
         for fi in range(2):
-            meas = OffsetMeasurer(r, real, fi, renderer=None, sigma_px=sig, rng=rng)
+            geom = geometry(r, real, fi) if geometry is not None else None
+            meas = OffsetMeasurer(r, real, fi, renderer=None, sigma_px=sig, rng=rng, geometry=geom)
             jitter = {a: float(rng.uniform(-q / 2, q / 2)) for a in ("X", "Y")} if q > 0 else None
             res = concentricity_search(r, real, fi, meas, _encoder_errors(rig, noise, rng), axis_order=order,
                                        start_offset_rad=jitter)
@@ -267,8 +315,7 @@ def surrogate_campaign(rig: CubeMirrorRig, real: Realization, noise: Noise, rng:
             if not res.converged:
                 raise SearchError(f"face {res.face}: surrogate search did not converge ({res.message})")
             null_readings.append(res.final_reading_rad)
-    est = estimate(rig, null_readings, order, sweep_readings=sweep_readings, sweep_uv=sweep_uv)
-    return compare(rig, est, real)
+    return order, null_readings, sweep_readings, sweep_uv
 
 
 @dataclass
@@ -316,43 +363,57 @@ def rendered_budget_sources(rig: CubeMirrorRig, null_sigma: float, centroid_sigm
 
 
 def rendered_error_budget(rig: CubeMirrorRig, n_trials: int, seed: int, *, null_sigma: float, centroid_sigma_px: float,
-                          axis_order: str | None = None, progress=None) -> RenderedBudget:
+                          axis_order: str | None = None, progress=None, workers: int | None = None) -> RenderedBudget:
     """Per-axis σ of the R(cube←sun) error: each source alone, the paper's sources together (seed
-    000) or every image-independent source together (001), and everything together."""
+    000) or every image-independent source together (001), and everything together.
+
+    ``workers``: processes that run the estimates (sweep fit, TRIAD) beside this one, which draws
+    the trials and runs the searches in order (default :func:`~rigsim.procedures.cube_mirror.estimate_pool.default_workers`);
+    the result does not depend on it."""
+    from rigsim.procedures.cube_mirror.estimate_pool import EstimatePool, default_workers
+
     pb = progress if progress is not None else _NullProgress()
     rng = np.random.default_rng(seed)
     sources = rendered_budget_sources(rig, null_sigma, centroid_sigma_px)
-    rows: list[BudgetRow] = []
-    errs: dict[str, np.ndarray] = {}
+    memo = _GeometryMemo() if rig.procedure.method == "diaphragm" else None
+    exact_rig = _exact_null_rig(rig)
+    pending: list[tuple[str, float | None, list]] = []  # row name, paper σ, per-trial futures of the error
 
-    def trials(name: str, drawn: set, noise: Noise, mode: str, paper) -> None:
+    def trials(pool: EstimatePool, name: str, drawn: set, noise: Noise, mode: str, paper) -> None:
         pb.set_description(f"budget: {name[:40]}")
-        e = np.empty((n_trials, 3))
         fit = noise.centroid_sigma_px > 0 or any(noise.encoder_sigma_rad.values()) or "perpendicularity" in drawn
-        for t in range(n_trials):
+        futures = []
+        for _ in range(n_trials):
             real = draw_realization(rig, rng, drawn)
-            e[t] = surrogate_campaign(rig, real, noise, rng, null_sigma=null_sigma, null_mode=mode,
-                                      axis_order=axis_order, fit_calibration=fit).error_arcsec
+            order, nulls, sweep_readings, sweep_uv = surrogate_observations(
+                rig, real, noise, rng, null_sigma=null_sigma, null_mode=mode, axis_order=axis_order,
+                fit_calibration=fit, geometry=memo, exact_rig=exact_rig)
+            futures.append(pool.submit(real, nulls, order, sweep_readings, sweep_uv))
             pb.update(1)
-        errs[name] = e
-        rows.append(BudgetRow(name, e.std(axis=0, ddof=1), paper, n_trials))
+        pending.append((name, paper, futures))
 
-    for name, (drawn, noise, mode, paper) in sources.items():
-        trials(name, drawn, noise, mode, paper)
     names = list(sources)
     full = noise_from_rig(rig)
-    if rig.procedure.method == "diaphragm":
-        paper_rows = [n for n in names if sources[n][3] is not None]
-        together = "σ1..σ4 together (paper's sources)"
-        trials(together, {"perpendicularity", "mounting"}, replace(Noise(), encoder_sigma_rad=full.encoder_sigma_rad),
-               "search", PAPER_RSS_ARCSEC)
-    else:
-        paper_rows = names[:-1]
-        together = "all but the sun-sensor centroid, together"
-        trials(together, {"perpendicularity", "plane_mirror"}, replace(Noise(), encoder_sigma_rad=full.encoder_sigma_rad),
-               "search", None)
-    trials("all sources together", {"perpendicularity", "mounting", "plane_mirror"},
-           Noise(full.encoder_sigma_rad, 0.0, centroid_sigma_px), "search", None)
+    readout = replace(Noise(), encoder_sigma_rad=full.encoder_sigma_rad)
+    with EstimatePool(rig, default_workers() if workers is None else int(workers)) as pool:
+        for name, (drawn, noise, mode, paper) in sources.items():
+            trials(pool, name, drawn, noise, mode, paper)
+        if rig.procedure.method == "diaphragm":
+            paper_rows = [n for n in names if sources[n][3] is not None]
+            together = "σ1..σ4 together (paper's sources)"
+            trials(pool, together, {"perpendicularity", "mounting"}, readout, "search", PAPER_RSS_ARCSEC)
+        else:
+            paper_rows = names[:-1]
+            together = "all but the sun-sensor centroid, together"
+            trials(pool, together, {"perpendicularity", "plane_mirror"}, readout, "search", None)
+        trials(pool, "all sources together", {"perpendicularity", "mounting", "plane_mirror"},
+               Noise(full.encoder_sigma_rad, 0.0, centroid_sigma_px), "search", None)
+        rows: list[BudgetRow] = []
+        errs: dict[str, np.ndarray] = {}
+        for name, paper, futures in pending:
+            e = np.array([f.result() for f in futures]).reshape(n_trials, 3)
+            errs[name] = e
+            rows.append(BudgetRow(name, e.std(axis=0, ddof=1), paper, n_trials))
     unit = "px" if rig.procedure.method == "diaphragm" else "arcsec"
     return RenderedBudget(rows, errs, centroid_sigma_px, null_sigma, unit, paper_rows, together)
 
@@ -372,4 +433,5 @@ __all__ = [
     "rendered_error_budget",
     "run_rendered_campaign",
     "surrogate_campaign",
+    "surrogate_observations",
 ]
