@@ -32,7 +32,7 @@ warnings.simplefilter("ignore")
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
-rig = load_rig("sun_sensor_2axis_diaphragm")
+rig = load_rig("scenes/sun_sensor_2axis_diaphragm.toml")  # the run folder is the repository
 real = realization_from_rig(rig)
 """
 

@@ -38,6 +38,7 @@ import numpy as np
 from rigsim.errors import GeometryWarning, SaturationWarning
 from rigsim.render.budget import check_memory
 from rigsim.render.cube_mirror.diaphragm import _WARN_FLAGS, DiaphragmFrames, DiaphragmRenderer, _derived_seed
+from rigsim.render.cube_mirror.pencil_chunks import PencilChunks, chunk_count
 from rigsim.render.frame import digitise
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.diaphragm import DiaphragmTruth, diaphragm_geometry, rasterise_screen_disk
@@ -56,13 +57,16 @@ class ConcentricityRenderer:
 
     ``divergence_full_angle_arcmin`` defaults to the rig's sun-simulator collimation angle.
     ``grid_mm`` is the screen-plane resampling step of the convolution (default 0.01 mm,
-    finer than the 15 µm object pixel).
+    finer than the 15 µm object pixel). ``workers`` processes (this one included) render the
+    pencil's fixed sample chunks (:mod:`rigsim.render.cube_mirror.pencil_chunks`): the frames are
+    bit-identical for any ``workers``; ``workers > 1`` spawns ``workers - 1`` processes, stopped by
+    :meth:`close`, with the renderer or at exit.
     """
 
     def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, face_index: int = 0, *, spp: int = 4,
                  divergence_full_angle_arcmin: float | None = None, grid_mm: float = 0.01,
                  spot_photons_per_px: float | None = None, hole_glow_ratio: float = 1.0,
-                 deterministic: bool = True, detector=None):
+                 deterministic: bool = True, detector=None, workers: int = 1):
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         arcmin = rig.sun_simulator.collimation_full_angle_arcmin if divergence_full_angle_arcmin is None \
@@ -77,10 +81,13 @@ class ConcentricityRenderer:
         if spot_photons_per_px is None:
             spot_photons_per_px = 0.5 * det.full_well_e / det.quantum_efficiency
         self.spot_photons_per_px = float(spot_photons_per_px)
-        self.pencil = DiaphragmRenderer(rig, self.real, face_index, spp=spp, beam="collimated",
-                                        return_into_hole="diffuse", hole_glow_ratio=hole_glow_ratio,
-                                        spot_photons_per_px=self.spot_photons_per_px, detector=det,
-                                        deterministic=deterministic, warmup=False)
+        pencil_kw = {"spp": spp, "beam": "collimated", "return_into_hole": "diffuse",
+                     "hole_glow_ratio": hole_glow_ratio, "spot_photons_per_px": self.spot_photons_per_px,
+                     "detector": det, "deterministic": deterministic, "warmup": False}
+        self.pencil = DiaphragmRenderer(rig, self.real, face_index, **pencil_kw)
+        # the pencil's samples in fixed chunks: the same image for any number of worker processes
+        self._chunks = PencilChunks(self.pencil, workers, init=(rig, self.real, int(face_index), pencil_kw))
+        self.workers = self._chunks.workers
         self.detector = det
         self.geometry = self.pencil.geometry  # camera, homography (no beam-mode dependence)
         # truth and flags of the divergent spot on the real (holed) screen
@@ -194,9 +201,12 @@ class ConcentricityRenderer:
         return self._hole_cache[seed]
 
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
-        self.pencil.set_pose(pose_rad)
-        pencil = self.pencil._render(self.pencil._spot_scene, _derived_seed(seed, 1))
+        pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
         return self.diverge(pencil) * self._gain
+
+    def close(self) -> None:
+        """Stop the worker processes (``workers > 1``); they also stop with the renderer or at exit."""
+        self._chunks.close()
 
     def truth(self, pose_rad: dict) -> DiaphragmTruth:
         return self.truth_geometry.trace(pose_rad)
@@ -246,7 +256,8 @@ class ConcentricityRenderer:
         s = self.pencil.settings()
         s.update({"beam": "divergent (screen-plane convolution of the rendered pencil)",
                   "divergence_full_angle_rad": self.divergence_rad, "divergence_radius_mm": self.R_div_mm,
-                  "grid_mm": self.grid_mm, "spot_photons_per_px": self.spot_photons_per_px})
+                  "grid_mm": self.grid_mm, "spot_photons_per_px": self.spot_photons_per_px,
+                  "pencil_chunks": chunk_count(self.pencil.spp)})
         return s
 
 
