@@ -267,11 +267,11 @@ class ConcentricityRenderer:
         return s
 
 
-def _homography(H: np.ndarray, x, y) -> np.ndarray:
-    """(2, …) image of the points (x, y) (broadcast together) under the 3×3 homography ``H``."""
+def _homography(H: np.ndarray, x, y) -> tuple[np.ndarray, np.ndarray]:
+    """Image (x', y') of the points (x, y) (broadcast together) under the 3×3 homography ``H``."""
+    x, y = np.broadcast_arrays(x, y)
     w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-    return np.stack(np.broadcast_arrays((H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w,
-                                        (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w))
+    return (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w, (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
 
 
 def _disk_kernel(R: float, sub: int = 4) -> np.ndarray:
