@@ -2,7 +2,8 @@
 worker processes: the same image for any worker count.
 
 Mitsuba's light tracer splats with float32 atomic adds, so a render on several Dr.Jit threads is not
-bit-reproducible, and Dr.Jit runs one kernel at a time per process. The pencil's ``spp`` samples
+bit-reproducible, and two Python threads rendering at once were measured no faster than one after
+the other (docs/campaign.md). The pencil's ``spp`` samples
 are therefore split into a fixed number of chunks, each rendered single-threaded with its own seed
 (:func:`chunk_seeds`); the chunks are averaged in chunk order. Which process renders a chunk does
 not matter (each is a pure function of the scene, the pose and its seed), so the image depends on
