@@ -32,12 +32,14 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
 from rigsim.render.budget import check_memory
 from rigsim.render.cube_mirror.diaphragm import _WARN_FLAGS, DiaphragmFrames, DiaphragmRenderer, _derived_seed
+from rigsim.render.cube_mirror.pencil_chunks import PencilChunks, chunk_count
 from rigsim.render.frame import digitise
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.truth.cube_mirror.diaphragm import DiaphragmTruth, diaphragm_geometry, rasterise_screen_disk
@@ -56,13 +58,16 @@ class ConcentricityRenderer:
 
     ``divergence_full_angle_arcmin`` defaults to the rig's sun-simulator collimation angle.
     ``grid_mm`` is the screen-plane resampling step of the convolution (default 0.01 mm,
-    finer than the 15 µm object pixel).
+    finer than the 15 µm object pixel). ``workers`` processes (this one included) render the
+    pencil's fixed sample chunks (:mod:`rigsim.render.cube_mirror.pencil_chunks`): the frames are
+    bit-identical for any ``workers``; ``workers > 1`` spawns ``workers - 1`` processes, stopped by
+    :meth:`close`, with the renderer or at exit.
     """
 
     def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, face_index: int = 0, *, spp: int = 4,
                  divergence_full_angle_arcmin: float | None = None, grid_mm: float = 0.01,
                  spot_photons_per_px: float | None = None, hole_glow_ratio: float = 1.0,
-                 deterministic: bool = True, detector=None):
+                 deterministic: bool = True, detector=None, workers: int = 1):
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         arcmin = rig.sun_simulator.collimation_full_angle_arcmin if divergence_full_angle_arcmin is None \
@@ -77,10 +82,13 @@ class ConcentricityRenderer:
         if spot_photons_per_px is None:
             spot_photons_per_px = 0.5 * det.full_well_e / det.quantum_efficiency
         self.spot_photons_per_px = float(spot_photons_per_px)
-        self.pencil = DiaphragmRenderer(rig, self.real, face_index, spp=spp, beam="collimated",
-                                        return_into_hole="diffuse", hole_glow_ratio=hole_glow_ratio,
-                                        spot_photons_per_px=self.spot_photons_per_px, detector=det,
-                                        deterministic=deterministic, warmup=False)
+        pencil_kw = {"spp": spp, "beam": "collimated", "return_into_hole": "diffuse",
+                     "hole_glow_ratio": hole_glow_ratio, "spot_photons_per_px": self.spot_photons_per_px,
+                     "detector": det, "deterministic": deterministic, "warmup": False}
+        self.pencil = DiaphragmRenderer(rig, self.real, face_index, **pencil_kw)
+        # the pencil's samples in fixed chunks: the same image for any number of worker processes
+        self._chunks = PencilChunks(self.pencil, workers, init=(rig, self.real, int(face_index), pencil_kw))
+        self.workers = self._chunks.workers
         self.detector = det
         self.geometry = self.pencil.geometry  # camera, homography (no beam-mode dependence)
         # truth and flags of the divergent spot on the real (holed) screen
@@ -97,43 +105,92 @@ class ConcentricityRenderer:
 
     # -- the screen-plane convolution --------------------------------------------------------
     def _setup_grid(self, gs: float) -> None:
+        """The screen-plane grid (step ``gs`` mm) covering the camera's field, and the divergence
+        disk on it. The image ↔ grid maps are computed per frame on the lit window only."""
         g = self.geometry
         W, H = g.camera.width, g.camera.height
         corners = g.uv_to_screen(np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]]))
         lo, hi = corners.min(axis=0) - gs, corners.max(axis=0) + gs
-        ns = int(math.ceil((hi[0] - lo[0]) / gs)) + 1
-        nt = int(math.ceil((hi[1] - lo[1]) / gs)) + 1
-        s = lo[0] + gs * np.arange(ns)
-        t = lo[1] + gs * np.arange(nt)
-        S, T = np.meshgrid(s, t)
-        uv = g.screen_to_uv(np.stack([S.ravel(), T.ravel()], axis=1))
-        self._to_grid = (uv[:, 0].reshape(nt, ns).astype(np.float32), uv[:, 1].reshape(nt, ns).astype(np.float32))
-        vv, uu = np.mgrid[0:H, 0:W]
-        st = g.uv_to_screen(np.stack([uu.ravel(), vv.ravel()], axis=1).astype(float))
-        self._from_grid = (((st[:, 0] - lo[0]) / gs).reshape(H, W).astype(np.float32),
-                           ((st[:, 1] - lo[1]) / gs).reshape(H, W).astype(np.float32))
-        R = self.R_div_mm / gs
-        k = int(math.ceil(R)) + 1
-        ky, kx = np.mgrid[-k:k + 1, -k:k + 1].astype(float)
-        sub = 4  # anti-aliased disk
-        acc = np.zeros_like(kx)
-        for a in range(sub):
-            for b in range(sub):
-                acc += np.hypot(kx + (a + 0.5) / sub - 0.5, ky + (b + 0.5) / sub - 0.5) < R
-        self._kernel = acc / acc.sum()
+        self._grid_lo = lo
+        self._grid_shape = (math.ceil((hi[1] - lo[1]) / gs) + 1, math.ceil((hi[0] - lo[0]) / gs) + 1)
+        self._H = np.asarray(g.H_screen_to_uv, float)
+        self._Hi = np.linalg.inv(self._H)
+        self._kernel = _disk_kernel(self.R_div_mm / gs)
+        self._kernel_fft: dict[tuple[int, int], np.ndarray] = {}
         self.grid_mm = gs
+
+    def _kernel_spectrum(self, shape: tuple[int, int]) -> np.ndarray:
+        """rfft2 of the divergence disk (float32) zero-padded to ``shape``, cached per shape."""
+        from scipy import fft
+
+        F = self._kernel_fft.get(shape)
+        if F is None:
+            if len(self._kernel_fft) >= 8:
+                self._kernel_fft.clear()
+            F = fft.rfft2(self._kernel.astype(np.float32), s=shape, workers=1)
+            self._kernel_fft[shape] = F
+        return F
 
     def diverge(self, pencil_img: np.ndarray) -> np.ndarray:
         """Blur a collimated-pencil image by the divergence disk on the screen plane, then drop the
-        light that falls into the hole. Units are kept (the plateau scales by (r/R)²)."""
-        import cv2
-        from scipy.signal import fftconvolve
+        light that falls into the hole. Units are kept (the plateau scales by (r/R)²).
 
-        f = cv2.remap(np.asarray(pencil_img, np.float32), *self._to_grid, cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        fc = fftconvolve(f.astype(np.float64), self._kernel, mode="same").astype(np.float32)
-        out = cv2.remap(fc, *self._from_grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        return np.clip(out.astype(np.float64), 0.0, None) * (1.0 - self.hole_coverage)
+        Only the lit part is processed: the grid window around the pencil's nonzero pixels, its
+        full linear convolution with the disk (float32 FFT, the disk's spectrum cached per size),
+        and the image pixels that window covers; the rest of the frame is exactly zero."""
+        import cv2
+        from scipy import fft
+
+        img = np.asarray(pencil_img)
+        Hh, Ww = img.shape
+        out = np.zeros((Hh, Ww))
+        rows = np.flatnonzero(np.any(img != 0, axis=1))
+        if rows.size == 0:
+            return out
+        cols = np.flatnonzero(np.any(img[rows[0]:rows[-1] + 1] != 0, axis=0))
+        gs = self.grid_mm
+        lo = self._grid_lo
+        nt, ns = self._grid_shape
+        # grid window: every grid point whose bilinear sample touches a lit pixel
+        u_lo, u_hi, v_lo, v_hi = cols[0] - 1.0, cols[-1] + 1.0, rows[0] - 1.0, rows[-1] + 1.0
+        st = _homography(self._Hi, np.array([u_lo, u_hi, u_lo, u_hi]), np.array([v_lo, v_lo, v_hi, v_hi]))
+        j0 = max(0, math.floor((st[0].min() - lo[0]) / gs) - 1)
+        j1 = min(ns, math.ceil((st[0].max() - lo[0]) / gs) + 2)
+        i0 = max(0, math.floor((st[1].min() - lo[1]) / gs) - 1)
+        i1 = min(nt, math.ceil((st[1].max() - lo[1]) / gs) + 2)
+        if j1 <= j0 or i1 <= i0:
+            return out
+        s = lo[0] + gs * np.arange(j0, j1)
+        t = lo[1] + gs * np.arange(i0, i1)
+        uv = _homography(self._H, s[None, :], t[:, None])
+        f = cv2.remap(np.asarray(img, np.float32), uv[0].astype(np.float32), uv[1].astype(np.float32),
+                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        # full linear convolution: grid rows i0 - k … i1 - 1 + k, columns likewise
+        K = self._kernel.shape[0]
+        k = K // 2
+        full = (f.shape[0] + K - 1, f.shape[1] + K - 1)
+        shape = tuple(fft.next_fast_len(64 * -(-n // 64), real=True) for n in full)
+        fc = fft.irfft2(fft.rfft2(f, s=shape, workers=1) * self._kernel_spectrum(shape), s=shape, workers=1)
+        # crop to the grid (as a "same" convolution over the whole grid would)
+        g0, g1 = max(0, i0 - k), min(nt, i1 - 1 + k + 1)
+        h0, h1 = max(0, j0 - k), min(ns, j1 - 1 + k + 1)
+        fc = np.ascontiguousarray(fc[g0 - (i0 - k):g1 - (i0 - k), h0 - (j0 - k):h1 - (j0 - k)], dtype=np.float32)
+        # image pixels covered by that grid window
+        sb = lo[0] + gs * np.array([h0 - 1, h1, h0 - 1, h1])
+        tb = lo[1] + gs * np.array([g0 - 1, g0 - 1, g1, g1])
+        uvb = _homography(self._H, sb, tb)
+        a0 = max(0, math.floor(uvb[0].min()) - 1)
+        a1 = min(Ww, math.ceil(uvb[0].max()) + 2)
+        b0 = max(0, math.floor(uvb[1].min()) - 1)
+        b1 = min(Hh, math.ceil(uvb[1].max()) + 2)
+        if a1 <= a0 or b1 <= b0:
+            return out
+        stp = _homography(self._Hi, np.arange(a0, a1, dtype=float)[None, :], np.arange(b0, b1, dtype=float)[:, None])
+        mx = ((stp[0] - lo[0]) / gs - h0).astype(np.float32)
+        my = ((stp[1] - lo[1]) / gs - g0).astype(np.float32)
+        win = cv2.remap(fc, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        out[b0:b1, a0:a1] = np.clip(win.astype(np.float64), 0.0, None) * (1.0 - self.hole_coverage[b0:b1, a0:a1])
+        return out
 
     # -- frames ---------------------------------------------------------------------------
     def hole_photons(self, seed: int = 0) -> np.ndarray:
@@ -145,9 +202,12 @@ class ConcentricityRenderer:
         return self._hole_cache[seed]
 
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
-        self.pencil.set_pose(pose_rad)
-        pencil = self.pencil._render(self.pencil._spot_scene, _derived_seed(seed, 1))
+        pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
         return self.diverge(pencil) * self._gain
+
+    def close(self) -> None:
+        """Stop the worker processes (``workers > 1``); they also stop with the renderer or at exit."""
+        self._chunks.close()
 
     def truth(self, pose_rad: dict) -> DiaphragmTruth:
         return self.truth_geometry.trace(pose_rad)
@@ -170,21 +230,26 @@ class ConcentricityRenderer:
                     warnings.warn(msg.format(face=self.geometry.face), GeometryWarning, stacklevel=2)
         hole = self.hole_photons(hole_seed)
         sec["hole_render"] = time.perf_counter() - t0
-        t1 = time.perf_counter()
         rendered = bool(spot) and not (flags.get("spot_not_returned") or flags.get("beam_misses_face"))
-        if not rendered:
-            spot = np.zeros_like(hole)
-        else:
-            spot = self.spot_photons(pose_rad, seed)
-        sec["spot_render"] = time.perf_counter() - t1
-        t2 = time.perf_counter()
         render = {**self.settings(), "noiseless": bool(noiseless), "spot_rendered": rendered}
-        frames = {name: digitise(photons, self.detector, seed=_derived_seed(seed, stream), noiseless=noiseless,
-                                 frame_seed=int(seed), truth={**tr.as_dict(), "frame": name}, truth_object=tr, render=render,
-                                 geometry_flags=flags, pose={"true_angles_rad": dict(pose_rad), "face": self.geometry.face},
-                                 sidecar_extra={"hole_seed": int(hole_seed), "detector_seed": _derived_seed(seed, stream)})
-                  for name, photons, stream in (("hole", hole, 3), ("spot", spot + hole, 4))}
-        sec["detector"] = time.perf_counter() - t2
+
+        def frame(name: str, photons: np.ndarray, stream: int):
+            return digitise(photons, self.detector, seed=_derived_seed(seed, stream), noiseless=noiseless,
+                            frame_seed=int(seed), truth={**tr.as_dict(), "frame": name}, truth_object=tr, render=render,
+                            geometry_flags=flags, pose={"true_angles_rad": dict(pose_rad), "face": self.geometry.face},
+                            sidecar_extra={"hole_seed": int(hole_seed), "detector_seed": _derived_seed(seed, stream)})
+
+        t1 = time.perf_counter()
+        # the hole frame's detector pass (its own seed) runs while Mitsuba, which releases the GIL,
+        # renders the spot: the same frames as one after the other
+        with ThreadPoolExecutor(1) as ex:
+            hole_frame = ex.submit(frame, "hole", hole, 3)
+            spot = self.spot_photons(pose_rad, seed) if rendered else np.zeros_like(hole)
+            sec["spot_render"] = time.perf_counter() - t1
+            t2 = time.perf_counter()
+            frames = {"hole": hole_frame.result()}
+        frames["spot"] = frame("spot", spot + hole, 4)
+        sec["detector"] = time.perf_counter() - t2  # the spot frame's (the hole frame's overlaps the render)
         flags["saturated_pixels"] = {k: f.detector.saturated_pixels for k, f in frames.items()}
         flags["saturated"] = bool(any(flags["saturated_pixels"].values()))
         if flags["saturated"] and warn:
@@ -197,5 +262,30 @@ class ConcentricityRenderer:
         s = self.pencil.settings()
         s.update({"beam": "divergent (screen-plane convolution of the rendered pencil)",
                   "divergence_full_angle_rad": self.divergence_rad, "divergence_radius_mm": self.R_div_mm,
-                  "grid_mm": self.grid_mm, "spot_photons_per_px": self.spot_photons_per_px})
+                  "grid_mm": self.grid_mm, "spot_photons_per_px": self.spot_photons_per_px,
+                  "pencil_chunks": chunk_count(self.pencil.spp)})
         return s
+
+
+def _homography(H: np.ndarray, x, y) -> tuple[np.ndarray, np.ndarray]:
+    """Image (x', y') of the points (x, y) (broadcast together) under the 3×3 homography ``H``."""
+    x, y = np.broadcast_arrays(x, y)
+    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+    return (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w, (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+
+
+def _disk_kernel(R: float, sub: int = 4) -> np.ndarray:
+    """Normalised uniform disk of radius ``R`` grid steps, anti-aliased by ``sub × sub`` sub-samples
+    per cell (only the rim cells are sub-sampled: the others are wholly in or out)."""
+    k = math.ceil(R) + 1
+    ky, kx = np.mgrid[-k:k + 1, -k:k + 1].astype(float)
+    d = np.hypot(kx, ky)
+    acc = np.where(d < R, float(sub * sub), 0.0)
+    rim = np.abs(d - R) < 1.0  # a cell's sub-samples lie within 0.75·√2 < 1 of its centre
+    xr, yr = kx[rim], ky[rim]
+    cnt = np.zeros(xr.shape)
+    for a in range(sub):
+        for b in range(sub):
+            cnt += np.hypot(xr + (a + 0.5) / sub - 0.5, yr + (b + 0.5) / sub - 0.5) < R
+    acc[rim] = cnt
+    return acc / acc.sum()

@@ -410,6 +410,12 @@ class DiaphragmRenderer:
         arr = scene.render(seed=int(seed), spp=self.spp, single_thread=self.deterministic)
         return np.maximum(arr, 0.0) * self.photons_per_radiance
 
+    def render_chunk(self, seed: int, spp: int) -> np.ndarray:
+        """Photons per pixel of the spot scene at its current pose: ``spp`` samples, Mitsuba seed
+        ``seed`` (one chunk of :mod:`rigsim.render.cube_mirror.pencil_chunks`)."""
+        arr = self._spot_scene.render(seed=int(seed), spp=int(spp), single_thread=self.deterministic)
+        return np.maximum(arr, 0.0) * self.photons_per_radiance
+
     def render_photons(self, pose_rad: dict, seed: int = 0, *, hole: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict]:
         """Expected photons per pixel of the spot alone and of the hole glow alone (Mitsuba
         Monte-Carlo noise included, no detector), and timings."""
