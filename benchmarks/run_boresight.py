@@ -22,12 +22,13 @@ from _compare import compare
 SETUP = """
 import json, os, tempfile, io, contextlib
 from rigsim.cli import main
+RIG = {rig!r}
 """
 
 STMT = """
 out = tempfile.mkdtemp(prefix="bench-boresight-")
 with contextlib.redirect_stdout(io.StringIO()):
-    rc = main(["run", "boresight", "--out", out, "--quiet"])
+    rc = main(["run", "boresight", "--rig", RIG, "--out", out, "--quiet"])
 assert rc == 0
 d = json.load(open(os.path.join(out, "boresight.json")))
 k = d["key_numbers"]
@@ -46,7 +47,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--rounds", type=int, default=1)
     a = ap.parse_args()
-    compare("run boresight (default)", SETUP, STMT, repeat=a.repeat, rounds=a.rounds, target="<= 20 s")
+    rig = str(Path(__file__).resolve().parents[1] / "scenes" / "dual_line_array_prism.toml")  # the old tree is src/ only
+    compare("run boresight (default)", SETUP.format(rig=rig), STMT, repeat=a.repeat, rounds=a.rounds, target="<= 20 s")
 
 
 if __name__ == "__main__":
