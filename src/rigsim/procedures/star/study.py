@@ -82,11 +82,13 @@ def usable_truth_obs(sky, truth, max_stars: int, *, edge_px: float = 5.0, min_se
 
 
 def simulate_frames(sky, seq, noise: CentroidNoise, rng: np.random.Generator, max_stars: int) -> list[FrameObs]:
+    fields = [sky.field(seq.R_cam_from_icrs[k]) for k in range(len(seq))]
+    idxs = [usable_truth_obs(sky, tr, max_stars) for tr in fields]
+    # the CRLB of every star of the sequence in one call (it is per star); the noise is drawn frame by frame
+    sigs = np.split(noise.sigma(np.concatenate([tr.photons[idx] for tr, idx in zip(fields, idxs)])),
+                    np.cumsum([idx.size for idx in idxs])[:-1])
     out = []
-    for k in range(len(seq)):
-        tr = sky.field(seq.R_cam_from_icrs[k])
-        idx = usable_truth_obs(sky, tr, max_stars)
-        sig = noise.sigma(tr.photons[idx])
+    for tr, idx, sig in zip(fields, idxs, sigs):
         uv = tr.uv[idx] + rng.normal(size=(idx.size, 2)) * sig[:, None]
         out.append(FrameObs(uv, np.repeat(sig[:, None], 2, 1), tr.dirs_icrs[idx], tr.photons[idx]))
     return out
