@@ -313,8 +313,13 @@ class LoopRenderer:
         return self.rig.laser.photons_per_frame / total
 
     def warm_up(self) -> float:
+        """Compile the kernels (seconds taken): by the photon calibration's render when it is still to do
+        (the first frame would do it anyway), else by a frame that is thrown away."""
         t0 = time.perf_counter()
-        self.render_photons(None, 0.0, seed=0)
+        if self.photons_per_unit is None:
+            self.photons_per_unit = self._calibrate()
+        else:
+            self.render_photons(None, 0.0, seed=0)
         return time.perf_counter() - t0
 
     def render(self, E_hrc=None, delta_f_mm=0.0, seed: int = 0, *, noiseless: bool = False,
