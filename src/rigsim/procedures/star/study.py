@@ -34,7 +34,7 @@ __all__ = ["CASES", "CentroidNoise", "usable_truth_obs", "simulate_frames", "Stu
 
 CASES = ("f_known", "f_biased", "f_joint")
 CLAIM = {"u0": 0.640, "v0": 0.217}
-TRIALS_PER_BATCH = 10
+TRIALS_PER_BATCH = 40
 """Trials whose filters run together (:func:`run_ekf_batch`; more: fewer numpy calls, more memory)."""
 
 
