@@ -416,6 +416,11 @@ def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weight
         th[est] = xe
         return th
 
+    # every frame's stars through the camera model in one call (the model is per point), and the
+    # catalogue measurements once (they do not depend on θ)
+    uv_all = np.concatenate([np.asarray(fo.uv, float) for fo in fos]) if fos else np.zeros((0, 2))
+    cuts = np.cumsum([0] + [len(fo) for fo in fos])
+    zs = [_measurement(model, fo.dirs_icrs, *st) for fo, st in zip(fos, sets)]
     res = None
     for _ in range(passes):
         Ls = whiteners(theta)
@@ -427,10 +432,10 @@ def batch_lsq(frames, theta0, *, estimate=THETA_NAMES, model: str = "ad", weight
             if cache.get("key") != key:
                 th = full(xe)
                 r_out, j_out = [], []
-                for fo, st, L in zip(fos, sets, Ls):
-                    x, dx_dth, _dx_duv, _ok = normalized_with_jacobians(fo.uv, th, p12)
+                x_all, dx_all, _dx_duv, _ok = normalized_with_jacobians(uv_all, th, p12)
+                for a, b, st, z in zip(cuts[:-1], cuts[1:], sets, zs):
+                    x, dx_dth = x_all[a:b], dx_all[a:b]
                     h, idx, coef = _model_terms(model, x, *st)
-                    z = _measurement(model, fo.dirs_icrs, *st)
                     H = np.einsum("msc,mscp->mp", coef, dx_dth[idx])[:, est]
                     r_out.append(h - z)
                     j_out.append(H)

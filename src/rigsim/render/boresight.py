@@ -51,6 +51,7 @@ LASER_STANDOFF_MM = 5.0     # emitter disk in front of the focal plane (telecent
 SENSOR_STANDOFF_MM = 2.0    # > Mitsuba's ray offset at 6 m (0.54 mm), < LASER_STANDOFF_MM
 LENS_PATCH_HALF_MM = 20.0
 FACET_HALF_MM = 25.0
+TRUTH_CHUNK = 32768         # rays per pass of the truth trace (its arrays stay in cache)
 MAX_DEPTH = 6               # emitter, lens, facet, lens, (laser disk, null), detector
 
 
@@ -65,19 +66,27 @@ def trace_scene_rays(src_xy: np.ndarray, src_z: float, C: np.ndarray, f_lens: fl
     (normal N through ``facet_point``) and back through the lens to the plane z = ``z_det``.
     Returns landing points (n, 2). World frame of the scene (OTA axes)."""
     x = np.asarray(src_xy, float)
-    n = len(x)
-    # source -> lens plane (telecentric: straight up)
-    h = x.copy()
-    d = np.column_stack([-(h - C[:2]) / f_lens, np.ones(n)])          # slope form (qx, qy, 1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    o = np.column_stack([h, np.full(n, C[2])])
-    t = ((facet_point - o) @ N) / (d @ N)
-    hit = o + t[:, None] * d
-    r = d - 2.0 * (d @ N)[:, None] * N
-    t2 = (C[2] - hit[:, 2]) / r[:, 2]
-    h2 = hit[:, :2] + t2[:, None] * r[:, :2]
-    q = r[:, :2] / np.abs(r[:, 2:3]) - (h2 - C[:2]) / f_lens             # slope per unit |z| after the lens
-    return h2 + (C[2] - z_det) * q
+    return np.stack(_trace_xy(x[:, 0], x[:, 1], C, f_lens, N, facet_point, z_det), axis=1)
+
+
+def _trace_xy(hx, hy, C, f_lens, N, facet_point, z_det):
+    """:func:`trace_scene_rays` on coordinate arrays (one pass per component, no (n, 3) temporaries)."""
+    Cx, Cy, Cz = (float(c) for c in C)
+    Nx, Ny, Nz = (float(c) for c in N)
+    # source -> lens plane (telecentric: straight up), slope form (qx, qy, 1), normalised
+    dx, dy = -(hx - Cx) / f_lens, -(hy - Cy) / f_lens
+    inv = 1.0 / np.sqrt(dx * dx + dy * dy + 1.0)
+    dx, dy, dz = dx * inv, dy * inv, inv
+    dN = dx * Nx + dy * Ny + dz * Nz
+    t = ((facet_point[0] - hx) * Nx + (facet_point[1] - hy) * Ny + (facet_point[2] - Cz) * Nz) / dN
+    px, py, pz = hx + t * dx, hy + t * dy, Cz + t * dz
+    rx, ry, rz = dx - 2.0 * dN * Nx, dy - 2.0 * dN * Ny, dz - 2.0 * dN * Nz
+    t2 = (Cz - pz) / rz
+    h2x, h2y = px + t2 * rx, py + t2 * ry
+    arz = np.abs(rz)
+    qx = rx / arz - (h2x - Cx) / f_lens              # slope per unit |z| after the lens
+    qy = ry / arz - (h2y - Cy) / f_lens
+    return h2x + (Cz - z_det) * qx, h2y + (Cz - z_det) * qy
 
 
 class LoopRenderer:
@@ -242,12 +251,14 @@ class LoopRenderer:
         n = self.truth_rays
         r = self.core_radius_mm * np.sqrt(rng.random(n))
         t = 2 * np.pi * rng.random(n)
-        src = self.laser_W[:2] + np.column_stack([r * np.cos(t), r * np.sin(t)])
-        land = trace_scene_rays(src, self.laser_W[2], p["C"], p["f_lens"], p["N"], self.facet_point_W,
-                                self.det_centre_W[2])
-        lw = np.column_stack([land, np.full(n, self.det_centre_W[2])])
-        du = (lw - self.det_centre_W) @ self.u_axis / g.pitch_mm + g.cx
-        dv = (lw - self.det_centre_W) @ self.v_axis / g.pitch_mm + g.cy
+        du, dv = np.empty(n), np.empty(n)
+        for a in range(0, n, TRUTH_CHUNK):   # in cache-sized chunks: the trace is many passes over its arrays
+            sl = slice(a, a + TRUTH_CHUNK)
+            lx, ly = _trace_xy(self.laser_W[0] + r[sl] * np.cos(t[sl]), self.laser_W[1] + r[sl] * np.sin(t[sl]),
+                               p["C"], p["f_lens"], p["N"], self.facet_point_W, self.det_centre_W[2])
+            ex, ey = lx - self.det_centre_W[0], ly - self.det_centre_W[1]   # the landing plane is the detector's
+            du[sl] = (ex * self.u_axis[0] + ey * self.u_axis[1]) / g.pitch_mm + g.cx
+            dv[sl] = (ex * self.v_axis[0] + ey * self.v_axis[1]) / g.pitch_mm + g.cy
         centre = self.exact_uv(E_hrc, delta_f_mm)
         if window_origin is None:
             window_origin = self._window_for(centre)
@@ -302,8 +313,13 @@ class LoopRenderer:
         return self.rig.laser.photons_per_frame / total
 
     def warm_up(self) -> float:
+        """Compile the kernels (seconds taken): by the photon calibration's render when it is still to do
+        (the first frame would do it anyway), else by a frame that is thrown away."""
         t0 = time.perf_counter()
-        self.render_photons(None, 0.0, seed=0)
+        if self.photons_per_unit is None:
+            self.photons_per_unit = self._calibrate()
+        else:
+            self.render_photons(None, 0.0, seed=0)
         return time.perf_counter() - t0
 
     def render(self, E_hrc=None, delta_f_mm=0.0, seed: int = 0, *, noiseless: bool = False,

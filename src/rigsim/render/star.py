@@ -38,9 +38,10 @@ def frame_seed(seed: int, k: int) -> int:
 
 def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, time_s: float = 0.0,
                  omega_cam_rad_s=None, substeps: int = 1, renderer: str = "analytic",
-                 noiseless: bool = False, keep_photons: bool = False, mitsuba=None) -> Frame:
+                 noiseless: bool = False, keep_photons: bool = False, mitsuba=None, fits_header: bool = True) -> Frame:
     """One frame (its truth: the :class:`~rigsim.truth.star.StarField`). ``renderer``: 'analytic'
-    (default) or 'mitsuba' (pass a :class:`MitsubaStarRenderer` as ``mitsuba``)."""
+    (default) or 'mitsuba' (pass a :class:`MitsubaStarRenderer` as ``mitsuba``). ``fits_header``: also
+    fit the frame's FITS cards (``extra["fits_header"]``, a TAN-SIP WCS fit) for writing it as a file."""
     s = sky.rig.sensor
     sigma = s.psf_sigma_px
     margin = -math.ceil(5.0 * sigma)  # stars just off the detector still put their wings on it
@@ -59,7 +60,8 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
         raise ValueError(f"renderer = {renderer!r}: allowed 'analytic' or 'mitsuba'")
     fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth.as_dict(), truth_object=truth,
                   render=settings, index=int(index), time_s=float(time_s))
-    fr.extra["fits_header"] = star_fits_cards(sky.rig, truth.R_cam_from_icrs, seed=int(seed), time_s=float(time_s))
+    if fits_header:
+        fr.extra["fits_header"] = star_fits_cards(sky.rig, truth.R_cam_from_icrs, seed=int(seed), time_s=float(time_s))
     if not keep_photons:
         fr.photons = None
     return fr
@@ -87,13 +89,16 @@ def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0, cam
 
 
 def render_sequence(sky: StarSky, seq, *, seed: int, renderer: str = "analytic", noiseless: bool = False,
-                    keep_photons: bool = False, mitsuba=None, substeps: int | None = None, progress=None):
-    """Render every frame of an :class:`rigsim.truth.star.AttitudeSequence` (a generator)."""
+                    keep_photons: bool = False, mitsuba=None, substeps: int | None = None, progress=None,
+                    fits_header: bool = True):
+    """Render every frame of an :class:`rigsim.truth.star.AttitudeSequence` (a generator); ``fits_header`` as in
+    :func:`render_frame`."""
     K = sky.rig.sequence.smear_substeps if substeps is None else int(substeps)
     for k in range(len(seq)):
         fr = render_frame(sky, seq.R_cam_from_icrs[k], seed=frame_seed(seed, k), index=k,
                           time_s=float(seq.times_s[k]), omega_cam_rad_s=seq.omega_cam_rad_s[k], substeps=K,
-                          renderer=renderer, noiseless=noiseless, keep_photons=keep_photons, mitsuba=mitsuba)
+                          renderer=renderer, noiseless=noiseless, keep_photons=keep_photons, mitsuba=mitsuba,
+                          fits_header=fits_header)
         if progress is not None:
             progress.update(1)
         yield fr

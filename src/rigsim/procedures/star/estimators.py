@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.estimation.star_calibration import EQUATIONS, WEIGHTINGS, run_ekf
+from rigsim.estimation.star_calibration import EQUATIONS, WEIGHTINGS
+from rigsim.estimation.star_ekf_batch import run_ekf_batch
 from rigsim.procedures.star.study import CLAIM, CentroidNoise, case_setup, improvement, random_slew, simulate_frames
 
 __all__ = ["ESTIMATORS", "FOCAL_CASES", "ReadingsStudy", "readings_study"]
@@ -30,6 +31,9 @@ ESTIMATORS = tuple((e, w) for e in EQUATIONS for w in WEIGHTINGS)
 """Every (equations, weighting) pair; rigsim's default (framework, propagated) first."""
 
 MAX_CI_WIDTH = 0.20  # a 95 % interval wider than 20 points cannot decide a +64 % claim
+
+TRIALS_PER_BATCH = 10
+"""Trials whose filters run together (more: fewer numpy calls, more memory)."""
 
 FOCAL_CASES = {"f_known": 0.0, "f+1": 1.0, "f-1": -1.0, "f+3": 3.0, "f-3": -3.0, "f_joint": None}
 """Focal-length cases: the bias of the fixed f from the truth (px), or None when f is estimated."""
@@ -129,22 +133,33 @@ def readings_study(rig, sky, *, trials: int = 20, seed: int | None = None, noise
             th0 = th0.copy()
             th0[0] = s.f_px + FOCAL_CASES[case]
         setups[case] = (th0, est, ps)
+    groups = [g for g in ([k for k in cases if FOCAL_CASES[k] is not None], [k for k in cases if FOCAL_CASES[k] is None])
+              if g]
     res = ReadingsStudy(int(trials), seed, float(noise.scale), tuple(cases), tuple(tuple(e) for e in estimators))
     seeds = np.random.default_rng(np.random.SeedSequence([seed, 4104])).integers(0, 2**63 - 1, size=int(trials))
-    for t in range(int(trials)):
-        rng = np.random.default_rng(int(seeds[t]))
-        frames = simulate_frames(sky, random_slew(rig, rng), noise, rng, c.max_stars_per_frame)
-        res.n_stars.append(float(np.mean([len(f) for f in frames])))
-        for case in cases:
-            th0, est, ps = setups[case]
+    cache: dict = {}
+    for t0 in range(0, int(trials), TRIALS_PER_BATCH):
+        # the filters of a chunk of trials × the cases of a group run together (run_ekf_batch)
+        chunk = []
+        for t in range(t0, min(int(trials), t0 + TRIALS_PER_BATCH)):
+            rng = np.random.default_rng(int(seeds[t]))
+            frames = simulate_frames(sky, random_slew(rig, rng), noise, rng, c.max_stars_per_frame)
+            res.n_stars.append(float(np.mean([len(f) for f in frames])))
+            chunk.append(frames)
+        for group in groups:
+            th0s = np.array([setups[case][0] for _ in chunk for case in group])
+            seqs = [frames for frames in chunk for _ in group]
+            _, est, ps = setups[group[0]]
             for e in res.estimators:
                 for model in ("ad", "ads"):
-                    r = run_ekf(frames, th0, model=model, estimate=est, prior_sigma=ps, weighting=e[1], equations=e[0],
-                                process_sigma=c.process_noise_px, p12=p12)
-                    res.errors.setdefault((case, e, model), []).append(r.theta[1:3] - true_pp)
-                    res.sigmas.setdefault((case, e, model), []).append(r.sigma[-2:])
+                    rs = run_ekf_batch(seqs, th0s, model=model, estimate=est, prior_sigma=ps, weighting=e[1],
+                                       equations=e[0], process_sigma=c.process_noise_px, p12=p12, cache=cache)
+                    for case, r in zip(group * len(chunk), rs):
+                        res.errors.setdefault((case, e, model), []).append(r.theta[1:3] - true_pp)
+                        res.sigmas.setdefault((case, e, model), []).append(r.sigma[-2:])
+        cache.clear()
         if progress is not None:
-            progress.update(1)
+            progress.update(len(chunk))
     res.errors = {k: np.array(v) for k, v in res.errors.items()}
     res.sigmas = {k: np.array(v) for k, v in res.sigmas.items()}
     return res

@@ -32,7 +32,9 @@ def generate(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mitsuba
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 4004]))
     commanded = att.from_rig(rig.sequence, rng, jitter=False)
     true_seq = true_sequence(rig, commanded, rng)
-    for fr in render_sequence(sky, true_seq, seed=seed, renderer=renderer, noiseless=noiseless, mitsuba=mitsuba):
+    # no FITS cards: the run writes no rendered frame (exported frames carry the commanded attitude's WCS)
+    for fr in render_sequence(sky, true_seq, seed=seed, renderer=renderer, noiseless=noiseless, mitsuba=mitsuba,
+                              fits_header=False):
         k = fr.index
         yield StarObservation(k, float(commanded.times_s[k]), fr.dn, commanded.R_cam_from_icrs[k]), fr.truth, fr
 

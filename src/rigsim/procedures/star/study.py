@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.estimation.star_calibration import FrameObs, batch_lsq, run_ekf
+from rigsim.estimation.star_calibration import FrameObs, batch_lsq
+from rigsim.estimation.star_ekf_batch import run_ekf_batch
 from rigsim.optics import attitude as att
 from rigsim.procedures.star.pipeline import pipeline_case_setup
 
@@ -33,6 +34,8 @@ __all__ = ["CASES", "CentroidNoise", "usable_truth_obs", "simulate_frames", "Stu
 
 CASES = ("f_known", "f_biased", "f_joint")
 CLAIM = {"u0": 0.640, "v0": 0.217}
+TRIALS_PER_BATCH = 40
+"""Trials whose filters run together (:func:`run_ekf_batch`; more: fewer numpy calls, more memory)."""
 
 
 @dataclass(frozen=True)
@@ -79,11 +82,13 @@ def usable_truth_obs(sky, truth, max_stars: int, *, edge_px: float = 5.0, min_se
 
 
 def simulate_frames(sky, seq, noise: CentroidNoise, rng: np.random.Generator, max_stars: int) -> list[FrameObs]:
+    fields = [sky.field(seq.R_cam_from_icrs[k]) for k in range(len(seq))]
+    idxs = [usable_truth_obs(sky, tr, max_stars) for tr in fields]
+    # the CRLB of every star of the sequence in one call (it is per star); the noise is drawn frame by frame
+    sigs = np.split(noise.sigma(np.concatenate([tr.photons[idx] for tr, idx in zip(fields, idxs)])),
+                    np.cumsum([idx.size for idx in idxs])[:-1])
     out = []
-    for k in range(len(seq)):
-        tr = sky.field(seq.R_cam_from_icrs[k])
-        idx = usable_truth_obs(sky, tr, max_stars)
-        sig = noise.sigma(tr.photons[idx])
+    for tr, idx, sig in zip(fields, idxs, sigs):
         uv = tr.uv[idx] + rng.normal(size=(idx.size, 2)) * sig[:, None]
         out.append(FrameObs(uv, np.repeat(sig[:, None], 2, 1), tr.dirs_icrs[idx], tr.photons[idx]))
     return out
@@ -165,30 +170,40 @@ def run_study(rig, sky, *, trials: int | None = None, seed: int | None = None, n
     th_batch = np.array(n.theta, dtype=float)
     rng_master = np.random.default_rng(seed)
     seeds = rng_master.integers(0, 2**63 - 1, size=trials)
-    for t in range(trials):
-        rng = np.random.default_rng(int(seeds[t]))
-        seq = random_slew(rig, rng)
-        frames = simulate_frames(sky, seq, noise, rng, c.max_stars_per_frame)
-        res.n_stars.append(float(np.mean([len(f) for f in frames])))
-        for case in CASES:
-            th0, est, ps = setups[case]
+    groups = (("f_known", "f_biased"), ("f_joint",))   # the cases of a group differ only in θ0
+    cache: dict = {}
+    for t0 in range(0, trials, TRIALS_PER_BATCH):
+        # the filters of a chunk of trials × the cases of a group run together (run_ekf_batch)
+        chunk = []
+        for t in range(t0, min(trials, t0 + TRIALS_PER_BATCH)):
+            rng = np.random.default_rng(int(seeds[t]))
+            seq = random_slew(rig, rng)
+            chunk.append(simulate_frames(sky, seq, noise, rng, c.max_stars_per_frame))
+            res.n_stars.append(float(np.mean([len(f) for f in chunk[-1]])))
+        for group in groups:
+            _, est, ps = setups[group[0]]
+            th0s = np.array([setups[case][0] for _ in chunk for case in group])
+            seqs = [frames for frames in chunk for _ in group]
             for model in models:
                 for w in weightings:
-                    r = run_ekf(frames, th0, model=model, estimate=est, prior_sigma=ps, weighting=w,
-                                process_sigma=c.process_noise_px, p12=p12, equations=equations)
-                    key = (case, model, w)
-                    res.errors.setdefault(key, []).append(r.theta[1:3] - true[1:3])
-                    res.sigmas.setdefault(key, []).append(r.sigma[-2:])
-                    if case == "f_joint":
-                        res.f_errors.setdefault(key, []).append(r.theta[0] - true[0])
-        if t < batch_trials:
-            b = batch_lsq(frames, th_batch, p12=p12, weighting=weightings[0], equations=equations)
-            if res.batch_errors is None:
-                res.batch_errors, res.batch_sigmas = [], []
-            res.batch_errors.append(b.theta - true)
-            res.batch_sigmas.append(b.sigma)
+                    rs = run_ekf_batch(seqs, th0s, model=model, estimate=est, prior_sigma=ps, weighting=w,
+                                       process_sigma=c.process_noise_px, p12=p12, equations=equations, cache=cache)
+                    for case, r in zip(group * len(chunk), rs):
+                        key = (case, model, w)
+                        res.errors.setdefault(key, []).append(r.theta[1:3] - true[1:3])
+                        res.sigmas.setdefault(key, []).append(r.sigma[-2:])
+                        if case == "f_joint":
+                            res.f_errors.setdefault(key, []).append(r.theta[0] - true[0])
+        for t, frames in zip(range(t0, t0 + len(chunk)), chunk):
+            if t < batch_trials:
+                b = batch_lsq(frames, th_batch, p12=p12, weighting=weightings[0], equations=equations)
+                if res.batch_errors is None:
+                    res.batch_errors, res.batch_sigmas = [], []
+                res.batch_errors.append(b.theta - true)
+                res.batch_sigmas.append(b.sigma)
+        cache.clear()
         if progress is not None:
-            progress.update(1)
+            progress.update(len(chunk))
     res.errors = {k: np.array(v) for k, v in res.errors.items()}
     res.sigmas = {k: np.array(v) for k, v in res.sigmas.items()}
     res.f_errors = {k: np.array(v) for k, v in res.f_errors.items()}
