@@ -9,6 +9,11 @@ acceptance campaigns) run only with ``-m long`` or ``RIGSIM_LONG=1``, not in CI 
 import os
 
 import pytest
+from threadpoolctl import threadpool_limits
+
+# the CLI's thread policy (rigsim.render.threads.command_threads): one BLAS thread per process. The
+# test workers already share the cores, and multithreaded BLAS on small matrices only spins.
+threadpool_limits(limits=1, user_api="blas")
 
 
 def _slow_requested(config) -> bool:

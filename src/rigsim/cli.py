@@ -197,7 +197,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        with _Heartbeat(" ".join(a for a in (argv if argv is not None else sys.argv[1:])[:2] if not a.startswith("-"))):
+        from rigsim.render.threads import command_threads
+
+        with _Heartbeat(" ".join(a for a in (argv if argv is not None else sys.argv[1:])[:2] if not a.startswith("-"))), \
+                command_threads():
             rc = int(args.func(args) or 0)
         sys.stdout.flush()
         return rc

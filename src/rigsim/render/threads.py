@@ -20,7 +20,7 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ["KINDS", "apply_thread_policy", "cores", "current_threads", "thread_policy"]
+__all__ = ["KINDS", "apply_thread_policy", "command_threads", "cores", "current_threads", "thread_policy"]
 
 KINDS = ("render", "worker", "numeric")
 
@@ -97,3 +97,15 @@ def thread_policy(kind: str, n: int | None = None) -> Iterator[dict[str, int | N
         if limits is not None:
             limits.restore_original_limits()
         _set({"opencv": before.get("opencv"), "drjit": before.get("drjit") if plan.get("drjit") else None})
+
+
+@contextmanager
+def command_threads() -> Iterator[None]:
+    """What every ``rigsim`` command runs under: the ``"render"`` policy's BLAS limit (one thread).
+
+    Dr.Jit and OpenCV keep their default (every core) and are not imported for it, so a command that
+    renders nothing starts as fast as before."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield

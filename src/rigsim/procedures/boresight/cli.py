@@ -215,15 +215,6 @@ def _stream(rig, ref) -> int:
 
 
 def cmd_run_boresight(args) -> int:
-    from threadpoolctl import threadpool_limits
-
-    # one BLAS thread: the analyses and the truth traces are many small products, which multithreaded
-    # BLAS slows down on a busy machine (Mitsuba's own threads are not BLAS's)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _run_boresight(args)
-
-
-def _run_boresight(args) -> int:
     from tqdm import tqdm
 
     import rigsim

@@ -128,15 +128,6 @@ def cmd_star_calibrate(args) -> int:
 
 
 def cmd_run_star_calibration(args) -> int:
-    from threadpoolctl import threadpool_limits
-
-    # one BLAS thread: the estimators factor thousands of tiny matrices, which multithreaded BLAS
-    # slows down many times on a busy machine (and one thread makes every sum's order fixed)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _run_star_calibration(args)
-
-
-def _run_star_calibration(args) -> int:
     import os
 
     from tqdm import tqdm
