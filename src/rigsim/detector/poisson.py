@@ -14,11 +14,11 @@ def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
 
     Dense steps over all values while many are undecided, then steps over the undecided ones only,
     compacted whenever half of them are decided: the cost is ~ Σλ element-steps. A value whose u
-    lies above the rounded CDF's top stops where the pmf falls below 2^-32 past the mode: a
-    deep-tail count."""
+    lies above the rounded CDF's top stops past the mode where the pmf falls below a quarter of the
+    float epsilon (its tail holds less than the uniforms' resolution): a deep-tail count."""
     dt = lam.dtype.type
     past_mode = float(lam.max()) + 1.0
-    tiny = dt(2.0 ** -32)
+    tiny = dt(np.finfo(lam.dtype).eps / 4)  # a pmf below it no longer moves a CDF near 1
     p = np.exp(-lam)
     c = p.copy()
     m = u > c
