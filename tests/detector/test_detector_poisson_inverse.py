@@ -37,3 +37,44 @@ def test_frame_is_stable_under_float_noise_in_the_photon_image():
     b = apply_detector(jitter, cfg, seed=9).dn
     assert np.mean(a != b) < 1e-3  # only pixels within ~1e-7 of a CDF step (or a DN rounding edge) may move
     assert np.abs(a.astype(int) - b.astype(int)).max() <= 1
+
+
+@pytest.mark.parametrize("lam", [0.1, 1.0, 9.0, 30.0, 100.0, 1.0e4])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_distribution_against_scipy(lam, dtype):
+    """The sampler apply_detector uses (float32) and the float64 one: mean, variance, chi² of the
+    histogram and Kolmogorov–Smirnov distance against scipy.stats.poisson, at the 0.1 % level."""
+    n = 400_000
+    rng = np.random.default_rng(int(lam * 10) + 7)
+    k = poisson_inverse_cdf(np.full(n, lam, dtype), rng.random(n, dtype=dtype)).astype(np.float64)
+    assert k.dtype == np.float64 and np.all(k == np.round(k)) and k.min() >= 0
+    assert abs(k.mean() - lam) < 4 * np.sqrt(lam / n)
+    assert k.var() == pytest.approx(lam, rel=4 * np.sqrt((2 + 1 / lam) / n))  # var of s²: λ²(2/n) + λ/n
+    lo, hi = stats.poisson.ppf([1e-4, 1 - 1e-4], lam)
+    inner = np.arange(lo, hi + 1)                                   # values; the ends collect the tails
+    cdf = stats.poisson.cdf(inner, lam)
+    expect = np.diff(np.concatenate([[0.0], cdf[:-1], [1.0]])) * n
+    counts = np.histogram(k, np.concatenate([[-np.inf], inner[:-1] + 0.5, [np.inf]]))[0]
+    ok = expect > 20
+    chi2 = np.sum((counts[ok] - expect[ok]) ** 2 / expect[ok])
+    assert chi2 < stats.chi2.ppf(0.999, ok.sum() - 1)
+    ecdf = np.searchsorted(np.sort(k), inner, side="right") / n
+    assert np.max(np.abs(ecdf - cdf)) < 1.95 / np.sqrt(n)              # KS 0.1 % critical value
+
+
+@pytest.mark.parametrize("lam", [0.05, 0.7, 3.0, 12.0, 29.0])
+def test_walk_is_the_exact_inverse(lam):
+    """Below the Cornish–Fisher threshold every count is scipy's ppf(u), except where u lies within
+    the CDF's rounding (float32: 1e-6) of a step."""
+    rng = np.random.default_rng(5)
+    for dtype, eps in ((np.float32, 1e-6), (np.float64, 1e-12)):
+        u = rng.random(100_000, dtype=dtype)
+        k = poisson_inverse_cdf(np.full(u.size, lam, dtype), u)
+        ref = stats.poisson.ppf(u.astype(np.float64), lam)
+        near = np.min(np.abs(u.astype(np.float64)[:, None] - stats.poisson.cdf(ref[:, None] + [-1, 0], lam)), axis=1) < eps
+        assert np.mean(near) < 1e-3
+        np.testing.assert_array_equal(k[~near], ref[~near])
+    # the largest float32 uniform: a finite deep-tail count near the exact quantile
+    top = np.float32(1 - 2.0 ** -24)
+    k = poisson_inverse_cdf(np.array([lam], np.float32), np.array([top]))[0]
+    assert abs(k - stats.poisson.ppf(float(top), lam)) <= 2

@@ -11,8 +11,15 @@ import numpy as np
 
 from rigsim.detector.config import DetectorConfig
 
-__all__ = ["mean_dn", "temporal_variance_dn2", "snr", "total_snr", "saturation_photons",
-           "dynamic_range_db", "absolute_sensitivity_threshold_photons"]
+__all__ = [
+    "absolute_sensitivity_threshold_photons",
+    "dynamic_range_db",
+    "mean_dn",
+    "saturation_photons",
+    "snr",
+    "temporal_variance_dn2",
+    "total_snr",
+]
 
 SIGMA_Q2_DN2 = 1.0 / 12.0
 

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 
 from rigsim.detector.config import DetectorConfig
+from rigsim.detector.pattern import fixed_pattern, signal_maps
+from rigsim.detector.poisson import poisson_inverse_cdf
 
-__all__ = ["DetectorFrame", "apply_detector", "fixed_pattern"]
+__all__ = ["DetectorFrame", "apply_detector", "fixed_pattern", "poisson_inverse_cdf"]
+
+_CHUNK = 1 << 15  # pixels per block of the noisy chain: its temporaries stay in the cache
 
 
 @dataclass
@@ -32,77 +35,59 @@ class DetectorFrame:
         return int(self.saturated.sum())
 
 
-@lru_cache(maxsize=8)
-def _pattern_z(sensor_seed: int, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(np.random.SeedSequence([int(sensor_seed), 0x9D7F_11E5]))
-    z_prnu = rng.standard_normal(shape)
-    z_dsnu = rng.standard_normal(shape)
-    z_prnu.setflags(write=False)
-    z_dsnu.setflags(write=False)
-    return z_prnu, z_dsnu
+def _check_photons(ph: np.ndarray) -> None:
+    if ph.ndim != 2:
+        raise ValueError(f"photons_per_px must be a 2-D image, got shape {ph.shape}")
+    if ph.size and not (ph.min() >= 0 and ph.max() < np.inf):  # NaN fails both comparisons
+        bad = int(np.sum(~np.isfinite(ph) | (ph < 0)))
+        raise ValueError(f"photons_per_px must be finite and >= 0 ({bad} pixels are not)")
 
 
-def fixed_pattern(cfg: DetectorConfig, detector_shape: tuple[int, int],
-                  origin_uv: tuple[int, int] = (0, 0),
-                  shape: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """PRNU gain map (1 + prnu_frac z) and DSNU offset map (dsnu_e z, electrons) of a region.
-
-    Drawn for the whole detector from ``cfg.sensor_seed`` only, then cut to the region of
-    ``shape`` (default: the whole detector) whose pixel (0, 0) is detector pixel ``origin_uv``.
-    A crop window therefore sees exactly the pattern of the same pixels in a full frame.
-    """
-    H, W = int(detector_shape[0]), int(detector_shape[1])
-    z_prnu, z_dsnu = _pattern_z(cfg.sensor_seed, (H, W))
-    h, w = (H, W) if shape is None else (int(shape[0]), int(shape[1]))
-    u0, v0 = int(origin_uv[0]), int(origin_uv[1])
-    gain = np.ones((h, w))
-    dsnu = np.zeros((h, w))
-    a0, b0, a1, b1 = max(0, u0), max(0, v0), min(W, u0 + w), min(H, v0 + h)
-    if a1 > a0 and b1 > b0:
-        gain[b0 - v0:b1 - v0, a0 - u0:a1 - u0] += cfg.prnu_frac * z_prnu[b0:b1, a0:a1]
-        dsnu[b0 - v0:b1 - v0, a0 - u0:a1 - u0] = cfg.dsnu_e * z_dsnu[b0:b1, a0:a1]
-    return np.maximum(gain, 0.0), dsnu
+def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float) -> None:
+    """Add N(0, sigma²) to float32 ``x`` in place: Box–Muller pairs from 24-bit uniforms (the
+    tails end at 5.8 σ, a probability of 1e-8)."""
+    n = x.size
+    m = (n + 1) // 2
+    uu = rng.random(2 * m, dtype=np.float32)
+    r = np.log1p(-uu[:m])  # log(1 - u), 1 - u in (0, 1]
+    r *= np.float32(-2.0 * sigma * sigma)
+    np.sqrt(r, out=r)
+    ang = uu[m:]
+    ang *= np.float32(2.0 * np.pi)
+    g = np.cos(ang)
+    g *= r
+    x[:m] += g
+    np.sin(ang[:n - m], out=g[:n - m])
+    g[:n - m] *= r[:n - m]
+    x[m:] += g[:n - m]
 
 
-def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0) -> np.ndarray:
-    """Poisson(λ) variates from uniforms ``u`` by inverting the CDF (one uniform per value).
-
-    λ ≤ ``small``: exact — a vectorised walk up the CDF over the still-undecided pixels (cost ∝ Σλ).
-    λ > ``small``: the Cornish–Fisher quantile of the Poisson distribution to O(1/λ) (skewness and
-    kurtosis terms), rounded to an integer: mean and variance are right to < 0.5 % at λ = 30 and
-    better above (tested); the exact inverse (scipy's ppf) costs ~1 s per megapixel.
-    """
-    from scipy import special
-
-    lam = np.asarray(lam, dtype=np.float64)
-    u = np.asarray(u, dtype=np.float64)
-    out = np.zeros(lam.shape, dtype=np.float64)
-    lo = lam <= small
-    if np.any(lo):
-        lam_s = lam[lo]
-        u_s = u[lo]
-        k = np.zeros(lam_s.shape)
-        p = np.exp(-lam_s)
-        cdf = p.copy()
-        idx = np.nonzero(u_s > cdf)[0]
-        step = 0
-        while idx.size:
-            step += 1
-            p[idx] *= lam_s[idx] / step
-            cdf[idx] += p[idx]
-            k[idx] += 1
-            idx = idx[u_s[idx] > cdf[idx]]
-            if step > 200:  # cdf rounding at 1 - 1e-16: the remaining u are within rounding of 1
-                break
-        out[lo] = k
-    hi = ~lo
-    if np.any(hi):
-        lh = lam[hi]
-        z = special.ndtri(np.clip(u[hi], 1e-300, 1 - 1e-16))
-        g1, g2 = 1.0 / np.sqrt(lh), 1.0 / lh
-        x = z + g1 * (z * z - 1) / 6 + g2 * (z**3 - 3 * z) / 24 - g1 * g1 * (2 * z**3 - 5 * z) / 36
-        out[hi] = np.maximum(np.floor(lh + np.sqrt(lh) * x + 0.5), 0.0)
-    return out
+def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn):
+    """The noisy chain over one block of pixels (flat views); writes the outputs in place and
+    returns the counts of full-well and ADC-clipped pixels."""
+    e = np.empty(ph.size, np.float32)
+    np.minimum(ph, 1e30, out=e, casting="unsafe")
+    e *= eg
+    np.minimum(e, np.float32(1e15), out=e)
+    e += dark                                  # λ: photo-electrons and dark electrons are Poisson
+    fw = np.float32(cfg.full_well_e)
+    K = cfg.gain_dn_per_e
+    t = np.minimum(e, fw)
+    np.multiply(t, np.float32(K), out=expected_dn)
+    expected_dn += cfg.offset_dn
+    n = poisson_inverse_cdf(e, u)
+    well = n >= fw
+    np.minimum(n, fw, out=n)
+    if cfg.read_noise_e > 0:
+        _add_normals_f32(rng_read, n, cfg.read_noise_e)
+    n *= np.float32(K)
+    n += np.float32(cfg.offset_dn + 0.5)       # round half up: truncation of y + 0.5 once clipped to >= 0
+    top = np.float32(cfg.max_dn)
+    adc = n >= top
+    np.clip(n, np.float32(0.0), top, out=n)
+    dn[:] = n
+    np.logical_or(well, adc, out=saturated)
+    return int(np.count_nonzero(well)), int(np.count_nonzero(adc))
 
 
 def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | None = None, *,
@@ -119,51 +104,55 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     QE, mean dark signal, full well, gain, offset, quantisation and ADC clipping.
     For a crop window pass its ``origin_uv`` and the full ``detector_shape`` (rows, cols) so the
     fixed pattern matches the full frame's.
+
+    The noisy chain runs in float32 over blocks of pixels (counts stay exact integers up to the
+    largest full well, 1e7 < 2^24); ``expected_dn`` is float64.
     """
-    ph = np.asarray(photons_per_px, dtype=np.float64)
-    if ph.ndim != 2:
-        raise ValueError(f"photons_per_px must be a 2-D image, got shape {ph.shape}")
-    if not np.all(np.isfinite(ph)) or np.any(ph < 0):
-        bad = int(np.sum(~np.isfinite(ph) | (ph < 0)))
-        raise ValueError(f"photons_per_px must be finite and >= 0 ({bad} pixels are not)")
+    ph = np.asarray(photons_per_px)
+    if ph.dtype.kind not in "fiub":
+        ph = ph.astype(np.float64)
+    _check_photons(ph)
     if not noiseless and seed is None:
         raise ValueError("apply_detector needs an explicit seed (or noiseless=True)")
     det_shape = tuple(ph.shape) if detector_shape is None else tuple(int(x) for x in detector_shape)
 
     eta = cfg.quantum_efficiency
     dark_mean = cfg.dark_mean_e
+    K = cfg.gain_dn_per_e
     if noiseless:
+        ph = ph.astype(np.float64, copy=False)
         e_mean = eta * ph + dark_mean
         electrons = np.minimum(e_mean, cfg.full_well_e)
         well_clip = e_mean >= cfg.full_well_e
-        expected = electrons
+        expected_dn = K * electrons + cfg.offset_dn
+        q = np.floor(expected_dn + 0.5)
+        top = cfg.max_dn
+        adc_clip = q >= top
+        dn = np.clip(q, 0, top).astype(np.uint16)
+        saturated = well_clip | adc_clip
+        n_well, n_adc = int(well_clip.sum()), int(adc_clip.sum())
     else:
-        gain_map, dsnu_map = fixed_pattern(cfg, det_shape, origin_uv, ph.shape)
+        eg, dark = signal_maps(int(cfg.sensor_seed), float(cfg.prnu_frac), float(cfg.dsnu_e), float(eta),
+                               float(dark_mean), det_shape, (int(origin_uv[0]), int(origin_uv[1])),
+                               tuple(int(x) for x in ph.shape))
         # Exactly one uniform per pixel for the shot noise, and a separate stream for the read
         # noise: the draws of one pixel never depend on another pixel's value. Renderers that add
         # samples with atomic float adds (ptracer) reproduce photon images only to ~1e-7; with
         # numpy's Poisson sampler (a value-dependent number of draws per pixel) that would
         # reshuffle the noise of every later pixel, with an inverse CDF it changes nothing.
         ss_shot, ss_read = np.random.SeedSequence([int(seed), 0x7E4D_0A11]).spawn(2)
-        sig_mean = eta * ph * gain_map
-        dark_px = np.maximum(dark_mean + dsnu_map, 0.0)
-        # photo-electrons and dark electrons are independent Poisson: their sum is Poisson
-        lam = np.minimum(sig_mean, 1e15) + dark_px
-        n = poisson_inverse_cdf(lam, np.random.default_rng(ss_shot).random(ph.shape))
-        well_clip = n >= cfg.full_well_e
-        electrons = np.minimum(n, cfg.full_well_e)
-        if cfg.read_noise_e > 0:
-            electrons = electrons + np.random.default_rng(ss_read).normal(0.0, cfg.read_noise_e, ph.shape)
-        expected = np.minimum(sig_mean + dark_px, cfg.full_well_e)
-
-    K = cfg.gain_dn_per_e
-    y = K * electrons + cfg.offset_dn
-    q = np.floor(y + 0.5)
-    top = cfg.max_dn
-    adc_clip = q >= top
-    dn = np.clip(q, 0, top).astype(np.uint16)
-    saturated = well_clip | adc_clip
-    expected_dn = K * expected + cfg.offset_dn
+        rng_shot, rng_read = np.random.default_rng(ss_shot), np.random.default_rng(ss_read)
+        dn = np.empty(ph.shape, np.uint16)
+        saturated = np.empty(ph.shape, bool)
+        expected_dn = np.empty(ph.shape, np.float64)
+        flat = [a.reshape(-1) for a in (np.ascontiguousarray(ph), eg, dark, dn, saturated, expected_dn)]
+        n_well = n_adc = 0
+        for i in range(0, ph.size, _CHUNK):
+            s = slice(i, min(ph.size, i + _CHUNK))
+            u = rng_shot.random(s.stop - s.start, dtype=np.float32)
+            w, a = _noisy_block(*(f[s] for f in flat[:3]), u, cfg, rng_read, *(f[s] for f in flat[3:]))
+            n_well += w
+            n_adc += a
     meta = {
         "seed": None if seed is None else int(seed),
         "sensor_seed": cfg.sensor_seed,
@@ -171,8 +160,8 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         "origin_uv": [int(origin_uv[0]), int(origin_uv[1])],
         "detector_shape": [int(det_shape[0]), int(det_shape[1])],
         "saturated_pixels": int(saturated.sum()),
-        "full_well_pixels": int(well_clip.sum()),
-        "adc_clipped_pixels": int(adc_clip.sum()),
+        "full_well_pixels": n_well,
+        "adc_clipped_pixels": n_adc,
         "config": cfg.model_dump(),
     }
     return DetectorFrame(dn=dn, saturated=saturated, expected_dn=expected_dn, meta=meta)
