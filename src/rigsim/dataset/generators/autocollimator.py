@@ -125,8 +125,9 @@ class AutocollimatorGenerator:
                 set_thread_count(int(self.threads))
             from rigsim.render.cube_mirror.autocollimator import AutocollimatorRenderer
 
+            # one Dr.Jit thread per render: a dataset's frames are byte-identical for any worker count
             self._renderers[face] = AutocollimatorRenderer(self.rig, self.real, "face", face, spp=self.spp,
-                                                           layout=self._layout(face))
+                                                           layout=self._layout(face), deterministic=True)
         pose = {a: math.radians(v) for a, v in params["pose_true_deg"].items()}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -326,11 +326,12 @@ class AutocollimatorRenderer:
                  optics: AutocollimatorOptics | None = None, layout: AutocollimatorLayout | None = None,
                  mirror_reflectance: float = 1.0, plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
                  max_depth: int | None = None, world_origin: str = "objective", diffraction: bool = True,
-                 diffraction_half_px: int | None = None):
+                 diffraction_half_px: int | None = None, deterministic: bool = False):
         import mitsuba as _mi  # noqa: F401  (ensure_variant happens in autocollimator_scene)
 
         check_memory(rig.autocollimator.resolution_px, "autocollimator.resolution_px")
         self.rig = rig
+        self.deterministic = bool(deterministic)  # one Dr.Jit thread per render: bit-identical frames (ptracer)
         self.real = real if real is not None else realization_from_rig(rig)
         self.optics = optics or AutocollimatorOptics(rig.autocollimator)
         self.layout = layout or autocollimator_layout(
@@ -453,7 +454,8 @@ class AutocollimatorRenderer:
             return AutocollimatorWindow(np.zeros((W, W)), tuple(origin), tr, flags, dict(pose_rad), spp, int(seed),
                                         time.perf_counter() - t0, False, np.zeros((W, W)), tuple(origin))
         t1 = time.perf_counter()
-        arr = self._scene.render({"pose": pose_rad, "window_origin": origin}, seed=int(seed), spp=spp)
+        arr = self._scene.render({"pose": pose_rad, "window_origin": origin}, seed=int(seed), spp=spp,
+                                 single_thread=self.deterministic)
         t_mi = time.perf_counter() - t1
         arr = np.ascontiguousarray(arr[:, ::-1]) * (self.scene_info.photons_per_unit * photons
                                                     / self.scene_info.source_photons)
