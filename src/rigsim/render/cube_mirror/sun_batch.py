@@ -1,0 +1,196 @@
+"""Many sun spots in one Mitsuba launch: the sweep's renderer.
+
+:class:`SunSpotBatch` renders the windows of many sun directions side by side on one film (a grid
+of ``tile_px`` × ``tile_px`` tiles). The sensor ``rigsim_pinhole_tiles`` is the distorted pinhole
+of :mod:`rigsim.render.plugins` with two per-tile parameters read by a gather on the tile index:
+the window's place on the detector (tile pixel (i, j) is detector pixel (u0 + i, v0 + j)) and a
+rotation camera → world that turns that tile's sun direction onto the world's +z axis, where the
+one disk of :class:`~rigsim.render.cube_mirror.sun_sensor.SunSpotRenderer` sits. A uniform disk
+seen from a pinhole depends only on the angle between the ray and the sun, so each tile sees
+exactly the image the per-frame renderer draws in its window; only the sampler's random
+numbers differ. Nothing but the disk emits, so pixels outside a tile are exactly zero.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rigsim.optics.sun_disk import _basis, _unit
+from rigsim.render.backend import ensure_variant
+from rigsim.render.scene import Element, Scene, mitsuba_seed
+
+__all__ = ["TILED_PLUGIN", "SunSpotBatch", "tile_px_for", "tile_rotations"]
+
+TILED_PLUGIN = "rigsim_pinhole_tiles"
+MAX_LAUNCH_SAMPLES = 2**28
+"""Light paths per launch: a sweep with more is cut into equal launches of this many at most."""
+
+_registered: set = set()
+
+
+def tile_rotations(sun_dirs: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) rotations camera → world with rows (e1, e2, s): each sun direction s goes to +z."""
+    out = np.empty((len(sun_dirs), 3, 3))
+    for k, s in enumerate(np.asarray(sun_dirs, dtype=np.float64)):
+        s = _unit(s)
+        e1, e2 = _basis(s)
+        out[k] = (e1, e2, s)
+    return out
+
+
+def tile_px_for(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
+                minimum: int = 4) -> int:
+    """The smallest even tile holding every spot of ``sun_dirs`` with its projected rim at least
+    ``margin_px`` inside the tile's edge, the tile centred as in
+    :meth:`SunSpotRenderer.window_origin_for` (origin = rounded centre − tile // 2)."""
+    S = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
+    if len(S) == 0:
+        return int(minimum + minimum % 2)
+    psi = np.linspace(0.0, 2.0 * math.pi, 90, endpoint=False)
+    h = full_angle_rad / 2.0
+    rims = []
+    for s in S:
+        e1, e2 = _basis(_unit(s))
+        rims.append(math.cos(h) * _unit(s) + math.sin(h) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2))
+    uv, ok = camera.project_valid(np.concatenate(rims))
+    uv = uv.reshape(len(S), len(psi), 2)
+    c, c_ok = camera.project_valid(S)
+    if not (np.all(ok) and np.all(c_ok)):
+        raise ValueError("a sun direction puts the spot outside the camera model")
+    rc = np.floor(c + 0.5)
+    half = np.maximum(rc - uv.min(axis=1) - 0.5, uv.max(axis=1) - rc + 0.5) + margin_px
+    return max(int(minimum), 2 * math.ceil(float(half.max())))
+
+
+def _register() -> None:
+    variant = ensure_variant()
+    if variant in _registered:
+        return
+    import drjit as dr
+    import mitsuba as mi
+
+    from rigsim.render.plugins import register_sensors
+
+    pinhole, _ = register_sensors()
+
+    class TiledPinholeSensor(pinhole):
+        """The distorted pinhole, one window and one camera rotation per film tile."""
+
+        def __init__(self, props):
+            self.tile_px = int(props["tile_px"])
+            self.tiles_x = int(props["tiles_x"])
+            self.n_tiles = int(props["n_tiles"])
+            self.tiles = mi.Float(np.zeros(12 * self.n_tiles, dtype=np.float32))  # u0 v0 active R(9), per tile
+            super().__init__(props)
+
+        def traverse(self, cb):
+            super().traverse(cb)
+            cb.put("tiles", self.tiles, mi.ParamFlags.NonDifferentiable)
+
+        def _update(self):
+            super()._update()
+            dr.make_opaque(self.tiles)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            wav, wav_weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
+            w, h = self._film_px
+            fx, fy = sample2.x * w, sample2.y * h
+            t = float(self.tile_px)
+            tx, ty = dr.floor(fx / t), dr.floor(fy / t)
+            k = dr.minimum(mi.UInt32(ty) * self.tiles_x + mi.UInt32(tx), self.n_tiles - 1) * 12
+
+            def tile(i):
+                return dr.gather(mi.Float, self.tiles, k + i)
+
+            u = fx - tx * t + tile(0) - 0.5
+            v = fy - ty * t + tile(1) - 0.5
+            xd = (u - self.cx) / self.fx
+            yd = (v - self.cy) / self.fy
+            x, y, det, valid = self._undistort(xd, yd)
+            valid &= self._on_detector(u, v) & (tile(2) > 0.5)
+            d = dr.normalize(mi.Vector3f(x, y, 1.0))
+            if self.response == "flux":
+                ct2 = d.z * d.z
+                wt = ct2 * ct2 / det
+            else:
+                wt = mi.Float(1.0)
+            world = mi.Vector3f(dr.fma(tile(3), d.x, dr.fma(tile(4), d.y, tile(5) * d.z)),
+                                dr.fma(tile(6), d.x, dr.fma(tile(7), d.y, tile(8) * d.z)),
+                                dr.fma(tile(9), d.x, dr.fma(tile(10), d.y, tile(11) * d.z)))
+            ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), world, time, wav)
+            return ray, wav_weight * dr.select(valid & active, wt, 0.0)
+
+    mi.register_sensor(TILED_PLUGIN, lambda props: TiledPinholeSensor(props))
+    _registered.add(variant)
+
+
+class SunSpotBatch:
+    """Render the windows of many sun directions with a :class:`SunSpotRenderer`'s disk, camera,
+    sampler and response, ``tile_px`` wide, a grid of up to ``tiles_per_launch`` tiles per launch.
+
+    ``render(sun_dirs, origins, seed)`` returns (K, tile_px, tile_px) expected photons; window k's
+    pixel (i, j) is detector pixel ``origins[k] + (i, j)``. The scalar fallback variant renders
+    window by window with the renderer itself."""
+
+    def __init__(self, renderer, tile_px: int, tiles_per_launch: int):
+        self.renderer = renderer
+        self.tile_px = int(tile_px)
+        if self.tile_px < 4:
+            raise ValueError(f"tile_px = {tile_px!r}: must be >= 4")
+        self.n_tiles = max(1, min(int(tiles_per_launch), MAX_LAUNCH_SAMPLES // (self.tile_px**2 * renderer.spp)))
+        self.tiles_x = math.ceil(math.sqrt(self.n_tiles))
+        self.tiles_y = math.ceil(self.n_tiles / self.tiles_x)
+        self.variant = ensure_variant()
+        self.batched = self.variant.startswith("llvm")
+        r = renderer
+        self._scene = self._build() if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
+
+    @property
+    def samples_per_launch(self) -> int:
+        return self.tiles_x * self.tiles_y * self.tile_px**2 * self.renderer.spp
+
+    def _build(self) -> Scene:
+        import mitsuba as mi
+
+        _register()
+        r, cam, t = self.renderer, self.renderer.camera, self.tile_px
+        sensor = {
+            "type": TILED_PLUGIN, "tile_px": t, "tiles_x": self.tiles_x, "n_tiles": self.n_tiles,
+            "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+            "k1": cam.k1, "k2": cam.k2, "k3": cam.k3, "p1": cam.p1, "p2": cam.p2,
+            "detector_width": cam.width, "detector_height": cam.height, "response": r.response,
+            "film": {"type": "hdrfilm", "width": self.tiles_x * t, "height": self.tiles_y * t,
+                     "rfilter": {"type": "box"}, "pixel_format": "luminance"},
+            "sampler": {"type": r.sampler, "sample_count": r.spp},
+        }
+        sun = {"type": "disk", "to_world": mi.ScalarTransform4f(r._disk_matrix(np.array([0.0, 0.0, 1.0]))),
+               "emitter": {"type": "area", "radiance": {"type": "uniform", "value": r._radiance()}}}
+
+        def set_tiles(state) -> dict:
+            return {"sensor.tiles": mi.Float(state["tiles"])} if "tiles" in state else {}
+
+        return Scene({"type": "path", "max_depth": 1}, [Element("sensor", sensor, set_tiles), Element("sun", sun)])
+
+    def render(self, sun_dirs, origins, seed: int = 0) -> np.ndarray:
+        sun_dirs = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
+        origins = np.asarray(origins, dtype=np.int64).reshape(-1, 2)
+        K, t = len(sun_dirs), self.tile_px
+        if not self.batched:
+            return np.array([self._scene.render({"sun_dir": _unit(s), "window_origin": tuple(int(x) for x in o)},
+                                                seed=mitsuba_seed(seed, k), spp=self.renderer.spp)
+                             for k, (s, o) in enumerate(zip(sun_dirs, origins))]).reshape(K, t, t)
+        rot = tile_rotations(sun_dirs)
+        out = np.empty((K, t, t))
+        for launch, a in enumerate(range(0, K, self.n_tiles)):
+            b = min(K, a + self.n_tiles)
+            data = np.zeros((self.n_tiles, 12))
+            data[:b - a, 0:2] = origins[a:b]
+            data[:b - a, 2] = 1.0
+            data[:b - a, 3:] = rot[a:b].reshape(-1, 9)
+            img = self._scene.render({"tiles": data.ravel().astype(np.float32)}, seed=mitsuba_seed(seed, launch),
+                                     spp=self.renderer.spp)
+            grid = img.reshape(self.tiles_y, t, self.tiles_x, t).transpose(0, 2, 1, 3).reshape(-1, t, t)
+            out[a:b] = grid[:b - a]
+        return out
