@@ -1,0 +1,124 @@
+"""The cube-mirror sun-sensor calibration sweep: old per-frame path vs one batched Mitsuba launch.
+
+    .venv/bin/python benchmarks/sweep.py [--rig sun_sensor_2axis_diaphragm] [--seed 2009] [--spp 256]
+                                         [--repeat 2] [--rounds 2] [--base 03aff45]
+
+Prints, through benchmarks/_compare.py (old = the package at ``--base``, new = the working tree,
+alternating subprocesses):
+
+1. ``sweep render + centroid``: ``render_sweep`` on the default sweep (574 frames in the field),
+   exactly what ``rigsim run cube-mirror`` calls; result: R(sun←rot) error of the fit against the
+   rig's truth (″ per axis, and its 1σ), the centroid rms against the exact sun-centre projection
+   (px), the frames rendered and the Mitsuba samples drawn.
+2. ``rendered vs exact``: the same sweep with a frame callback: rms of the first moment of each
+   frame's expected-photon window minus the exact pixel-binned centroid of the disk (px), the
+   rendering's own error (one run per side; its time includes the per-frame truth).
+3. ``bare Mitsuba launch`` (new only): one render of the sweep's batched scene (same tiles, same
+   spp), nothing else: Mitsuba's raw sample throughput on this machine for this scene. The last
+   line gives the sweep's samples/s as a fraction of it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _compare import BASE, compare
+
+SETUP = """
+import warnings
+import numpy as np
+from rigsim.rig import load_rig
+from rigsim.truth.cube_mirror.realization import noise_from_rig, realization_from_rig
+from rigsim.procedures.cube_mirror.sweep import calibrate_from_sweep, render_sweep
+from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
+warnings.simplefilter("ignore")
+rig = load_rig({rig!r} if {rig!r}.endswith(".toml") else "scenes/{rig}.toml")  # the old tree's scenes/ link is not archived
+real = realization_from_rig(rig)
+noise = noise_from_rig(rig)
+"""
+
+SWEEP = """
+obs, tr = render_sweep(rig, real, noise, {seed}, spp={spp})
+cal = calibrate_from_sweep(rig, obs)
+e = small_angle_error(cal.R_sun_from_rot, real.R_sun_from_mount) * ARCSEC_PER_RAD
+sig = np.sqrt(np.diag(cal.covariance))[-3:] * ARCSEC_PER_RAD
+try:
+    from rigsim.render.cube_mirror.sun_batch import tile_px_for
+    tile = min(32, tile_px_for(tr.camera, tr.sun_dir_cam, tr.full_angle_rad))
+except ImportError:  # the old per-frame path renders the whole 32-px window
+    tile = 32
+result = {{"R_err_x_arcsec": e[0], "R_err_y_arcsec": e[1], "R_err_z_arcsec": e[2], "R_sigma_max_arcsec": sig.max(),
+          "centroid_vs_centre_rms_px": np.sqrt(np.mean((obs.uv - tr.uv_centre) ** 2)),
+          "frames": obs.n_rendered, "rejected": obs.n_rejected, "tile_px": tile,
+          "samples": obs.n_rendered * tile * tile * {spp}}}
+"""
+
+EXACT = """
+errs = []
+def on_frame(fr, spots, k, reading, i):
+    errs.append(fr.photon_centroid() - np.asarray(fr.sidecar["truth"]["spot"]["pixel_centroid_uv"]))
+obs, tr = render_sweep(rig, real, noise, {seed}, spp={spp}, on_frame=on_frame)
+errs = np.array(errs)
+result = {{"rendered_vs_exact_rms_px": np.sqrt(np.mean(errs ** 2)), "rendered_vs_exact_max_px": np.abs(errs).max()}}
+"""
+
+BARE_SETUP = SETUP + """
+from rigsim.estimation.sun_calibration import sweep_poses
+from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, tile_px_for
+from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
+sc = SunSensorScene(rig, real, spp={spp})
+p = rig.procedure
+poses = sweep_poses(p.sweep_axes, p.sweep_range_deg, p.sweep_step_deg,
+                    {{a.label: 0.0 for a in rig.turntable.axes if a.label not in p.sweep_axes}})
+n = len(next(iter(poses.values())))
+S = np.array([sc.sun_dir_cam({{k: float(v[i]) for k, v in poses.items()}}) for i in range(n)])
+c, ok = sc.camera.project_valid(S)
+ok &= sc.camera.on_detector(c, margin_px=3.0)
+S, c = S[ok], c[ok]
+tile = min(sc.renderer.window_px, tile_px_for(sc.camera, S, sc.full_angle_rad))
+batch = SunSpotBatch(sc.renderer, tile, len(S))
+data = np.zeros((batch.n_tiles, 12))
+data[:len(S), 0:2] = np.floor(c + 0.5) - tile // 2
+data[:len(S), 2] = 1.0
+from rigsim.render.cube_mirror.sun_batch import tile_rotations
+data[:len(S), 3:] = tile_rotations(S).reshape(-1, 9)
+state = {{"tiles": data.ravel().astype(np.float32)}}
+batch._scene.render(state, seed=1, spp={spp})  # compile
+"""
+
+BARE = """
+img = batch._scene.render(state, seed=2, spp={spp})
+result = {{"samples": batch.samples_per_launch, "tiles": len(S), "tile_px": tile}}
+"""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rig", default="sun_sensor_2axis_diaphragm")
+    ap.add_argument("--seed", type=int, default=2009)
+    ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--base", default=BASE)
+    a = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.2f} at start ({os.cpu_count()} cores)")
+    setup = SETUP.format(rig=a.rig)
+    sw = compare("sweep render + centroid", setup, SWEEP.format(seed=a.seed, spp=a.spp), repeat=a.repeat,
+                 rounds=a.rounds, base=a.base, target="<= 3 s")
+    compare("rendered vs exact (1 run, + truth)", setup, EXACT.format(seed=a.seed, spp=a.spp), repeat=1, rounds=1,
+            base=a.base, target="<= 0.0025 px rms")
+    bare = compare("bare Mitsuba launch (same scene, spp)", BARE_SETUP.format(rig=a.rig, spp=a.spp),
+                   BARE.format(spp=a.spp), repeat=max(3, a.repeat), rounds=a.rounds, old=False)
+    new = sw["new"]
+    raw = bare["new"].result["samples"] / bare["new"].best
+    swr = new.result["samples"] / new.best
+    print(f"\nMitsuba raw throughput {raw / 1e6:.1f} M samples/s (bare launch); sweep {swr / 1e6:.1f} M samples/s "
+          f"= {100 * swr / raw:.0f} % of raw (goal >= 50 %); load average {os.getloadavg()[0]:.2f} at end")
+
+
+if __name__ == "__main__":
+    main()
