@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rigsim.optics.sun_disk import spot_truth, window_centroid
-from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, tile_px_for
+from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, tile_groups, tile_px_for
 from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
@@ -78,3 +78,15 @@ def test_tile_size_follows_the_largest_spot():
     d = 2 * math.tan(a / 2) * cam.fx  # on-axis diameter
     assert on_axis % 2 == 0 and d + 2 <= on_axis <= d + 6
     assert off >= on_axis
+
+
+def test_tile_groups_render_fewest_pixels():
+    sizes = np.array([6] * 47 + [8] * 246 + [10] * 118 + [12] * 94 + [14] * 57 + [16] * 11 + [18])  # the default sweep
+    groups = tile_groups(sizes)
+    assert [t for t, _ in groups] == [8, 12, 18]
+    assert sorted(np.concatenate([i for _, i in groups]).tolist()) == list(range(len(sizes)))
+    assert all((sizes[i] <= t).all() for t, i in groups)
+    pixels = sum(t * t * len(i) for t, i in groups)
+    assert pixels < 0.45 * 18 * 18 * len(sizes)  # one 18-px tile for all: 2.6× more pixels
+    (t, i), = tile_groups(np.array([8, 8]))
+    assert t == 8 and i.tolist() == [0, 1]

@@ -1,7 +1,7 @@
 """Seed 000 step 1 / seed 001 step B on rendered frames: the sun-sensor calibration sweep.
 
 For every sweep pose: render the sun-sensor frame (Mitsuba + detector model) at the *true*
-pose (every frame's spot in one batched Mitsuba launch), record the turntable *reading* (true + encoder bias + noise), extract the spot with
+pose (every frame's spot in a few batched Mitsuba launches), record the turntable *reading* (true + encoder bias + noise), extract the spot with
 rigsim.imaging and centroid it, then fit intrinsics + R(sun←rot) by least squares with the
 nominal turntable. The estimator sees readings and centroids only.
 """
@@ -80,16 +80,17 @@ def render_sweep(
     every rendered frame, its spots, the index of the one measured (None: rejected), the turntable
     reading and the sweep pose's index (the frame carries its full sidecar truth).
 
-    Every spot in the field is rendered in one Mitsuba launch (:class:`SunSpotBatch`: a tile just
-    large enough for the sweep's largest spot, pasted into the readout window); each frame is then
-    digitised with its own detector seed and measured."""
+    Every spot in the field is rendered in a few Mitsuba launches (:class:`SunSpotBatch`: tiles just
+    large enough for each group of spots, at most three sizes, pasted into the readout window); each
+    frame is then digitised with its own detector seed and measured."""
     if centroider not in FRAME_METHODS:
         raise ValueError(f"centroider = {centroider!r}: allowed {', '.join(FRAME_METHODS)}")
     import time
 
     from rigsim.detector import apply_detector
-    from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, tile_px_for
+    from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, spot_tile_px, tile_groups
     from rigsim.render.cube_mirror.sun_sensor import SunSensorScene, detector_part
+    from rigsim.render.scene import mitsuba_seed
 
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -109,17 +110,21 @@ def render_sweep(
     field_idx = np.flatnonzero(ok)
     frame_seeds = [int(rng.integers(2**31)) for _ in field_idx]  # one per frame, in pose order, as rendered
     renderer = scene.renderer
-    tile = min(renderer.window_px, tile_px_for(cam, S[field_idx], scene.full_angle_rad))
-    batch = SunSpotBatch(renderer, tile, max(1, len(field_idx)))
-    tiles = batch.render(S[field_idx], np.floor(c[field_idx] + 0.5).astype(np.int64) - tile // 2,
-                         seed=int(rng.integers(2**31)))
+    sizes = np.minimum(renderer.window_px, spot_tile_px(cam, S[field_idx], scene.full_angle_rad))
+    render_seed = int(rng.integers(2**31))
+    tiles: list = [None] * len(field_idx)
+    for g, (tile, idx) in enumerate(tile_groups(sizes)):  # a launch per tile size: small spots, small tiles
+        batch = SunSpotBatch(renderer, tile, len(idx))
+        sel = field_idx[idx]
+        imgs = batch.render(S[sel], np.floor(c[sel] + 0.5).astype(np.int64) - tile // 2, seed=mitsuba_seed(render_seed, g))
+        for j, img in zip(idx, imgs):
+            tiles[j] = img
     if progress and n > len(field_idx):
         progress(n - len(field_idx))
     det = rig.sun_sensor.detector
     noise_model = NoiseModel.from_detector(det)
     shape = (rig.sun_sensor.resolution_px[1], rig.sun_sensor.resolution_px[0])
     W = renderer.window_px
-    a = W // 2 - tile // 2
     keep, uv = [], []
     rejected = 0
     for j, i in enumerate(field_idx):
@@ -128,7 +133,7 @@ def render_sweep(
             import warnings
 
             pose = {k: float(v[i]) for k, v in poses.items()}
-            win = renderer.window(S[i], tiles[j], seed=fseed, batched_tile_px=tile)
+            win = renderer.window(S[i], tiles[j], seed=fseed, batched_tile_px=len(tiles[j]))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 fr = scene.frame(pose, win, seed=fseed, noiseless=noiseless, truth_points=200_000, full_frame=False)
@@ -136,7 +141,8 @@ def render_sweep(
         else:
             origin_w = renderer.window_origin_for(c[i])
             photons = np.zeros((W, W))
-            photons[a:a + tile, a:a + tile] = tiles[j]
+            t = len(tiles[j])
+            photons[W // 2 - t // 2:W // 2 - t // 2 + t, W // 2 - t // 2:W // 2 - t // 2 + t] = tiles[j]
             photons, origin = detector_part(photons, origin_w, shape)
             dn = apply_detector(photons, det, seed=fseed, noiseless=noiseless, origin_uv=origin,
                                 detector_shape=shape).dn

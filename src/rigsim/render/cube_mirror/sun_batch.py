@@ -21,7 +21,7 @@ from rigsim.optics.sun_disk import _basis, _unit
 from rigsim.render.backend import ensure_variant
 from rigsim.render.scene import Element, Scene, mitsuba_seed
 
-__all__ = ["TILED_PLUGIN", "SunSpotBatch", "tile_px_for", "tile_rotations"]
+__all__ = ["TILED_PLUGIN", "SunSpotBatch", "spot_tile_px", "tile_groups", "tile_px_for", "tile_rotations"]
 
 TILED_PLUGIN = "rigsim_pinhole_tiles"
 MAX_LAUNCH_SAMPLES = 2**28
@@ -40,14 +40,14 @@ def tile_rotations(sun_dirs: np.ndarray) -> np.ndarray:
     return out
 
 
-def tile_px_for(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
-                minimum: int = 4) -> int:
-    """The smallest even tile holding every spot of ``sun_dirs`` with its projected rim at least
+def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
+                 minimum: int = 4) -> np.ndarray:
+    """Per sun direction, the smallest even tile holding its spot with the projected rim at least
     ``margin_px`` inside the tile's edge, the tile centred as in
     :meth:`SunSpotRenderer.window_origin_for` (origin = rounded centre − tile // 2)."""
     S = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
     if len(S) == 0:
-        return int(minimum + minimum % 2)
+        return np.zeros(0, dtype=int)
     psi = np.linspace(0.0, 2.0 * math.pi, 90, endpoint=False)
     h = full_angle_rad / 2.0
     rims = []
@@ -60,8 +60,45 @@ def tile_px_for(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_p
     if not (np.all(ok) and np.all(c_ok)):
         raise ValueError("a sun direction puts the spot outside the camera model")
     rc = np.floor(c + 0.5)
-    half = np.maximum(rc - uv.min(axis=1) - 0.5, uv.max(axis=1) - rc + 0.5) + margin_px
-    return max(int(minimum), 2 * math.ceil(float(half.max())))
+    half = np.maximum(rc - uv.min(axis=1) - 0.5, uv.max(axis=1) - rc + 0.5).max(axis=1) + margin_px
+    return np.maximum(int(minimum), 2 * np.ceil(half).astype(int))
+
+
+def tile_px_for(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
+                minimum: int = 4) -> int:
+    """One tile for every spot of ``sun_dirs``: the largest of :func:`spot_tile_px`."""
+    t = spot_tile_px(camera, sun_dirs, full_angle_rad, margin_px=margin_px, minimum=minimum)
+    return int(t.max()) if len(t) else int(minimum + minimum % 2)
+
+
+def tile_groups(sizes: np.ndarray, max_groups: int = 3) -> list[tuple[int, np.ndarray]]:
+    """Split spots needing tiles of ``sizes`` px into at most ``max_groups`` launches, each with one
+    tile (its largest spot's), choosing the cuts that render the fewest pixels. Returns
+    [(tile_px, indices)], smallest tile first."""
+    sizes = np.asarray(sizes, dtype=int)
+    if len(sizes) == 0:
+        return []
+    levels = np.unique(sizes)
+    best = None
+    from itertools import combinations
+
+    for k in range(min(max_groups, len(levels))):
+        for cuts in combinations(levels[:-1], k):
+            tops = [*cuts, levels[-1]]
+            lo = -1
+            cost = 0
+            for t in tops:
+                cost += int(((sizes > lo) & (sizes <= t)).sum()) * t * t
+                lo = t
+            if best is None or cost < best[0]:
+                best = (cost, tops)
+    groups, lo = [], -1
+    for t in best[1]:
+        idx = np.flatnonzero((sizes > lo) & (sizes <= t))
+        if len(idx):
+            groups.append((int(t), idx))
+        lo = t
+    return groups
 
 
 def _register() -> None:
