@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from rigsim.optics.sun_disk import _basis, _unit
+from rigsim.optics.sun_disk import _unit
 from rigsim.render.backend import ensure_variant
 from rigsim.render.scene import Element, Scene, mitsuba_seed
 
@@ -30,14 +30,22 @@ MAX_LAUNCH_SAMPLES = 2**28
 _registered: set = set()
 
 
+def _frames(sun_dirs) -> np.ndarray:
+    """(K, 3, 3) rows (e1, e2, s) per sun direction: :func:`rigsim.optics.sun_disk._basis`, vectorised."""
+    S = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
+    norm = np.linalg.norm(S, axis=1)
+    if not np.all(np.isfinite(norm) & (norm > 0)):
+        raise ValueError("sun directions must be finite non-zero 3-vectors")
+    S = S / norm[:, None]
+    a = np.where((np.abs(S[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    e1 = np.cross(S, a)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    return np.stack([e1, np.cross(S, e1), S], axis=1)
+
+
 def tile_rotations(sun_dirs: np.ndarray) -> np.ndarray:
     """(K, 3, 3) rotations camera → world with rows (e1, e2, s): each sun direction s goes to +z."""
-    out = np.empty((len(sun_dirs), 3, 3))
-    for k, s in enumerate(np.asarray(sun_dirs, dtype=np.float64)):
-        s = _unit(s)
-        e1, e2 = _basis(s)
-        out[k] = (e1, e2, s)
-    return out
+    return _frames(sun_dirs)
 
 
 def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
@@ -50,11 +58,10 @@ def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_
         return np.zeros(0, dtype=int)
     psi = np.linspace(0.0, 2.0 * math.pi, 90, endpoint=False)
     h = full_angle_rad / 2.0
-    rims = []
-    for s in S:
-        e1, e2 = _basis(_unit(s))
-        rims.append(math.cos(h) * _unit(s) + math.sin(h) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2))
-    uv, ok = camera.project_valid(np.concatenate(rims))
+    B = _frames(S)  # rows e1, e2, s per direction
+    ring = np.column_stack([math.sin(h) * np.cos(psi), math.sin(h) * np.sin(psi), np.full(len(psi), math.cos(h))])
+    rims = np.einsum("pk,nkj->npj", ring, B)  # the rim of spot_outline, every direction at once
+    uv, ok = camera.project_valid(rims.reshape(-1, 3))
     uv = uv.reshape(len(S), len(psi), 2)
     c, c_ok = camera.project_valid(S)
     if not (np.all(ok) and np.all(c_ok)):
