@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rigsim.optics.sun_disk import spot_truth, window_centroid
-from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, tile_groups, tile_px_for
+from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, spot_tile_px, tile_groups, tile_px_for
 from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
@@ -90,3 +90,13 @@ def test_tile_groups_render_fewest_pixels():
     assert pixels < 0.45 * 18 * 18 * len(sizes)  # one 18-px tile for all: 2.6× more pixels
     (t, i), = tile_groups(np.array([8, 8]))
     assert t == 8 and i.tolist() == [0, 1]
+
+
+def test_a_spot_outside_the_camera_model_gets_no_tile():
+    cam = RIG.sun_sensor.camera()
+    a = math.radians(RIG.sun_simulator.collimation_full_angle_arcmin / 60.0)
+    sizes = spot_tile_px(cam, np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]), a)
+    assert sizes[0] >= 4 and sizes[1] == sizes[2] == 0
+    (t, i), = tile_groups(sizes)
+    assert t == sizes[0] and i.tolist() == [0]
+    assert tile_groups(np.zeros(3, dtype=int)) == []

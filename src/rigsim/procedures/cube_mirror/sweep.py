@@ -112,7 +112,7 @@ def render_sweep(
     renderer = scene.renderer
     sizes = np.minimum(renderer.window_px, spot_tile_px(cam, S[field_idx], scene.full_angle_rad))
     render_seed = int(rng.integers(2**31))
-    tiles: list = [None] * len(field_idx)
+    tiles: list = [np.zeros((0, 0))] * len(field_idx)  # size 0: outside the camera model, nothing drawn
     for g, (tile, idx) in enumerate(tile_groups(sizes)):  # a launch per tile size: small spots, small tiles
         batch = SunSpotBatch(renderer, tile, len(idx))
         sel = field_idx[idx]

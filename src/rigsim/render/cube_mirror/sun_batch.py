@@ -52,7 +52,8 @@ def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_
                  minimum: int = 4) -> np.ndarray:
     """Per sun direction, the smallest even tile holding its spot with the projected rim at least
     ``margin_px`` inside the tile's edge, the tile centred as in
-    :meth:`SunSpotRenderer.window_origin_for` (origin = rounded centre − tile // 2)."""
+    :meth:`SunSpotRenderer.window_origin_for` (origin = rounded centre − tile // 2); 0 for a spot
+    outside the camera model (the per-frame renderer draws nothing there either)."""
     S = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
     if len(S) == 0:
         return np.zeros(0, dtype=int)
@@ -64,42 +65,42 @@ def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_
     uv, ok = camera.project_valid(rims.reshape(-1, 3))
     uv = uv.reshape(len(S), len(psi), 2)
     c, c_ok = camera.project_valid(S)
-    if not (np.all(ok) and np.all(c_ok)):
-        raise ValueError("a sun direction puts the spot outside the camera model")
-    rc = np.floor(c + 0.5)
+    valid = ok.reshape(len(S), len(psi)).all(axis=1) & c_ok
+    rc = np.floor(np.where(valid[:, None], c, 0.0) + 0.5)
+    uv = np.where(valid[:, None, None], uv, rc[:, None, :])
     half = np.maximum(rc - uv.min(axis=1) - 0.5, uv.max(axis=1) - rc + 0.5).max(axis=1) + margin_px
-    return np.maximum(int(minimum), 2 * np.ceil(half).astype(int))
+    return np.where(valid, np.maximum(int(minimum), 2 * np.ceil(half).astype(int)), 0)
 
 
 def tile_px_for(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
                 minimum: int = 4) -> int:
     """One tile for every spot of ``sun_dirs``: the largest of :func:`spot_tile_px`."""
     t = spot_tile_px(camera, sun_dirs, full_angle_rad, margin_px=margin_px, minimum=minimum)
-    return int(t.max()) if len(t) else int(minimum + minimum % 2)
+    return int(t.max()) if len(t) and t.max() > 0 else int(minimum + minimum % 2)
 
 
 def tile_groups(sizes: np.ndarray, max_groups: int = 3) -> list[tuple[int, np.ndarray]]:
     """Split spots needing tiles of ``sizes`` px into at most ``max_groups`` launches, each with one
     tile (its largest spot's), choosing the cuts that render the fewest pixels. Returns
-    [(tile_px, indices)], smallest tile first."""
+    [(tile_px, indices)], smallest tile first; spots of size 0 (nothing to render) are in none."""
     sizes = np.asarray(sizes, dtype=int)
-    if len(sizes) == 0:
+    levels = np.unique(sizes[sizes > 0])
+    if len(levels) == 0:
         return []
-    levels = np.unique(sizes)
     best = None
     from itertools import combinations
 
     for k in range(min(max_groups, len(levels))):
         for cuts in combinations(levels[:-1], k):
             tops = [*cuts, levels[-1]]
-            lo = -1
+            lo = 0
             cost = 0
             for t in tops:
                 cost += int(((sizes > lo) & (sizes <= t)).sum()) * t * t
                 lo = t
             if best is None or cost < best[0]:
                 best = (cost, tops)
-    groups, lo = [], -1
+    groups, lo = [], 0
     for t in best[1]:
         idx = np.flatnonzero((sizes > lo) & (sizes <= t))
         if len(idx):
