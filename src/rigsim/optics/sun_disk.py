@@ -4,6 +4,7 @@ centroid and geometry flags.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -35,21 +36,30 @@ def _basis(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(s, e1)
 
 
-def disk_directions(sun_dir, full_angle_rad: float, n: int) -> np.ndarray:
-    """``n`` unit directions filling the cone of the given full angle with equal solid angle each.
-
-    Deterministic sunflower quadrature: ring position uniform in (1 - cos phi), azimuth stepped by
-    the golden angle. Each point carries solid angle ``2 pi (1 - cos(a/2)) / n``.
-    """
-    s = _unit(sun_dir)
-    e1, e2 = _basis(s)
+@functools.lru_cache(maxsize=4)
+def _disk_pattern(full_angle_rad: float, n: int) -> np.ndarray:
+    """The sunflower pattern of :func:`disk_directions` in the sun's own frame, (n, 3) columns
+    (along s, along e1, along e2): computed once per (angle, n), shared by every direction."""
     i = np.arange(n, dtype=np.float64)
     t = (i + 0.5) / n
     cos_phi = 1.0 - t * (1.0 - math.cos(full_angle_rad / 2.0))
     sin_phi = np.sqrt(np.maximum(0.0, 1.0 - cos_phi * cos_phi))
     psi = i * _GOLDEN_ANGLE
-    return (cos_phi[:, None] * s + sin_phi[:, None] * (np.cos(psi)[:, None] * e1
-                                                      + np.sin(psi)[:, None] * e2))
+    out = np.column_stack([cos_phi, sin_phi * np.cos(psi), sin_phi * np.sin(psi)])
+    out.flags.writeable = False
+    return out
+
+
+def disk_directions(sun_dir, full_angle_rad: float, n: int) -> np.ndarray:
+    """``n`` unit directions filling the cone of the given full angle with equal solid angle each.
+
+    Deterministic sunflower quadrature: ring position uniform in (1 - cos phi), azimuth stepped by
+    the golden angle. Each point carries solid angle ``2 pi (1 - cos(a/2)) / n``. The pattern is
+    cached per (angle, n); a direction costs one (n, 3) × (3, 3) product.
+    """
+    s = _unit(sun_dir)
+    e1, e2 = _basis(s)
+    return np.einsum("nk,kj->nj", _disk_pattern(float(full_angle_rad), int(n)), np.array([s, e1, e2]))
 
 
 def spot_outline(camera: PinholeBrown, sun_dir, full_angle_rad: float, n: int = 90):

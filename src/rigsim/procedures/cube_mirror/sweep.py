@@ -1,7 +1,7 @@
 """Seed 000 step 1 / seed 001 step B on rendered frames: the sun-sensor calibration sweep.
 
 For every sweep pose: render the sun-sensor frame (Mitsuba + detector model) at the *true*
-pose, record the turntable *reading* (true + encoder bias + noise), extract the spot with
+pose (every frame's spot in a few batched Mitsuba launches), record the turntable *reading* (true + encoder bias + noise), extract the spot with
 rigsim.imaging and centroid it, then fit intrinsics + R(sun←rot) by least squares with the
 nominal turntable. The estimator sees readings and centroids only.
 """
@@ -9,13 +9,15 @@ nominal turntable. The estimator sees readings and centroids only.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor, sweep_poses
 from rigsim.imaging import NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
+from rigsim.optics.camera import PinholeBrown
+from rigsim.optics.sun_disk import spot_truth
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import NOMINAL_D, TruePose, TurntableModel, TurntableReading
 from rigsim.truth.cube_mirror.realization import Noise, Realization
@@ -34,11 +36,27 @@ class SweepObservation:
 
 @dataclass
 class SweepTruth:
-    """The same frames' truth (for the comparison step only)."""
+    """The same frames' truth (for the comparison step only). ``uv_pixel_centroid``, the exact
+    pixel-binned centroid of each spot (quadrature of ``quadrature_points`` points), is computed on
+    first use: the sweep itself never needs it."""
 
     poses: TruePose  # true turntable angles (N,) per axis
-    uv_pixel_centroid: np.ndarray  # exact pixel-binned centroid of each spot (N, 2)
     uv_centre: np.ndarray  # exact projection of the sun's centre (what the calibration model predicts) (N, 2)
+    sun_dir_cam: np.ndarray  # unit vector to the sun in the sensor frame (N, 3)
+    camera: PinholeBrown  # the true sensor
+    full_angle_rad: float
+    response: str = "flux"
+    quadrature_points: int = 200_000
+    _pixel_centroid: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def uv_pixel_centroid(self) -> np.ndarray:
+        """Exact pixel-binned centroid of each spot (N, 2)."""
+        if self._pixel_centroid is None:
+            self._pixel_centroid = np.array([
+                spot_truth(self.camera, s, self.full_angle_rad, n=self.quadrature_points,
+                           response=self.response)["pixel_centroid_uv"] for s in self.sun_dir_cam]).reshape(-1, 2)
+        return self._pixel_centroid
 
 
 def render_sweep(
@@ -60,12 +78,19 @@ def render_sweep(
     centroid`` stage): ``"scurve"`` (default: first moment with the disk's pixel-phase correction)
     or ``"tcom"``/``"wcom"``/``"gauss"``. ``on_frame(frame, spots, k, reading_rad, pose_index)`` sees
     every rendered frame, its spots, the index of the one measured (None: rejected), the turntable
-    reading and the sweep pose's index."""
+    reading and the sweep pose's index (the frame carries its full sidecar truth).
+
+    Every spot in the field is rendered in a few Mitsuba launches (:class:`SunSpotBatch`: tiles just
+    large enough for each group of spots, at most three sizes, pasted into the readout window); each
+    frame is then digitised with its own detector seed and measured."""
     if centroider not in FRAME_METHODS:
         raise ValueError(f"centroider = {centroider!r}: allowed {', '.join(FRAME_METHODS)}")
     import time
 
-    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
+    from rigsim.detector import apply_detector
+    from rigsim.render.cube_mirror.sun_batch import SunSpotBatch, spot_tile_px, tile_groups
+    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene, detector_part
+    from rigsim.render.scene import mitsuba_seed
 
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -78,44 +103,67 @@ def render_sweep(
     read = {k: v + real.encoder_bias_rad.get(k, 0.0) + rng.normal(0.0, noise.encoder_sigma_rad.get(k, 0.0), n)
             for k, v in poses.items()}
     scene = SunSensorScene(rig, real, spp=spp)
-    keep, uv, uv_true, uv_centre = [], [], [], []
+    cam = scene.camera
+    S = np.array([scene.sun_dir_cam({k: float(v[i]) for k, v in poses.items()}) for i in range(n)]).reshape(n, 3)
+    c, ok = cam.project_valid(S)
+    ok &= cam.on_detector(c, margin_px=3.0)  # elsewhere the sun is outside the field: no spot to record
+    field_idx = np.flatnonzero(ok)
+    frame_seeds = [int(rng.integers(2**31)) for _ in field_idx]  # one per frame, in pose order, as rendered
+    renderer = scene.renderer
+    sizes = np.minimum(renderer.window_px, spot_tile_px(cam, S[field_idx], scene.full_angle_rad))
+    render_seed = int(rng.integers(2**31))
+    tiles: list = [np.zeros((0, 0))] * len(field_idx)  # size 0: outside the camera model, nothing drawn
+    for g, (tile, idx) in enumerate(tile_groups(sizes)):  # a launch per tile size: small spots, small tiles
+        batch = SunSpotBatch(renderer, tile, len(idx))
+        sel = field_idx[idx]
+        imgs = batch.render(S[sel], np.floor(c[sel] + 0.5).astype(np.int64) - tile // 2, seed=mitsuba_seed(render_seed, g))
+        for j, img in zip(idx, imgs):
+            tiles[j] = img
+    if progress and n > len(field_idx):
+        progress(n - len(field_idx))
+    det = rig.sun_sensor.detector
+    noise_model = NoiseModel.from_detector(det)
+    shape = (rig.sun_sensor.resolution_px[1], rig.sun_sensor.resolution_px[0])
+    W = renderer.window_px
+    keep, uv = [], []
     rejected = 0
-    rendered = 0
-    for i in range(n):
-        pose = {k: float(v[i]) for k, v in poses.items()}
-        s = scene.sun_dir_cam(pose)
-        c, ok = scene.camera.project_valid(s[None, :])
-        if not (ok[0] and scene.camera.on_detector(c, margin_px=3.0)[0]):
-            if progress:
-                progress(1)
-            continue  # the sun is outside the field at this pose: no spot to record
-        import warnings
+    for j, i in enumerate(field_idx):
+        fseed = frame_seeds[j]
+        if on_frame is not None:
+            import warnings
 
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            fr = scene.render(pose, seed=int(rng.integers(2**31)), truth_points=200_000, full_frame=False,
-                                 noiseless=noiseless)
-        rendered += 1
-        det = rig.sun_sensor.detector
-        spots = measure_frame(fr.dn, NoiseModel.from_detector(det), method=centroider, saturation_dn=det.max_dn,
-                              threshold_dn=0.5 if noiseless else None, origin_uv=fr.origin_uv,
-                              detector_shape=fr.detector_shape)
+            pose = {k: float(v[i]) for k, v in poses.items()}
+            win = renderer.window(S[i], tiles[j], seed=fseed, batched_tile_px=len(tiles[j]))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fr = scene.frame(pose, win, seed=fseed, noiseless=noiseless, truth_points=200_000, full_frame=False)
+            dn, origin = fr.dn, fr.origin_uv
+        else:
+            origin_w = renderer.window_origin_for(c[i])
+            photons = np.zeros((W, W))
+            t = len(tiles[j])
+            photons[W // 2 - t // 2:W // 2 - t // 2 + t, W // 2 - t // 2:W // 2 - t // 2 + t] = tiles[j]
+            photons, origin = detector_part(photons, origin_w, shape)
+            dn = apply_detector(photons, det, seed=fseed, noiseless=noiseless, origin_uv=origin,
+                                detector_shape=shape).dn
+        spots = measure_frame(dn, noise_model, method=centroider, saturation_dn=det.max_dn,
+                              threshold_dn=0.5 if noiseless else None, origin_uv=origin, detector_shape=shape)
         k = single_spot(spots)
         if on_frame is not None:
-            on_frame(fr, spots, k, {a: float(r[i]) for a, r in read.items()}, i)
+            on_frame(fr, spots, k, {ax: float(r[i]) for ax, r in read.items()}, int(i))
         if k is None:
             rejected += 1
         else:
-            keep.append(i)
+            keep.append(int(i))
             uv.append([float(spots.u[k]), float(spots.v[k])])
-            uv_true.append(fr.sidecar["truth"]["spot"]["pixel_centroid_uv"])
-            uv_centre.append(fr.sidecar["truth"]["spot"]["center_uv"])
         if progress:
             progress(1)
     keep = np.array(keep, dtype=int)
-    readings = TurntableReading({a: r[keep] for a, r in read.items()})
-    obs = SweepObservation(readings, np.array(uv), rendered, rejected, time.perf_counter() - t0)
-    return obs, SweepTruth(TruePose({k: v[keep] for k, v in poses.items()}), np.array(uv_true), np.array(uv_centre))
+    readings = TurntableReading({ax: r[keep] for ax, r in read.items()})
+    obs = SweepObservation(readings, np.array(uv).reshape(-1, 2), len(field_idx), rejected, time.perf_counter() - t0)
+    truth = SweepTruth(TruePose({k: v[keep] for k, v in poses.items()}), c[keep].reshape(-1, 2), S[keep],
+                       cam, scene.full_angle_rad, renderer.response)
+    return obs, truth
 
 
 def calibrate_from_sweep(rig: CubeMirrorRig, sweep: SweepObservation, axis_order: str | None = None) -> SunCalibration:

@@ -182,6 +182,23 @@ class SunSpotRenderer:
         return SpotWindow(arr, origin, s, center, flags, self.spp, int(seed), self.variant,
                           time.perf_counter() - t0, settings)
 
+    def window(self, sun_dir_cam, image: np.ndarray, seed: int = 0, seconds: float = 0.0, **settings) -> SpotWindow:
+        """A :class:`SpotWindow` (``window_px`` wide, placed as :meth:`render` places it, with its
+        geometry flags) holding ``image``: photons rendered elsewhere (e.g. a tile of
+        :class:`~rigsim.render.cube_mirror.sun_batch.SunSpotBatch`) centred in it; the rest is 0."""
+        s = _unit(sun_dir_cam)
+        c_uv, c_ok = self.camera.project_valid(s[None, :])
+        center = c_uv[0] if c_ok[0] else None
+        W = self.window_px
+        origin = self.window_origin_for(center) if center is not None else (0, 0)
+        flags = spot_geometry_flags(self.camera, s, self.full_angle_rad, window=(origin[0], origin[1], W, W))
+        full = np.zeros((W, W))
+        t = image.shape[0]
+        a = W // 2 - t // 2
+        full[a:a + t, a:a + t] = image
+        return SpotWindow(full, origin, s, center, flags, self.spp, int(seed), self.variant, float(seconds),
+                          {**self.settings(), **settings})
+
     def render_frame(self, sun_dir_cam, seed: int = 0) -> tuple[np.ndarray, SpotWindow]:
         """Full detector frame (H, W) of expected photons: the window composited on black.
 
@@ -262,18 +279,24 @@ class SunSensorScene:
         ``extra["window"]`` is the rendered :class:`SpotWindow`."""
         t0 = time.perf_counter()
         s = self.sun_dir_cam(pose_rad)
+        win = self.renderer.render(s, seed=seed)
+        return self.frame(pose_rad, win, seed=seed, noiseless=noiseless, truth_points=truth_points,
+                          full_frame=full_frame, t0=t0)
+
+    def frame(self, pose_rad: dict, win: SpotWindow, *, seed: int, noiseless: bool = False,
+              truth_points: int = 400_000, full_frame: bool = True, t0: float | None = None) -> Frame:
+        """The detector stage of :meth:`render` for a rendered window ``win`` (from this scene's
+        renderer or from :class:`~rigsim.render.cube_mirror.sun_batch.SunSpotBatch`): the
+        digitised frame with its sidecar (truth from ``truth_points`` quadrature points)."""
+        t0 = time.perf_counter() if t0 is None else t0
+        s = win.sun_dir_cam
         ss = self.rig.sun_sensor
         if full_frame:
-            photons, win = self.renderer.render_frame(s, seed=seed)
+            photons = win.paste_into(np.zeros((self.camera.height, self.camera.width)))
             origin, shape = (0, 0), None
         else:
-            win = self.renderer.render(s, seed=seed)
             shape = (ss.resolution_px[1], ss.resolution_px[0])
-            # the detector's part of the window: a window reaching past the edge reads out only real pixels
-            (u0, v0), (h, w) = win.origin_uv, win.image.shape
-            a0, b0 = max(0, u0), max(0, v0)
-            a1, b1 = max(a0, min(shape[1], u0 + w)), max(b0, min(shape[0], v0 + h))
-            photons, origin = win.image[b0 - v0:b1 - v0, a0 - u0:a1 - u0], (a0, b0)
+            photons, origin = detector_part(win.image, win.origin_uv, shape)
         truth = self.renderer.truth(s, n=truth_points) if not (win.flags.get("spot_off_detector") or win.flags.get("spot_outside_model")) else {"valid": False}
         return digitise(
             photons, ss.detector, seed=seed, noiseless=noiseless, origin_uv=origin, detector_shape=shape,
@@ -288,6 +311,15 @@ class SunSensorScene:
             geometry_flags=dict(win.flags),
             pose={k: math.degrees(v) for k, v in pose_rad.items()},
             extra={"window": win}, seconds=time.perf_counter() - t0)
+
+
+def detector_part(image: np.ndarray, origin_uv, shape: tuple[int, int]) -> tuple[np.ndarray, tuple[int, int]]:
+    """The detector's part of a window at ``origin_uv`` on a detector of ``shape`` (rows, cols): a
+    window reaching past the edge reads out only real pixels. Returns (pixels, their origin)."""
+    (u0, v0), (h, w) = origin_uv, image.shape
+    a0, b0 = max(0, u0), max(0, v0)
+    a1, b1 = max(a0, min(shape[1], u0 + w)), max(b0, min(shape[0], v0 + h))
+    return image[b0 - v0:b1 - v0, a0 - u0:a1 - u0], (a0, b0)
 
 
 def sun_sensor_export_dict(scene: SunSensorScene, pose_rad: dict, spp: int = 64) -> tuple[dict, list[str]]:

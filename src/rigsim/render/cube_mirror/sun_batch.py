@@ -1,0 +1,241 @@
+"""Many sun spots in one Mitsuba launch: the sweep's renderer.
+
+:class:`SunSpotBatch` renders the windows of many sun directions side by side on one film (a grid
+of ``tile_px`` × ``tile_px`` tiles). The sensor ``rigsim_pinhole_tiles`` is the distorted pinhole
+of :mod:`rigsim.render.plugins` with two per-tile parameters read by a gather on the tile index:
+the window's place on the detector (tile pixel (i, j) is detector pixel (u0 + i, v0 + j)) and a
+rotation camera → world that turns that tile's sun direction onto the world's +z axis, where the
+one disk of :class:`~rigsim.render.cube_mirror.sun_sensor.SunSpotRenderer` sits. A uniform disk
+seen from a pinhole depends only on the angle between the ray and the sun, so each tile sees
+exactly the image the per-frame renderer draws in its window; only the sampler's random
+numbers differ. Nothing but the disk emits, so pixels outside a tile are exactly zero.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rigsim.optics.sun_disk import _unit
+from rigsim.render.backend import ensure_variant
+from rigsim.render.scene import Element, Scene, mitsuba_seed
+
+__all__ = ["TILED_PLUGIN", "SunSpotBatch", "spot_tile_px", "tile_groups", "tile_px_for", "tile_rotations"]
+
+TILED_PLUGIN = "rigsim_pinhole_tiles"
+MAX_LAUNCH_SAMPLES = 2**28
+"""Light paths per launch: a sweep with more is cut into equal launches of this many at most."""
+
+_registered: set = set()
+
+
+def _frames(sun_dirs) -> np.ndarray:
+    """(K, 3, 3) rows (e1, e2, s) per sun direction: :func:`rigsim.optics.sun_disk._basis`, vectorised."""
+    S = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
+    norm = np.linalg.norm(S, axis=1)
+    if not np.all(np.isfinite(norm) & (norm > 0)):
+        raise ValueError("sun directions must be finite non-zero 3-vectors")
+    S = S / norm[:, None]
+    a = np.where((np.abs(S[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    e1 = np.cross(S, a)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    return np.stack([e1, np.cross(S, e1), S], axis=1)
+
+
+def tile_rotations(sun_dirs: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) rotations camera → world with rows (e1, e2, s): each sun direction s goes to +z."""
+    return _frames(sun_dirs)
+
+
+def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
+                 minimum: int = 4) -> np.ndarray:
+    """Per sun direction, the smallest even tile holding its spot with the projected rim at least
+    ``margin_px`` inside the tile's edge, the tile centred as in
+    :meth:`SunSpotRenderer.window_origin_for` (origin = rounded centre − tile // 2); 0 for a spot
+    outside the camera model (the per-frame renderer draws nothing there either)."""
+    S = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
+    if len(S) == 0:
+        return np.zeros(0, dtype=int)
+    psi = np.linspace(0.0, 2.0 * math.pi, 90, endpoint=False)
+    h = full_angle_rad / 2.0
+    B = _frames(S)  # rows e1, e2, s per direction
+    ring = np.column_stack([math.sin(h) * np.cos(psi), math.sin(h) * np.sin(psi), np.full(len(psi), math.cos(h))])
+    rims = np.einsum("pk,nkj->npj", ring, B)  # the rim of spot_outline, every direction at once
+    uv, ok = camera.project_valid(rims.reshape(-1, 3))
+    uv = uv.reshape(len(S), len(psi), 2)
+    c, c_ok = camera.project_valid(S)
+    valid = ok.reshape(len(S), len(psi)).all(axis=1) & c_ok
+    rc = np.floor(np.where(valid[:, None], c, 0.0) + 0.5)
+    uv = np.where(valid[:, None, None], uv, rc[:, None, :])
+    half = np.maximum(rc - uv.min(axis=1) - 0.5, uv.max(axis=1) - rc + 0.5).max(axis=1) + margin_px
+    return np.where(valid, np.maximum(int(minimum), 2 * np.ceil(half).astype(int)), 0)
+
+
+def tile_px_for(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
+                minimum: int = 4) -> int:
+    """One tile for every spot of ``sun_dirs``: the largest of :func:`spot_tile_px`."""
+    t = spot_tile_px(camera, sun_dirs, full_angle_rad, margin_px=margin_px, minimum=minimum)
+    return int(t.max()) if len(t) and t.max() > 0 else int(minimum + minimum % 2)
+
+
+def tile_groups(sizes: np.ndarray, max_groups: int = 3) -> list[tuple[int, np.ndarray]]:
+    """Split spots needing tiles of ``sizes`` px into at most ``max_groups`` launches, each with one
+    tile (its largest spot's), choosing the cuts that render the fewest pixels. Returns
+    [(tile_px, indices)], smallest tile first; spots of size 0 (nothing to render) are in none."""
+    sizes = np.asarray(sizes, dtype=int)
+    levels = np.unique(sizes[sizes > 0])
+    if len(levels) == 0:
+        return []
+    best = None
+    from itertools import combinations
+
+    for k in range(min(max_groups, len(levels))):
+        for cuts in combinations(levels[:-1], k):
+            tops = [*cuts, levels[-1]]
+            lo = 0
+            cost = 0
+            for t in tops:
+                cost += int(((sizes > lo) & (sizes <= t)).sum()) * t * t
+                lo = t
+            if best is None or cost < best[0]:
+                best = (cost, tops)
+    groups, lo = [], 0
+    for t in best[1]:
+        idx = np.flatnonzero((sizes > lo) & (sizes <= t))
+        if len(idx):
+            groups.append((int(t), idx))
+        lo = t
+    return groups
+
+
+def _register() -> None:
+    variant = ensure_variant()
+    if variant in _registered:
+        return
+    import drjit as dr
+    import mitsuba as mi
+
+    from rigsim.render.plugins import register_sensors
+
+    pinhole, _ = register_sensors()
+
+    class TiledPinholeSensor(pinhole):
+        """The distorted pinhole, one window and one camera rotation per film tile."""
+
+        def __init__(self, props):
+            self.tile_px = int(props["tile_px"])
+            self.tiles_x = int(props["tiles_x"])
+            self.n_tiles = int(props["n_tiles"])
+            self.tiles = mi.Float(np.zeros(12 * self.n_tiles, dtype=np.float32))  # u0 v0 active R(9), per tile
+            super().__init__(props)
+
+        def traverse(self, cb):
+            super().traverse(cb)
+            cb.put("tiles", self.tiles, mi.ParamFlags.NonDifferentiable)
+
+        def _update(self):
+            super()._update()
+            dr.make_opaque(self.tiles)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            wav, wav_weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
+            w, h = self._film_px
+            fx, fy = sample2.x * w, sample2.y * h
+            t = float(self.tile_px)
+            tx, ty = dr.floor(fx / t), dr.floor(fy / t)
+            k = dr.minimum(mi.UInt32(ty) * self.tiles_x + mi.UInt32(tx), self.n_tiles - 1) * 12
+
+            def tile(i):
+                return dr.gather(mi.Float, self.tiles, k + i)
+
+            u = fx - tx * t + tile(0) - 0.5
+            v = fy - ty * t + tile(1) - 0.5
+            xd = (u - self.cx) / self.fx
+            yd = (v - self.cy) / self.fy
+            x, y, det, valid = self._undistort(xd, yd)
+            valid &= self._on_detector(u, v) & (tile(2) > 0.5)
+            d = dr.normalize(mi.Vector3f(x, y, 1.0))
+            if self.response == "flux":
+                ct2 = d.z * d.z
+                wt = ct2 * ct2 / det
+            else:
+                wt = mi.Float(1.0)
+            world = mi.Vector3f(dr.fma(tile(3), d.x, dr.fma(tile(4), d.y, tile(5) * d.z)),
+                                dr.fma(tile(6), d.x, dr.fma(tile(7), d.y, tile(8) * d.z)),
+                                dr.fma(tile(9), d.x, dr.fma(tile(10), d.y, tile(11) * d.z)))
+            ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), world, time, wav)
+            return ray, wav_weight * dr.select(valid & active, wt, 0.0)
+
+    mi.register_sensor(TILED_PLUGIN, lambda props: TiledPinholeSensor(props))
+    _registered.add(variant)
+
+
+class SunSpotBatch:
+    """Render the windows of many sun directions with a :class:`SunSpotRenderer`'s disk, camera,
+    sampler and response, ``tile_px`` wide, a grid of up to ``tiles_per_launch`` tiles per launch.
+
+    ``render(sun_dirs, origins, seed)`` returns (K, tile_px, tile_px) expected photons; window k's
+    pixel (i, j) is detector pixel ``origins[k] + (i, j)``. The scalar fallback variant renders
+    window by window with the renderer itself."""
+
+    def __init__(self, renderer, tile_px: int, tiles_per_launch: int):
+        self.renderer = renderer
+        self.tile_px = int(tile_px)
+        if self.tile_px < 4:
+            raise ValueError(f"tile_px = {tile_px!r}: must be >= 4")
+        self.n_tiles = max(1, min(int(tiles_per_launch), MAX_LAUNCH_SAMPLES // (self.tile_px**2 * renderer.spp)))
+        self.tiles_x = math.ceil(math.sqrt(self.n_tiles))
+        self.tiles_y = math.ceil(self.n_tiles / self.tiles_x)
+        self.variant = ensure_variant()
+        self.batched = self.variant.startswith("llvm")
+        r = renderer
+        self._scene = self._build() if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
+
+    @property
+    def samples_per_launch(self) -> int:
+        return self.tiles_x * self.tiles_y * self.tile_px**2 * self.renderer.spp
+
+    def _build(self) -> Scene:
+        import mitsuba as mi
+
+        _register()
+        r, cam, t = self.renderer, self.renderer.camera, self.tile_px
+        sensor = {
+            "type": TILED_PLUGIN, "tile_px": t, "tiles_x": self.tiles_x, "n_tiles": self.n_tiles,
+            "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+            "k1": cam.k1, "k2": cam.k2, "k3": cam.k3, "p1": cam.p1, "p2": cam.p2,
+            "detector_width": cam.width, "detector_height": cam.height, "response": r.response,
+            "film": {"type": "hdrfilm", "width": self.tiles_x * t, "height": self.tiles_y * t,
+                     "rfilter": {"type": "box"}, "pixel_format": "luminance"},
+            "sampler": {"type": r.sampler, "sample_count": r.spp},
+        }
+        sun = {"type": "disk", "to_world": mi.ScalarTransform4f(r._disk_matrix(np.array([0.0, 0.0, 1.0]))),
+               "emitter": {"type": "area", "radiance": {"type": "uniform", "value": r._radiance()}}}
+
+        def set_tiles(state) -> dict:
+            return {"sensor.tiles": mi.Float(state["tiles"])} if "tiles" in state else {}
+
+        return Scene({"type": "path", "max_depth": 1}, [Element("sensor", sensor, set_tiles), Element("sun", sun)])
+
+    def render(self, sun_dirs, origins, seed: int = 0) -> np.ndarray:
+        sun_dirs = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
+        origins = np.asarray(origins, dtype=np.int64).reshape(-1, 2)
+        K, t = len(sun_dirs), self.tile_px
+        if not self.batched:
+            return np.array([self._scene.render({"sun_dir": _unit(s), "window_origin": tuple(int(x) for x in o)},
+                                                seed=mitsuba_seed(seed, k), spp=self.renderer.spp)
+                             for k, (s, o) in enumerate(zip(sun_dirs, origins))]).reshape(K, t, t)
+        rot = tile_rotations(sun_dirs)
+        out = np.empty((K, t, t))
+        for launch, a in enumerate(range(0, K, self.n_tiles)):
+            b = min(K, a + self.n_tiles)
+            data = np.zeros((self.n_tiles, 12))
+            data[:b - a, 0:2] = origins[a:b]
+            data[:b - a, 2] = 1.0
+            data[:b - a, 3:] = rot[a:b].reshape(-1, 9)
+            img = self._scene.render({"tiles": data.ravel().astype(np.float32)}, seed=mitsuba_seed(seed, launch),
+                                     spp=self.renderer.spp)
+            grid = img.reshape(self.tiles_y, t, self.tiles_x, t).transpose(0, 2, 1, 3).reshape(-1, t, t)
+            out[a:b] = grid[:b - a]
+        return out
