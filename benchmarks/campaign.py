@@ -25,6 +25,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=200)
     ap.add_argument("--seed", type=int, default=2009)
     ap.add_argument("--repeat-frames", type=int, default=4)
+    ap.add_argument("--aiming-workers", type=int, default=1)
     a = ap.parse_args()
 
     t_import = time.perf_counter()
@@ -40,7 +41,8 @@ def main() -> None:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        camp = rc.run_rendered_campaign(rig, real, seed=a.seed, repeat_frames=a.repeat_frames)
+        camp = rc.run_rendered_campaign(rig, real, seed=a.seed, repeat_frames=a.repeat_frames,
+                                        aiming_workers=a.aiming_workers)
     t_camp = time.perf_counter() - t0
     mn = camp.measured_noise
     t0 = time.perf_counter()

@@ -195,3 +195,25 @@ def test_aiming_frames_are_bit_identical_for_one_and_two_workers():
             assert np.array_equal(a.hole.dn, b.hole.dn) and np.array_equal(a.spot.dn, b.spot.dn), key
     # different seeds do differ (the chunks are not all one stream)
     assert not np.array_equal(ref[0].spot_photons, ref[1].spot_photons)
+
+
+def test_a_dead_aiming_worker_leaves_the_frame_unchanged():
+    """The worker process is killed before a frame: the renderer warns once, renders that chunk itself and
+    returns the frame one process gives for the seed."""
+    from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
+    from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
+
+    pose = dict(diaphragm_geometry(RIG, REAL, 0).layout.null_pose_rad)
+    pose["X"] += math.radians(-60.0 / 3600)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ConcentricityRenderer(RIG, REAL, 0, workers=1).render(pose, seed=3)
+    r = ConcentricityRenderer(RIG, REAL, 0, workers=2)
+    r.render(pose, seed=9)  # the worker is up
+    for proc in list(r._chunks._pool._processes.values()):
+        proc.kill()
+        proc.join()
+    with pytest.warns(RuntimeWarning, match="worker process failed"):
+        got = r.render(pose, seed=3)
+    assert r._chunks._pool is None
+    assert np.array_equal(ref.spot_photons, got.spot_photons) and np.array_equal(ref.spot.dn, got.spot.dn)

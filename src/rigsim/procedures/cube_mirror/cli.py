@@ -159,6 +159,8 @@ def _run_cube_mirror_rendered(args) -> int:
     print(f"rigsim {rigsim.__version__} — cube-mirror campaign on rendered frames (seed {rig.seed_document}), rig '{rig.name}'")
     print(f"rig file: {args.rig}   seed: {args.seed}   axis order (outer→inner): {axis_order}   "
           f"errors: {'none (ideal rig, noise-free detector)' if args.ideal else 'the rig file’s true errors + detector and encoder noise'}")
+    from rigsim.render.threads import cores
+
     t_all = time.perf_counter()
     total = rc.expected_frames(rig) + args.repeat_frames
     with warnings.catch_warnings():
@@ -168,7 +170,7 @@ def _run_cube_mirror_rendered(args) -> int:
             camp = rc.run_rendered_campaign(rig, real, seed=args.seed, axis_order=axis_order, noise=noise,
                                             noiseless=args.ideal, threshold=threshold, sweep_spp=args.sweep_spp,
                                             sweep_step_deg=args.sweep_step, repeat_frames=args.repeat_frames,
-                                            progress=bar, frames=frames)
+                                            progress=bar, frames=frames, aiming_workers=min(2, cores()))
     wall = dict(camp.times)
     res = camp.result
     cal = camp.calibration
@@ -187,6 +189,9 @@ def _run_cube_mirror_rendered(args) -> int:
 
     _print_truth_vs_recovered(res, ("R(sun←rot)  sweep fit", "R(cube←rot) search + TRIAD", "R(cube←sun) composed"))
     user = _user_frames_finish(args, rig, frames, camp, real, axis_order)
+    from rigsim.render.backend import release_memory
+
+    release_memory()  # the renderers are gone: the budget's workers and the report's 3D view start smaller
     budget = None
     if not args.no_budget:
         mn = camp.measured_noise

@@ -99,7 +99,7 @@ def expected_frames(rig: CubeMirrorRig) -> int:
 def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 0, axis_order: str | None = None,
                           noise: Noise | None = None, noiseless: bool = False, threshold: float | None = None,
                           sweep_spp: int = 256, sweep_step_deg: float | None = None, repeat_frames: int = 0,
-                          progress=None, frames=None) -> RenderedCampaign:
+                          progress=None, frames=None, aiming_workers: int = 1) -> RenderedCampaign:
     """One campaign on rendered frames against the rig instance ``real``.
 
     ``noise``: the random errors that are not image noise (encoder noise; default the rig's).
@@ -108,6 +108,8 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     renders that many extra frames at the first face's final pose to measure the null measurement
     scatter (for :func:`rendered_error_budget`). ``frames``
     (:class:`~rigsim.procedures.cube_mirror.user_frames.CampaignFrames`) sees every sweep frame.
+    ``aiming_workers``: processes rendering each aiming-camera frame's fixed pencil chunks (the frames
+    are the same for any count).
     """
     from rigsim.procedures.cube_mirror.sweep import render_sweep
 
@@ -144,7 +146,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
         for fi, face in enumerate(rig.procedure.faces):
             pb.set_description(f"concentricity search, face {face}")
             t0 = time.perf_counter()
-            renderer = ConcentricityRenderer(rig, real, fi)
+            renderer = ConcentricityRenderer(rig, real, fi, workers=aiming_workers)
             times[f"aiming-camera scene build, face {face}"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             meas = OffsetMeasurer(rig, real, fi, renderer=renderer, seed=search_seed + fi, noiseless=noiseless,
@@ -164,6 +166,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
                     resid.append(m + meas.bias_px - ex)
                     pb.update(1)
                 times["aiming-camera repeatability frames"] = time.perf_counter() - t0
+            renderer.close()
         measured.update(_null_noise(resid, "px"))
     else:
         from rigsim.procedures.cube_mirror.autocollimation import (

@@ -110,16 +110,35 @@ class PencilChunks:
             return p.render_chunk(seeds[0], per)
         futures = {}
         if self._pool is not None:  # chunks 1 … workers-1 in the workers, the rest here, in order
-            futures = {c: self._pool.submit(_worker_render, dict(pose_rad), s, per)
-                       for c, s in enumerate(seeds) if 0 < c < self.workers}
+            try:
+                futures = {c: self._pool.submit(_worker_render, dict(pose_rad), s, per)
+                           for c, s in enumerate(seeds) if 0 < c < self.workers}
+            except Exception as exc:  # noqa: BLE001  (the pool broke since the last frame)
+                self._lost_worker(exc)
+                futures = {}
         parts = [None] * len(seeds)
         for c, s in enumerate(seeds):
             if c not in futures:
                 parts[c] = p.render_chunk(s, per)
+        for c, fut in futures.items():
+            try:
+                parts[c] = _uncrop(parts[0].shape, fut.result())
+            except Exception as exc:  # noqa: BLE001  (the worker died or could not start: render that chunk here)
+                self._lost_worker(exc)
+                p.set_pose(pose_rad)
+                parts[c] = p.render_chunk(seeds[c], per)
         acc = np.zeros_like(parts[0])
         for c in range(len(seeds)):
-            acc += parts[c] if parts[c] is not None else _uncrop(acc.shape, futures[c].result())
+            acc += parts[c]
         return acc / len(seeds)
+
+    def _lost_worker(self, exc: BaseException) -> None:
+        if self._pool is not None:
+            import warnings
+
+            warnings.warn(f"aiming-camera worker process failed ({type(exc).__name__}); rendering its chunks in this "
+                          "process (same frames, slower)", RuntimeWarning, stacklevel=3)
+            self.close()
 
     def close(self) -> None:
         if self._pool is not None:
