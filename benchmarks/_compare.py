@@ -64,7 +64,9 @@ def old_src(base: str = BASE) -> Path:
     cache = getattr(old_src, "_cache", {})
     if base not in cache:
         d = Path(tempfile.mkdtemp(prefix=f"rigsim-old-{base}-"))
-        arc = subprocess.run(["git", "-C", str(REPO), "archive", base, "src"], check=True, capture_output=True).stdout
+        # src/ and the rig files beside it (a default rig is found in the repository's scenes/)
+        arc = subprocess.run(["git", "-C", str(REPO), "archive", base, "src", "scenes"], check=True,
+                             capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", str(d)], input=arc, check=True)
         cache[base] = d / "src"
         old_src._cache = cache

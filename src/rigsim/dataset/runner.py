@@ -250,14 +250,16 @@ def _generate_locked(root, t0, gen, opts, kind, rig_path, rig_text, frames, swee
     return GenerateResult(root, n, len(todo), n_resumed, dt, len(todo) / dt_render if todo else 0.0, n_retries, manifest)
 
 
-def _die_with_parent() -> None:
+def _die_with_parent(parent: int | None = None) -> None:
     """A worker must not outlive the run that started it (a killed main process would otherwise leave
     workers rendering and writing, holding the caller's pipe): Linux's parent-death signal, and a
     watchdog thread where that is not available."""
     import signal
     import threading
 
-    parent = os.getppid()
+    # the parent's pid comes from the parent: a worker that starts after its parent died (a slow
+    # start on a busy machine) would otherwise take init's pid for its parent's and live on
+    parent = os.getppid() if parent is None else int(parent)
     try:
         import ctypes
 
@@ -276,26 +278,19 @@ def _die_with_parent() -> None:
     threading.Thread(target=watch, name="rigsim-parent-watch", daemon=True).start()
 
 
-def _init_worker(threads: int | None) -> None:
+def _init_worker(threads: int | None, parent: int | None = None) -> None:
     """Die with the parent; one thread per worker process when several share the machine (no oversubscription)."""
-    _die_with_parent()
+    _die_with_parent(parent)
     _set_threads(threads)
 
 
 def _set_threads(threads: int | None) -> None:
+    """The thread policy (:mod:`rigsim.render.threads`): ``"worker"`` (every pool one thread) for one of
+    several workers, else ``"render"`` with ``threads`` Dr.Jit/OpenCV threads and one BLAS thread."""
     if threads:
-        try:
-            from rigsim.render.backend import set_thread_count
+        from rigsim.render.threads import apply_thread_policy
 
-            set_thread_count(int(threads))
-        except Exception:
-            pass
-        try:
-            import cv2
-
-            cv2.setNumThreads(int(threads))
-        except Exception:
-            pass
+        apply_thread_policy("worker" if int(threads) == 1 else "render", int(threads))
 
 
 def _run_pool(workers, kind, rig_text, rig_source, opts, root, fmt, chunks, retries, bar) -> int:
@@ -310,7 +305,7 @@ def _run_pool(workers, kind, rig_text, rig_source, opts, root, fmt, chunks, retr
     while pending:
         ctx = mp.get_context("spawn")  # Mitsuba/Dr.Jit state must not be forked
         with ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx, initializer=_init_worker,
-                                 initargs=(threads,)) as ex:
+                                 initargs=(threads, os.getpid())) as ex:
             futs = {ex.submit(render_chunk, kind, rig_text, rig_source, opts, str(root), fmt, chunks[k]): k
                     for k in sorted(pending)}
             broken = False

@@ -59,16 +59,11 @@ def encode_image(img: np.ndarray, fmt: str, header=None) -> bytes:
     a = np.asarray(img)
     if a.dtype != np.uint16 or a.ndim != 2:
         raise ValueError(f"frames must be 2-D uint16, got {a.dtype} {a.shape}")
+    from rigsim.files.images import encode_image as encode_frame
+
     if fmt == "png":
-        import cv2
-
-        ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, 3])
-        if not ok:
-            raise RuntimeError("PNG encoding failed")
-        return buf.tobytes()
+        return encode_frame(a, ".png")  # the one PNG writer (Huffman-only after the Average filter: fast, lossless)
     if fmt == "fits":
-        from rigsim.files.images import encode_image as encode_frame
-
         return encode_frame(a, ".fits", header)  # the one FITS writer, header cards included
     raise ValueError(f"image format {fmt!r}: must be 'png' or 'fits'")
 

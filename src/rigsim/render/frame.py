@@ -100,8 +100,6 @@ def build_sidecar(*, truth: dict | None = None, render: dict | None = None,
 
 def write_frame(path, dn: np.ndarray, sidecar: dict) -> tuple[Path, Path]:
     """Write ``<path>.png`` (16-bit) and ``<path>.json``. Returns both paths."""
-    import cv2
-
     img = np.asarray(dn)
     if img.ndim != 2 or img.dtype != np.uint16:
         raise ValueError(f"frames are 2-D uint16 images; got shape {img.shape}, dtype {img.dtype}")
@@ -112,11 +110,9 @@ def write_frame(path, dn: np.ndarray, sidecar: dict) -> tuple[Path, Path]:
     side["image"] = {"file": png.name, "width": int(img.shape[1]), "height": int(img.shape[0]),
                      "dtype": "uint16", "convention": "img[v, u]; pixel (0,0) centre at (0,0)"}
     from rigsim.files.atomic import atomic_write_bytes
+    from rigsim.files.images import encode_image
 
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(img))
-    if not ok:
-        raise OSError(f"cv2.imencode could not encode {png}")
-    atomic_write_bytes(png, buf.tobytes())
+    atomic_write_bytes(png, encode_image(img, ".png"))
     atomic_write_bytes(js, json.dumps(side, indent=1, sort_keys=True, allow_nan=False).encode())
     return png, js
 
