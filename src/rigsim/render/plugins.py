@@ -207,13 +207,9 @@ def _make_classes():  # noqa: C901 - one closure per variant keeps mitsuba out o
             valid = (r2 < self.r2_max) & (det > 0) & (resid < 1e-5 * (1.0 + dr.sqrt(r2)))
             return x, y, det, valid
 
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            wav, wav_weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1,
-                                                      active)
-            u, v = self._film_uv_to_pixel(sample2)
-            xd = (u - self.cx) / self.fx
-            yd = (v - self.cy) / self.fy
-            x, y, det, valid = self._undistort(xd, yd)
+        def _pixel_ray(self, u, v):
+            """Camera-frame unit direction of detector pixel position (u, v), its response weight and validity."""
+            x, y, det, valid = self._undistort((u - self.cx) / self.fx, (v - self.cy) / self.fy)
             valid &= self._on_detector(u, v)
             d = dr.normalize(mi.Vector3f(x, y, 1.0))
             if self.response == "flux":
@@ -221,6 +217,13 @@ def _make_classes():  # noqa: C901 - one closure per variant keeps mitsuba out o
                 w = ct2 * ct2 / det
             else:
                 w = mi.Float(1.0)
+            return d, w, valid
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            wav, wav_weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1,
+                                                      active)
+            u, v = self._film_uv_to_pixel(sample2)
+            d, w, valid = self._pixel_ray(u, v)
             ray = mi.Ray3f(self.to_world @ mi.Point3f(0.0, 0.0, 0.0), self.to_world @ d, time,
                            wav)
             return ray, wav_weight * dr.select(valid & active, w, 0.0)

@@ -151,16 +151,8 @@ def _register() -> None:
 
             u = fx - tx * t + tile(0) - 0.5
             v = fy - ty * t + tile(1) - 0.5
-            xd = (u - self.cx) / self.fx
-            yd = (v - self.cy) / self.fy
-            x, y, det, valid = self._undistort(xd, yd)
-            valid &= self._on_detector(u, v) & (tile(2) > 0.5)
-            d = dr.normalize(mi.Vector3f(x, y, 1.0))
-            if self.response == "flux":
-                ct2 = d.z * d.z
-                wt = ct2 * ct2 / det
-            else:
-                wt = mi.Float(1.0)
+            d, wt, valid = self._pixel_ray(u, v)
+            valid &= tile(2) > 0.5
             world = mi.Vector3f(dr.fma(tile(3), d.x, dr.fma(tile(4), d.y, tile(5) * d.z)),
                                 dr.fma(tile(6), d.x, dr.fma(tile(7), d.y, tile(8) * d.z)),
                                 dr.fma(tile(9), d.x, dr.fma(tile(10), d.y, tile(11) * d.z)))
