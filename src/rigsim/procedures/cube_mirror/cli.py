@@ -219,6 +219,7 @@ def _run_cube_mirror_rendered(args) -> int:
         rig_path = os.path.relpath(resolve_rig_path(args.rig))
     except Exception:
         rig_path = args.rig
+    release_memory()  # the budget's arrays: the report's 3D view (~300 MB of off-screen OpenGL) starts smaller
     files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall, user=user,
                          command="rigsim " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rigsim") else None)
     print("\nWall time by stage (s): " + ", ".join(f"{k} {v:.1f}" for k, v in wall.items()))
