@@ -121,3 +121,15 @@ def _print_row(name: str, sides: dict, old: bool, target: str) -> None:
         if r:
             print(f"{'':<6}{label} result: " + ", ".join(f"{k} {v:.6g}" for k, v in r.items()))
     sys.stdout.flush()
+
+
+def main_for(doc: str, name: str, setup: str, stmt: str, *, target: str = "", **fmt) -> None:
+    """The ``main()`` of a one-case benchmark script: ``--repeat`` and ``--rounds`` options, then
+    :func:`compare` with ``setup`` formatted with ``fmt``."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeat", type=int, default=1, help="timed runs per process (default 1)")
+    ap.add_argument("--rounds", type=int, default=1, help="old/new process pairs (default 1)")
+    a = ap.parse_args()
+    compare(name, setup.format(**fmt), stmt, repeat=a.repeat, rounds=a.rounds, target=target)

@@ -12,12 +12,11 @@ Usage: PYTHONPATH=src .venv/bin/python benchmarks/run_boresight.py [--repeat 1] 
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _compare import compare
+from _compare import main_for
 
 SETUP = """
 import json, os, tempfile, io, contextlib
@@ -43,12 +42,8 @@ result = {"orbit_rel_rms_x_arcsec": rel[0], "orbit_rel_rms_y_arcsec": rel[1], "o
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--rounds", type=int, default=1)
-    a = ap.parse_args()
-    rig = str(Path(__file__).resolve().parents[1] / "scenes" / "dual_line_array_prism.toml")  # the old tree is src/ only
-    compare("run boresight (default)", SETUP.format(rig=rig), STMT, repeat=a.repeat, rounds=a.rounds, target="<= 20 s")
+    rig = str(Path(__file__).resolve().parents[1] / "scenes" / "dual_line_array_prism.toml")
+    main_for(__doc__, "run boresight (default)", SETUP, STMT, target="<= 20 s", rig=rig)
 
 
 if __name__ == "__main__":

@@ -12,12 +12,11 @@ Usage: PYTHONPATH=src .venv/bin/python benchmarks/run_star.py [--repeat 1] [--ro
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _compare import compare
+from _compare import main_for
 
 SETUP = """
 import json, os, tempfile, io, contextlib
@@ -44,12 +43,8 @@ for k, v in d.get("times_s", {}).items():   # per-stage seconds of the run (its 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--rounds", type=int, default=1)
-    a = ap.parse_args()
-    rig = str(Path(__file__).resolve().parents[1] / "scenes" / "star_sensor.toml")  # the old tree is src/ only
-    compare("run star-calibration (default)", SETUP.format(rig=rig), STMT, repeat=a.repeat, rounds=a.rounds, target="<= 40 s")
+    rig = str(Path(__file__).resolve().parents[1] / "scenes" / "star_sensor.toml")
+    main_for(__doc__, "run star-calibration (default)", SETUP, STMT, target="<= 40 s", rig=rig)
 
 
 if __name__ == "__main__":
