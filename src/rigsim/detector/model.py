@@ -62,9 +62,10 @@ def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float) -> N
     x[m:] += g[:n - m]
 
 
-def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn):
+def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn, added=None):
     """The noisy chain over one block of pixels (flat views); writes the outputs in place and
-    returns the counts of full-well and ADC-clipped pixels."""
+    returns the counts of full-well and ADC-clipped pixels. ``added``: electrons added after the
+    shot noise (or None)."""
     e = np.empty(ph.size, np.float32)
     np.minimum(ph, 1e30, out=e, casting="unsafe")
     e *= eg
@@ -72,10 +73,12 @@ def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn):
     e += dark                                  # λ: photo-electrons and dark electrons are Poisson
     fw = np.float32(cfg.full_well_e)
     K = cfg.gain_dn_per_e
-    t = np.minimum(e, fw)
+    t = np.minimum(e, fw) if added is None else np.minimum(e + added, fw)
     np.multiply(t, np.float32(K), out=expected_dn)
     expected_dn += cfg.offset_dn
     n = poisson_inverse_cdf(e, u)
+    if added is not None:
+        n += added
     well = n >= fw
     np.minimum(n, fw, out=n)
     if cfg.read_noise_e > 0:
@@ -92,7 +95,7 @@ def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn):
 
 def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | None = None, *,
                    noiseless: bool = False, origin_uv: tuple[int, int] = (0, 0),
-                   detector_shape: tuple[int, int] | None = None) -> DetectorFrame:
+                   detector_shape: tuple[int, int] | None = None, added_e: np.ndarray | None = None) -> DetectorFrame:
     """Digitise an image of expected photon counts per pixel (over the exposure).
 
     Chain: photons x QE x PRNU -> Poisson; dark: Poisson(dark_current x t + DSNU); sum clipped at
@@ -103,7 +106,9 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     ``noiseless=True`` drops every random term (shot, dark shot, read noise, DSNU, PRNU) and keeps
     QE, mean dark signal, full well, gain, offset, quantisation and ADC clipping.
     For a crop window pass its ``origin_uv`` and the full ``detector_shape`` (rows, cols) so the
-    fixed pattern matches the full frame's.
+    fixed pattern matches the full frame's. ``added_e``: electrons (same shape as the photons) added
+    to the signal after the shot noise and before the full well — charge the optics did not deliver
+    (hot pixels, cosmic-ray hits: rigsim.detector.defects).
 
     The noisy chain runs in float32 over blocks of pixels (counts stay exact integers up to the
     largest full well, 1e7 < 2^24); ``expected_dn`` is float64.
@@ -115,6 +120,12 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     if not noiseless and seed is None:
         raise ValueError("apply_detector needs an explicit seed (or noiseless=True)")
     det_shape = tuple(ph.shape) if detector_shape is None else tuple(int(x) for x in detector_shape)
+    added = None
+    if added_e is not None:
+        added = np.asarray(added_e, dtype=np.float64)
+        if added.shape != ph.shape:
+            raise ValueError(f"added_e has shape {added.shape}, the photons {ph.shape}")
+        _check_photons(added)
 
     eta = cfg.quantum_efficiency
     dark_mean = cfg.dark_mean_e
@@ -122,6 +133,8 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     if noiseless:
         ph = ph.astype(np.float64, copy=False)
         e_mean = eta * ph + dark_mean
+        if added is not None:
+            e_mean = e_mean + added
         electrons = np.minimum(e_mean, cfg.full_well_e)
         well_clip = e_mean >= cfg.full_well_e
         expected_dn = K * electrons + cfg.offset_dn
@@ -146,11 +159,13 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         saturated = np.empty(ph.shape, bool)
         expected_dn = np.empty(ph.shape, np.float64)
         flat = [a.reshape(-1) for a in (np.ascontiguousarray(ph), eg, dark, dn, saturated, expected_dn)]
+        flat_added = None if added is None else added.astype(np.float32).reshape(-1)
         n_well = n_adc = 0
         for i in range(0, ph.size, _CHUNK):
             s = slice(i, min(ph.size, i + _CHUNK))
             u = rng_shot.random(s.stop - s.start, dtype=np.float32)
-            w, a = _noisy_block(*(f[s] for f in flat[:3]), u, cfg, rng_read, *(f[s] for f in flat[3:]))
+            w, a = _noisy_block(*(f[s] for f in flat[:3]), u, cfg, rng_read, *(f[s] for f in flat[3:]),
+                                None if flat_added is None else flat_added[s])
             n_well += w
             n_adc += a
     meta = {

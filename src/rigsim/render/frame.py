@@ -228,17 +228,20 @@ def digitise(photons: np.ndarray, detector_config, *, seed: int, noiseless: bool
              detector_shape: tuple[int, int] | None = None, truth: dict | None = None, truth_object=None,
              render: dict | None = None, geometry_flags: dict | None = None, pose: dict | None = None,
              sidecar_extra: dict | None = None, extra: dict | None = None, seconds: float = 0.0,
-             index: int = 0, time_s: float = 0.0, frame_seed: int | None = None) -> Frame:
+             index: int = 0, time_s: float = 0.0, frame_seed: int | None = None, added_e=None) -> Frame:
     """The render loop's detector stage: expected photons per pixel (a whole frame, or a window at
     ``origin_uv`` of a detector of ``detector_shape`` (rows, cols)) → a :class:`Frame` with its sidecar.
     ``seed`` drives the detector noise; ``frame_seed`` (default ``seed``) is the seed the sidecar
-    records, the one the whole frame is reproduced from when the detector's is derived from it."""
+    records, the one the whole frame is reproduced from when the detector's is derived from it.
+    ``added_e``: electrons added after the shot noise (hot pixels, cosmic rays), same shape as ``photons``."""
     from rigsim.detector import apply_detector
     from rigsim.render.budget import fit_processes
 
     rows, cols = detector_shape if detector_shape is not None else np.shape(photons)
     fit_processes(1, int(rows) * int(cols), f"a {cols}×{rows} px detector")  # one line, not an out-of-memory kill
     kw = {"origin_uv": tuple(origin_uv), "detector_shape": detector_shape} if detector_shape is not None else {}
+    if added_e is not None:
+        kw["added_e"] = added_e
     det = apply_detector(photons, detector_config, seed=seed, noiseless=noiseless, **kw)
     sidecar = build_sidecar(truth=truth, render=render, detector_frame=det, geometry_flags=geometry_flags, pose=pose,
                             seed=seed if frame_seed is None else frame_seed, extra=sidecar_extra)

@@ -19,6 +19,7 @@ from scipy.special import erf
 from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.scene import Element, PinholeSensor, Scene
+from rigsim.render.star_effects import star_frame_effects
 from rigsim.truth.star import StarSky
 
 __all__ = ['render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
@@ -58,8 +59,14 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
         settings = {"renderer": "mitsuba", **mitsuba.settings()}
     else:
         raise ValueError(f"renderer = {renderer!r}: allowed 'analytic' or 'mitsuba'")
-    fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth.as_dict(), truth_object=truth,
-                  render=settings, index=int(index), time_s=float(time_s))
+    fx = star_frame_effects(sky, seed=int(seed), noiseless=noiseless)
+    if fx.photons is not None:
+        photons = photons + fx.photons
+    truth_dict = truth.as_dict()
+    if fx.truth:
+        truth_dict["effects"] = fx.truth
+    fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth_dict, truth_object=truth,
+                  render=settings, index=int(index), time_s=float(time_s), added_e=fx.electrons)
     if fits_header:
         fr.extra["fits_header"] = star_fits_cards(sky.rig, truth.R_cam_from_icrs, seed=int(seed), time_s=float(time_s))
     if not keep_photons:

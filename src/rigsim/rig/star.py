@@ -19,6 +19,7 @@ from pydantic import Field, model_validator
 
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown, brown_undistort, radial_r2_max
+from rigsim.rig.effects import StarEffects
 from rigsim.rig.model import RigModel
 
 __all__ = ["PSF", "StarSensor", "Nominal", "Sky", "Sequence", "Identification", "Calibration", "Study", "StarRig",
@@ -254,6 +255,7 @@ class StarRig(_Model):
     identification: Identification = Field(default_factory=Identification)
     calibration: Calibration = Field(default_factory=Calibration)
     study: Study = Field(default_factory=Study)
+    effects: StarEffects = Field(default_factory=StarEffects)
 
     @property
     def nominal_intrinsics(self) -> Nominal:

@@ -67,7 +67,7 @@ class StarSky:
         self._phot = dict(zero_point_photons_per_s_cm2=rig.sky.zero_point_photons_per_s_cm2,
                           aperture_area_cm2=s.aperture_area_cm2, transmission=s.optics_transmission,
                           exposure_s=det.exposure_s)
-        pix_arcsec = s.pixel_pitch_um * 1e-3 / s.focal_length_mm * 180.0 / math.pi * 3600.0
+        self.pixel_arcsec = pix_arcsec = s.pixel_pitch_um * 1e-3 / s.focal_length_mm * 180.0 / math.pi * 3600.0
         self.background_photons_per_px = float(star_photons(rig.sky.background_mag_per_arcsec2, **self._phot)
                                                * pix_arcsec**2)
         self.exposure_s = det.exposure_s

@@ -1,0 +1,68 @@
+"""The star sensor's ``[effects]`` on one frame: the photons and electrons they add, and their truth.
+
+Stray light adds photons (it passes through the optics and the detector's quantum efficiency
+like the sky); hot pixels and cosmic rays add electrons after the photon shot noise. Each
+effect draws from its own stream of the frame's seed, so switching one on changes neither the
+detector noise nor another effect's draw.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rigsim.detector.defects import deposit_cosmic_rays, draw_cosmic_rays, hot_pixel_electrons, hot_pixel_rates
+from rigsim.optics.stray_light import stray_light_mag_map, surface_brightness_photons
+
+__all__ = ["FrameEffects", "effects_rng", "star_frame_effects"]
+
+_STREAMS = {"hot_pixels": 0x407, "cosmic_rays": 0xC05}
+
+
+def effects_rng(seed: int, name: str) -> np.random.Generator:
+    """The random stream of effect ``name`` in the frame with detector seed ``seed``."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), 0xEFFEC7, _STREAMS[name]]))
+
+
+@dataclass
+class FrameEffects:
+    photons: np.ndarray | None = None      # added to the expected photons per pixel
+    electrons: np.ndarray | None = None    # added to the signal after the shot noise
+    truth: dict = field(default_factory=dict)
+
+
+def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffects:
+    """What the rig's enabled effects add to one full frame of ``sky`` (a
+    :class:`rigsim.truth.star.StarSky`) rendered with detector seed ``seed``."""
+    rig = sky.rig
+    eff = rig.effects
+    out = FrameEffects()
+    if not eff.enabled:
+        return out
+    s = rig.sensor
+    H, W = sky.shape_hw
+    if eff.stray_light.enabled:
+        st = eff.stray_light
+        mag = stray_light_mag_map((H, W), sky.pixel_arcsec / 3600.0, direction_deg=st.direction_deg,
+                                  edge_mag_per_arcsec2=st.edge_mag_per_arcsec2, falloff_mag_per_deg=st.falloff_mag_per_deg)
+        out.photons = surface_brightness_photons(mag, sky.photons, sky.pixel_arcsec)
+        out.truth["stray_light"] = {"photons_per_px_min": float(out.photons.min()),
+                                    "photons_per_px_max": float(out.photons.max())}
+    electrons = np.zeros((H, W), dtype=np.float64)
+    if eff.hot_pixels.enabled:
+        hp = eff.hot_pixels
+        rates = hot_pixel_rates(s.detector.sensor_seed, W, (0, H), (0, W), fraction=hp.fraction,
+                                threshold_e_per_s=hp.threshold_e_per_s, mean_excess_e_per_s=hp.mean_excess_e_per_s)
+        electrons += hot_pixel_electrons(rates, s.detector.exposure_s, effects_rng(seed, "hot_pixels"), noiseless)
+        out.truth["hot_pixels"] = {"n": int(np.count_nonzero(rates))}
+    if eff.cosmic_rays.enabled:
+        cr = eff.cosmic_rays
+        hits = draw_cosmic_rays(effects_rng(seed, "cosmic_rays"), (H, W), pixel_pitch_um=s.pixel_pitch_um,
+                                exposure_s=s.detector.exposure_s, flux_per_cm2_s=cr.flux_per_cm2_s, depth_um=cr.depth_um,
+                                charge_e_per_um=cr.charge_e_per_um, landau_width=cr.landau_width)
+        electrons += deposit_cosmic_rays(hits, (0, H), (0, W))
+        out.truth["cosmic_rays"] = hits.as_dict()
+    if eff.hot_pixels.enabled or eff.cosmic_rays.enabled:
+        out.electrons = electrons
+    return out
