@@ -15,7 +15,7 @@ from rigsim.errors import CliError, RigsimError
 from rigsim.families import FAMILIES, family_of
 from rigsim.files.options import number
 from rigsim.procedures import centroid as centroid_stage
-from rigsim.procedures import readings_commands
+from rigsim.procedures import readings_commands, robustness_commands
 from rigsim.procedures import target_commands
 from rigsim.view import cli as view_cli
 
@@ -27,6 +27,7 @@ examples:
   rigsim run cube-mirror --analytic             the same campaign without rendering (seconds)
   rigsim run boresight                          seed 003: dual line-array camera, DVAD vs simplified
   rigsim run star-calibration                   seed 004: star-sensor calibration, AD vs ADS
+  rigsim run robustness star_sensor             what hot pixels, cosmic rays, stray light do to the calibration
   rigsim triad 181.398 0.528 91.386 -0.048      R(pm<-rot) from Table 1's final angles
   rigsim centroid frames/*.png --rig sun_sensor_2axis_diaphragm --out centroids.csv    your own frames
   rigsim calibrate sun-sensor --angles angles.csv --centroids centroids.csv --out sun.json
@@ -182,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     centroid_stage.add_cli(groups)
     target_commands.add_cli(groups)
     readings_commands.add_cli(groups)
+    robustness_commands.add_cli(groups)
     dataset_cli.add_cli(groups)
     view_cli.add_cli(groups)
     return p

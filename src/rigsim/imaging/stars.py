@@ -15,7 +15,7 @@ import numpy as np
 
 from rigsim.imaging import Flag, NoiseModel, find_spots
 
-__all__ = ["Observations", "extract_stars", "BAD_FLAGS"]
+__all__ = ["BAD_FLAGS", "Observations", "extract_stars"]
 
 BAD_FLAGS = int(Flag.INVALID | Flag.SATURATED | Flag.EDGE | Flag.BLENDED | Flag.NAN)
 
@@ -34,18 +34,25 @@ class Observations:
     def usable(self) -> np.ndarray:
         return ((self.flags & BAD_FLAGS) == 0) & np.all(np.isfinite(self.uv), axis=1) & np.all(self.sigma_uv > 0, axis=1)
 
-    def subset(self, idx) -> "Observations":
+    def subset(self, idx) -> Observations:
         return Observations(self.uv[idx], self.sigma_uv[idx], self.flux[idx], self.flags[idx])
 
 
 def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "gauss",
-                  threshold_sigma: float = 5.0, saturation: float | None = None) -> Observations:
+                  threshold_sigma: float = 5.0, saturation: float | None = None,
+                  repair_single_pixels: bool = False) -> Observations:
     """Detect and centroid every star of a frame (``find_spots`` with the detector's noise model).
 
     ``saturation`` defaults to the ADC's top code. For the Gaussian fit σ starts at ``sigma_px``
-    and is fitted (smeared spots are slightly wider than the static PSF).
+    and is fitted (smeared spots are slightly wider than the static PSF). ``repair_single_pixels``:
+    first replace the pixels no PSF could have lit alone (hot pixels, particle hits:
+    :func:`rigsim.imaging.cosmetics.single_pixel_events`) by their neighbours' mean.
     """
     noise = NoiseModel.from_detector(detector)
+    if repair_single_pixels:
+        from rigsim.imaging.cosmetics import repair_pixels, single_pixel_events
+
+        dn = repair_pixels(dn, single_pixel_events(dn, noise, sigma_px))
     sat = float(2 ** detector.adc_bits - 1) if saturation is None else float(saturation)
     kw = {}
     if method == "gauss":

@@ -32,6 +32,30 @@ class FrameEffects:
     truth: dict = field(default_factory=dict)
 
 
+def _static_maps(sky) -> dict:
+    """The maps that do not change from frame to frame (the stray light, the hot pixels' rates),
+    computed once per sky and effects table."""
+    eff, s = sky.rig.effects, sky.rig.sensor
+    key = (eff.model_dump_json(), s.detector.sensor_seed)
+    cached = getattr(sky, "_effects_maps", None)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    H, W = sky.shape_hw
+    maps = {}
+    if eff.stray_light.enabled:
+        st = eff.stray_light
+        mag = stray_light_mag_map((H, W), sky.pixel_arcsec / 3600.0, direction_deg=st.direction_deg,
+                                  edge_mag_per_arcsec2=st.edge_mag_per_arcsec2, falloff_mag_per_deg=st.falloff_mag_per_deg)
+        maps["stray_photons"] = surface_brightness_photons(mag, sky.photons, sky.pixel_arcsec)
+    if eff.hot_pixels.enabled:
+        hp = eff.hot_pixels
+        maps["hot_rates"] = hot_pixel_rates(s.detector.sensor_seed, W, (0, H), (0, W), fraction=hp.fraction,
+                                            threshold_e_per_s=hp.threshold_e_per_s,
+                                            mean_excess_e_per_s=hp.mean_excess_e_per_s)
+    sky._effects_maps = (key, maps)
+    return maps
+
+
 def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffects:
     """What the rig's enabled effects add to one full frame of ``sky`` (a
     :class:`rigsim.truth.star.StarSky`) rendered with detector seed ``seed``."""
@@ -42,18 +66,14 @@ def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffec
         return out
     s = rig.sensor
     H, W = sky.shape_hw
+    static = _static_maps(sky)
     if eff.stray_light.enabled:
-        st = eff.stray_light
-        mag = stray_light_mag_map((H, W), sky.pixel_arcsec / 3600.0, direction_deg=st.direction_deg,
-                                  edge_mag_per_arcsec2=st.edge_mag_per_arcsec2, falloff_mag_per_deg=st.falloff_mag_per_deg)
-        out.photons = surface_brightness_photons(mag, sky.photons, sky.pixel_arcsec)
+        out.photons = static["stray_photons"]
         out.truth["stray_light"] = {"photons_per_px_min": float(out.photons.min()),
                                     "photons_per_px_max": float(out.photons.max())}
     electrons = np.zeros((H, W), dtype=np.float64)
     if eff.hot_pixels.enabled:
-        hp = eff.hot_pixels
-        rates = hot_pixel_rates(s.detector.sensor_seed, W, (0, H), (0, W), fraction=hp.fraction,
-                                threshold_e_per_s=hp.threshold_e_per_s, mean_excess_e_per_s=hp.mean_excess_e_per_s)
+        rates = static["hot_rates"]
         electrons += hot_pixel_electrons(rates, s.detector.exposure_s, effects_rng(seed, "hot_pixels"), noiseless)
         out.truth["hot_pixels"] = {"n": int(np.count_nonzero(rates))}
     if eff.cosmic_rays.enabled:

@@ -15,15 +15,27 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, StrictBool, model_validator
 
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown, brown_undistort, radial_r2_max
 from rigsim.rig.effects import StarEffects
 from rigsim.rig.model import RigModel
 
-__all__ = ["PSF", "StarSensor", "Nominal", "Sky", "Sequence", "Identification", "Calibration", "Study", "StarRig",
-           "NominalSensor", "NominalStarRig", "psf_sigma_px"]
+__all__ = [
+    "PSF",
+    "Calibration",
+    "Identification",
+    "Nominal",
+    "NominalSensor",
+    "NominalStarRig",
+    "Sequence",
+    "Sky",
+    "StarRig",
+    "StarSensor",
+    "Study",
+    "psf_sigma_px",
+]
 
 
 
@@ -187,6 +199,8 @@ class Calibration(_Model):
     ads_variant: Literal["exact", "improved"] = "exact"
     process_noise_px: float = Field(0.0, ge=0.0, le=100.0, description="EKF process noise per frame (1σ)")
     centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
+    single_pixel_filter: StrictBool = Field(True, description="repair single-pixel events (hot pixels, particle "
+                                                               "hits) before extracting the stars")
 
 
 class Study(_Model):

@@ -23,8 +23,16 @@ from rigsim.imaging.stars import Observations, extract_stars
 from rigsim.optics.sky import SkyCatalogue
 from rigsim.rig.star import NominalStarRig
 
-__all__ = ["IDENTIFICATION", "PIPELINE_CASES", "StarObservation", "StarPipeline", "PipelineOutput", "calibrate_frames",
-           "pipeline_case_setup", "per_star_residuals"]
+__all__ = [
+    "IDENTIFICATION",
+    "PIPELINE_CASES",
+    "PipelineOutput",
+    "StarObservation",
+    "StarPipeline",
+    "calibrate_frames",
+    "per_star_residuals",
+    "pipeline_case_setup",
+]
 
 IDENTIFICATION = ("commanded", "lost-in-space")
 """How stars are identified: from the commanded attitude (the prior), or with no prior at all."""
@@ -100,7 +108,9 @@ class StarPipeline:
     def add(self, obs: StarObservation) -> IdentResult:
         s, idc = self.nominal.sensor, self.nominal.identification
         t0 = time.perf_counter()
-        found = extract_stars(obs.dn, s.detector, s.psf_sigma_px, method=self.nominal.calibration.centroid_method)
+        c = self.nominal.calibration
+        found = extract_stars(obs.dn, s.detector, s.psf_sigma_px, method=c.centroid_method,
+                              repair_single_pixels=c.single_pixel_filter)
         usable = found.subset(np.flatnonzero(found.usable))
         t1 = time.perf_counter()
         kw = {"search_radius_px": idc.search_radius_px, "match_tolerance_px": idc.match_tolerance_px,

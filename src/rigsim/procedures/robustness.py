@@ -1,0 +1,278 @@
+"""Robustness of a pipeline to a rig's ``[effects]``: the same trials (same seeds) run on ideal
+frames, with each effect alone and with all of them; every recovered quantity is compared with
+the truth, and the paired difference to the ideal run isolates what the effect adds.
+
+Family-neutral: a family supplies its quantities and a trial function (``procedures/<family>/
+robustness.py``); this module summarises, judges, plots and writes the report. The verdict rule
+is in docs/effects.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "ADDED_LIMIT",
+    "ALL",
+    "IDEAL",
+    "Quantity",
+    "RobustnessResult",
+    "run_configs",
+    "summarise",
+    "verdicts",
+    "write_robustness_files",
+]
+
+IDEAL, ALL = "ideal", "all effects"
+ADDED_LIMIT = 0.5
+"""An effect must be handled when the error it adds (RMS of the paired difference to the ideal run)
+exceeds this fraction of the ideal run's RMS error (or of the budget, when the quantity has one)."""
+
+
+@dataclass(frozen=True)
+class Quantity:
+    key: str
+    label: str
+    unit: str
+    kind: str = "error"            # "error": recovered − truth; "count": a tally (more is better unless ``lower_is_better``)
+    budget: float | None = None    # the allowed RMS error, in ``unit`` (None: the ideal run is the reference)
+    lower_is_better: bool = False  # for counts (e.g. wrong identifications)
+
+
+@dataclass
+class RobustnessResult:
+    family: str
+    rig_name: str
+    seed: int
+    trials: int
+    quantities: tuple[Quantity, ...]
+    configs: tuple[str, ...]                          # IDEAL first, then each effect, then ALL
+    values: dict[str, dict[str, np.ndarray]]          # config -> quantity key -> (trials,)
+    render_ms_per_frame: dict[str, float]             # config -> mean render time of a frame
+    effects: dict = field(default_factory=dict)       # the parameters of every effect (as in the rig file)
+    times: dict = field(default_factory=dict)
+    pipeline: str = ""                                # the pipeline variant these values come from
+
+
+def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None) -> dict:
+    """``trial(config, seed) -> dict`` for every config and seed (same seeds for every config), in
+    ``workers`` processes (spawned; results do not depend on the worker count)."""
+    jobs = [(c, s) for c in configs for s in seeds]
+    out: dict = {}
+    if workers <= 1:
+        for c, s in jobs:
+            out[(c, s)] = trial(c, s)
+            if progress is not None:
+                progress.update(1)
+        return out
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
+        futs = {ex.submit(trial, c, s): (c, s) for c, s in jobs}
+        for f in as_completed(futs):
+            out[futs[f]] = f.result()
+            if progress is not None:
+                progress.update(1)
+    return out
+
+
+def _rms(x) -> float:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if x.size else math.nan
+
+
+def summarise(res: RobustnessResult) -> list[dict]:
+    """One row per (config, quantity): bias, σ and RMS over the trials; for errors the error the
+    config adds to the ideal run (RMS of the paired difference) and its ratio to the reference."""
+    rows = []
+    ideal = res.values[IDEAL]
+    for c in res.configs:
+        for q in res.quantities:
+            x = np.asarray(res.values[c][q.key], dtype=float)
+            row = {"config": c, "quantity": q.key, "label": q.label, "unit": q.unit, "kind": q.kind,
+                   "mean": float(np.nanmean(x)), "sigma": float(np.nanstd(x, ddof=1)) if x.size > 1 else math.nan}
+            if q.kind == "error":
+                ref = q.budget if q.budget is not None else _rms(ideal[q.key])
+                added = _rms(x - np.asarray(ideal[q.key], dtype=float))
+                row.update(rms=_rms(x), added_rms=added, reference=ref,
+                           added_over_reference=added / ref if ref > 0 else math.inf)
+            else:
+                row.update(change=float(np.nanmean(x) - np.nanmean(np.asarray(ideal[q.key], dtype=float))))
+            rows.append(row)
+    return rows
+
+
+def verdicts(res: RobustnessResult, rows: list[dict] | None = None) -> dict[str, dict]:
+    """Per config: ``must_handle`` and the reasons (quantities whose added error exceeds
+    ``ADDED_LIMIT`` × reference, counts that got worse by more than their trial-to-trial spread)."""
+    rows = summarise(res) if rows is None else rows
+    qs = {q.key: q for q in res.quantities}
+    ideal = {r["quantity"]: r for r in rows if r["config"] == IDEAL}
+    out = {}
+    for c in res.configs:
+        if c == IDEAL:
+            continue
+        reasons = []
+        for r in (r for r in rows if r["config"] == c):
+            q = qs[r["quantity"]]
+            if q.kind == "error" and r["added_over_reference"] > ADDED_LIMIT:
+                reasons.append(f"{q.label}: adds {r['added_rms']:.3g} {q.unit} rms "
+                               f"({r['added_over_reference']:.2f}× the {'budget' if q.budget else 'ideal error'})")
+            elif q.kind == "count":
+                worse = r["change"] if q.lower_is_better else -r["change"]
+                spread = ideal[q.key]["sigma"]
+                spread = 0.0 if not np.isfinite(spread) else spread
+                if worse > max(spread, 0.5):
+                    reasons.append(f"{q.label}: {r['change']:+.3g} per trial")
+        out[c] = {"must_handle": bool(reasons), "reasons": reasons}
+    return out
+
+
+def _plot(results: list[RobustnessResult], rows: list[list[dict]], path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rigsim.files.atomic import save_figure
+
+    res0 = results[0]
+    errs = [q for q in res0.quantities if q.kind == "error"]
+    n = len(errs)
+    cols = min(3, n)
+    nrows = math.ceil(n / cols)
+    fig, axs = plt.subplots(nrows, cols, figsize=(5.4 * cols, 3.7 * nrows), squeeze=False)
+    x = np.arange(len(res0.configs))
+    w = 0.8 / len(results)
+    for ax, q in zip(axs.flat, errs):
+        for j, (res, rr) in enumerate(zip(results, rows)):
+            rs = {r["config"]: r for r in rr if r["quantity"] == q.key}
+            mean = [rs[c]["mean"] for c in res.configs]
+            sig = [rs[c]["sigma"] for c in res.configs]
+            colours = ["0.5"] + ["C3" if rs[c]["added_over_reference"] > ADDED_LIMIT else "C0" for c in res.configs[1:]]
+            ax.bar(x + (j - (len(results) - 1) / 2) * w, mean, w * 0.95, yerr=sig, color=colours, capsize=2,
+                   hatch="//" if j else None, edgecolor="k" if j else None, linewidth=0.3,
+                   label=res.pipeline if len(results) > 1 else None)
+        ref = {r["config"]: r for r in rows[0] if r["quantity"] == q.key}[IDEAL]["reference"]
+        lo = 0.0 if q.key.endswith("rms_px") else -ref
+        ax.axhspan(lo, ref, color="0.88", zorder=0)
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xticks(x, res0.configs, rotation=30, ha="right", fontsize=8)
+        ax.set_title(q.label + (" (band: budget)" if q.budget else " (band: ideal rms)"), fontsize=9)
+        ax.set_ylabel(f"error ({q.unit})")
+        if len(results) > 1:
+            ax.legend(fontsize=6, loc="best")
+    for ax in list(axs.flat)[n:]:
+        ax.axis("off")
+    fig.suptitle(f"{res0.rig_name}: bias ± σ over {res0.trials} trials per configuration "
+                 "(red: the effect must be handled; hatched: " + ", ".join(r.pipeline for r in results[1:]) + ")"
+                 if len(results) > 1 else "(red: the effect must be handled)", fontsize=10)
+    fig.tight_layout()
+    out = save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def _table(res: RobustnessResult, rows: list[dict]) -> str:
+    from rigsim.reporting import text_table
+
+    tab = []
+    for r in rows:
+        if r["kind"] == "error":
+            tab.append([r["config"], r["label"], r["unit"], f"{r['mean']:+.4g}", f"{r['sigma']:.4g}", f"{r['rms']:.4g}",
+                        "" if r["config"] == IDEAL else f"{r['added_rms']:.3g}", f"{r['reference']:.3g}"])
+        else:
+            tab.append([r["config"], r["label"], r["unit"], f"{r['mean']:.4g}", f"{r['sigma']:.3g}", "",
+                        "" if r["config"] == IDEAL else f"{r['change']:+.3g}", ""])
+    return text_table(["config", "quantity", "unit", "bias/mean", "σ", "rms", "added", "reference"], tab)
+
+
+def _markdown(results: list[RobustnessResult], rows: list[list[dict]], verdict: list[dict], frames_png) -> str:
+    import json
+
+    from rigsim.reporting import text_table
+
+    res = results[0]
+    lines = [f"# Robustness of the {res.family} pipeline to the rig's effects — {res.rig_name}", "",
+             f"{res.trials} trials per configuration (seeds {res.seed} … {res.seed + res.trials - 1}, the same for "
+             "every configuration), each a full rendered run compared with its truth"
+             + (f"; every run's frames go through {len(results)} pipeline variants" if len(results) > 1 else "")
+             + ". *added* is the RMS of the paired difference to the ideal run: the error the effect itself adds. "
+             f"An effect must be handled when it adds more than {ADDED_LIMIT:g}× the reference (the budget, or the "
+             "ideal run's RMS error), or when it loses identified stars or frames, or adds wrong identifications, "
+             "beyond the ideal run's trial-to-trial spread.", ""]
+    if frames_png:
+        lines += [f"![a frame, ideal and with every effect]({frames_png})", ""]
+    lines += ["## Verdict", ""]
+    for r, v in zip(results, verdict):
+        if len(results) > 1:
+            lines += [f"### pipeline: {r.pipeline}", ""]
+        for c, d in v.items():
+            lines.append(f"* **{c}** — " + ("must be handled: " + "; ".join(d["reasons"]) if d["must_handle"]
+                                             else "no action needed at these values"))
+        lines.append("")
+    lines += ["## Recovered quantities", "", "![bias and σ per configuration](robustness.png)", ""]
+    for r, rr in zip(results, rows):
+        if len(results) > 1:
+            lines += [f"### pipeline: {r.pipeline}", ""]
+        lines += ["```", _table(r, rr), "```", ""]
+    ms = res.render_ms_per_frame
+    lines += ["## Render cost", "", "```",
+              text_table(["config", "ms per frame", "× ideal"],
+                         [[c, f"{ms[c]:.1f}", f"{ms[c] / ms[IDEAL]:.2f}"] for c in res.configs]),
+              "```", "", "## Effect parameters", "", "```json", json.dumps(res.effects, indent=1), "```", ""]
+    return "\n".join(lines)
+
+
+def _column(q: Quantity, stat: str) -> str:
+    """CSV column of a statistic of ``q``: ``<name>_<stat>_<unit>`` (the unit last, as every rigsim
+    table), or ``<key>_<stat>`` for a count."""
+    suffix = "_" + q.unit
+    if q.kind == "count" or not q.key.endswith(suffix):
+        return f"{q.key}_{stat}"
+    return f"{q.key[: -len(suffix)]}_{stat}{suffix}"
+
+
+def write_robustness_files(out: Path, results, *, frames_png: Path | None = None) -> dict[str, Path]:
+    """robustness.json (every trial, the summary, the verdict), robustness.csv (the summary, units in
+    the column names), robustness.png and robustness.md in ``out``. ``results``: one
+    :class:`RobustnessResult` per pipeline variant (same configurations and seeds)."""
+    from rigsim.files import write_json, write_table
+    from rigsim.files.atomic import atomic_write_text
+
+    results = [results] if isinstance(results, RobustnessResult) else list(results)
+    rows = [summarise(r) for r in results]
+    verdict = [verdicts(r, rr) for r, rr in zip(results, rows)]
+    files = {"png": _plot(results, rows, out / "robustness.png")}
+    table: dict[str, list] = {"pipeline": [], "config": []}
+    for res, rr in zip(results, rows):
+        table["pipeline"] += [res.pipeline] * len(res.configs)
+        table["config"] += list(res.configs)
+        for q in res.quantities:  # one column per quantity and statistic, the unit last
+            rs = {r["config"]: r for r in rr if r["quantity"] == q.key}
+            stats = ("mean", "sigma", "rms", "added_rms") if q.kind == "error" else ("mean", "sigma")
+            for st in stats:
+                table.setdefault(_column(q, st), []).extend(rs[c][st] for c in res.configs)
+        table.setdefault("render_per_frame_ms", []).extend(res.render_ms_per_frame[c] for c in res.configs)
+    files["csv"] = write_table(out / "robustness.csv", table)
+    res0 = results[0]
+    files["json"] = write_json(out / "robustness.json", {
+        "family": res0.family, "rig": res0.rig_name, "seed": res0.seed, "trials": res0.trials,
+        "configs": list(res0.configs), "added_limit": ADDED_LIMIT, "effects": res0.effects,
+        "quantities": [q.__dict__ for q in res0.quantities], "render_ms_per_frame": res0.render_ms_per_frame,
+        "times_s": res0.times,
+        "pipelines": [{"pipeline": r.pipeline, "summary": rr, "verdict": v,
+                       "trials_values": {c: {k: np.asarray(x).tolist() for k, x in r.values[c].items()}
+                                         for c in r.configs}}
+                      for r, rr, v in zip(results, rows, verdict)]})
+    files["report"] = atomic_write_text(out / "robustness.md",
+                                        _markdown(results, rows, verdict, frames_png.name if frames_png else None))
+    if frames_png is not None:
+        files["frames"] = frames_png
+    return files

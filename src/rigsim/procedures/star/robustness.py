@@ -1,0 +1,168 @@
+"""The star sensor's robustness trials: the whole seed-004 run (render → extract → identify → EKFs
+and batch least squares) with a chosen set of ``[effects]`` switched on, scored against the truth.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, run_configs
+from rigsim.rig.effects import STAR_EFFECTS
+
+__all__ = ["QUANTITIES", "configs_for", "frames_figure", "pipeline_variants", "run_star_robustness", "star_trial"]
+
+QUANTITIES = (
+    Quantity("lsq_f_px", "f, batch LSQ", "px"),
+    Quantity("lsq_u0_px", "u0, batch LSQ", "px"),
+    Quantity("lsq_v0_px", "v0, batch LSQ", "px"),
+    Quantity("ads_f_px", "f, ADS EKF (f joint)", "px"),
+    Quantity("ads_u0_px", "u0, ADS EKF (f joint)", "px"),
+    Quantity("ads_v0_px", "v0, ADS EKF (f joint)", "px"),
+    Quantity("ad_u0_px", "u0, AD EKF (f joint)", "px"),
+    Quantity("ad_v0_px", "v0, AD EKF (f joint)", "px"),
+    Quantity("centroid_rms_px", "centroid error of identified stars (rms)", "px"),
+    Quantity("identified_count", "identified stars (whole run)", "count", kind="count"),
+    Quantity("wrong_count", "wrong identifications (whole run)", "count", kind="count", lower_is_better=True),
+    Quantity("frames_identified_count", "frames identified", "count", kind="count"),
+)
+
+_SKY = {}
+
+
+def configs_for(names=None) -> tuple[str, ...]:
+    """IDEAL, each named effect alone (default: all of them), and ALL when more than one."""
+    names = tuple(STAR_EFFECTS if names is None else names)
+    return (IDEAL, *names, *((ALL,) if len(names) > 1 else ()))
+
+
+def _rig_with(rig, config: str, names):
+    on = () if config == IDEAL else (tuple(names) if config == ALL else (config,))
+    return rig.model_copy(update={"effects": rig.effects.only(on)})
+
+
+def pipeline_variants(rig) -> dict[str, object]:
+    """The pipelines every robustness run's frames go through: as the rig configures it, and with
+    its single-pixel filter switched the other way (name → nominal rig)."""
+    nominal = rig.nominal_rig()
+    on = nominal.calibration.single_pixel_filter
+    other = nominal.model_copy(update={"calibration": nominal.calibration.model_copy(
+        update={"single_pixel_filter": not on})})
+    state = {True: "single-pixel filter on", False: "single-pixel filter off"}
+    return {f"as configured ({state[on]})": nominal, state[not on]: other}
+
+
+def _score(out, truths, rig, sky, truth_theta) -> dict:
+    from rigsim.procedures.star.run import compare
+
+    ids, cs = compare(out, truths, rig, sky)
+    lsq = np.asarray(out.batch.theta, dtype=float) - truth_theta
+    ads = np.asarray(out.ekf[("f_joint", "ads")].theta, dtype=float) - truth_theta
+    ad = np.asarray(out.ekf[("f_joint", "ad")].theta, dtype=float) - truth_theta
+    return {"lsq_f_px": lsq[0], "lsq_u0_px": lsq[1], "lsq_v0_px": lsq[2],
+            "ads_f_px": ads[0], "ads_u0_px": ads[1], "ads_v0_px": ads[2], "ad_u0_px": ad[1], "ad_v0_px": ad[2],
+            "centroid_rms_px": float(np.hypot(*cs["rms_px"]) / np.sqrt(2.0)),
+            "identified_count": float(ids["identified"]), "wrong_count": float(ids["wrong"]),
+            "frames_identified_count": float(ids["frames_identified"])}
+
+
+def star_trial(rig, names, config: str, seed: int) -> dict:
+    """One rendered run of ``rig`` with ``config`` (IDEAL, an effect name or ALL of ``names``) at
+    ``seed``, through every :func:`pipeline_variants`: {variant: the errors and counts of
+    :data:`QUANTITIES`} and the render time per frame (ms, key ``_render_ms_per_frame``)."""
+    from rigsim.procedures.star.pipeline import StarPipeline
+    from rigsim.procedures.star.run import generate
+    from rigsim.truth.star import StarSky
+
+    r = _rig_with(rig, config, names)
+    if rig.name not in _SKY:
+        _SKY[rig.name] = StarSky(rig).sky
+    sky = StarSky(r, sky=_SKY[rig.name])
+    pipes = {v: StarPipeline(nom, sky.sky) for v, nom in pipeline_variants(r).items()}
+    truths, t_render, n = [], 0.0, 0
+    t0 = time.perf_counter()
+    for obs, truth, _fr in generate(r, seed=int(seed), sky=sky):
+        t_render += time.perf_counter() - t0
+        n += 1
+        truths.append(truth)
+        for p in pipes.values():
+            p.add(obs)
+        t0 = time.perf_counter()
+    s = r.sensor
+    truth_theta = np.array([s.f_px, *s.principal_point_px, s.k1, s.k2])
+    out = {v: _score(p.calibrate(), truths, r, sky, truth_theta) for v, p in pipes.items()}
+    out["_render_ms_per_frame"] = 1e3 * t_render / max(1, n)
+    return out
+
+
+class _Trial:
+    """A picklable ``trial(config, seed)`` for :func:`run_configs`."""
+
+    def __init__(self, rig, names):
+        self.rig, self.names = rig, tuple(names)
+
+    def __call__(self, config, seed):
+        return star_trial(self.rig, self.names, config, seed)
+
+
+def run_star_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
+                        progress=None) -> list[RobustnessResult]:
+    """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
+    :class:`RobustnessResult` per pipeline variant, the configured pipeline first."""
+    names = tuple(STAR_EFFECTS if names is None else names)
+    configs = configs_for(names)
+    seeds = list(range(int(seed), int(seed) + int(trials)))
+    t0 = time.perf_counter()
+    raw = run_configs(_Trial(rig, names), configs, seeds, workers=workers, progress=progress)
+    render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
+    effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
+    wall = time.perf_counter() - t0
+    results = []
+    for v in pipeline_variants(rig):
+        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds]) for q in QUANTITIES} for c in configs}
+        results.append(RobustnessResult("star", rig.name, int(seed), int(trials), QUANTITIES, configs, values, render,
+                                        effects, {"wall": wall}, pipeline=v))
+    return results
+
+
+def frames_figure(rig, path, *, seed: int = 0, names=None, crop: int = 256):
+    """One frame of the rig's sequence, ideal and with every effect on, side by side (a crop of
+    ``crop`` px at the detector's bright-edge side, same grey scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rigsim.files.atomic import save_figure
+    from rigsim.optics import attitude as att
+    from rigsim.render.star import frame_seed, render_frame
+    from rigsim.truth.star import StarSky, true_sequence
+
+    names = tuple(STAR_EFFECTS if names is None else names)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 4004]))
+    commanded = att.from_rig(rig.sequence, rng, jitter=False)
+    true_seq = true_sequence(rig, commanded, rng)
+    base = StarSky(rig)
+    imgs = []
+    for r in (_rig_with(rig, IDEAL, names), _rig_with(rig, ALL, names)):
+        sky = StarSky(r, sky=base.sky)
+        fr = render_frame(sky, true_seq.R_cam_from_icrs[0], seed=frame_seed(seed, 0), fits_header=False,
+                          omega_cam_rad_s=true_seq.omega_cam_rad_s[0], substeps=rig.sequence.smear_substeps)
+        imgs.append(fr.dn.astype(float))
+    H, W = imgs[0].shape
+    c = min(crop, H, W)
+    win = (slice(0, c), slice(W - c, W))
+    lo = np.percentile(imgs[0][win], 1)
+    hi = max(np.percentile(imgs[1][win], 99.9), lo + 1)
+    fig, axs = plt.subplots(1, 2, figsize=(10, 5.2))
+    for ax, im, title in zip(axs, imgs, ("ideal", "every effect on: " + ", ".join(n.replace("_", " ") for n in names))):
+        ax.imshow(im[win], cmap="gray", vmin=lo, vmax=hi, extent=(W - c - 0.5, W - 0.5, c - 0.5, -0.5))
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("u (px)")
+        ax.set_ylabel("v (px)")
+    fig.suptitle(f"{rig.name}: frame 0, top-right {c}×{c} px, same grey scale (DN {lo:.0f}–{hi:.0f})", fontsize=10)
+    fig.tight_layout()
+    out = save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return out

@@ -1,0 +1,107 @@
+"""The robustness summary and verdict on known numbers, and `rigsim run robustness` on a short star rig."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rigsim.cli import main
+from rigsim.files import read_table
+from rigsim.files.tables import Column
+from rigsim.procedures.robustness import (
+    ADDED_LIMIT,
+    ALL,
+    IDEAL,
+    Quantity,
+    RobustnessResult,
+    summarise,
+    verdicts,
+    write_robustness_files,
+)
+
+Q = (Quantity("a_px", "a", "px"), Quantity("n_count", "stars", "count", kind="count"))
+
+
+def _result(shift, extra_noise, lost):
+    rng = np.random.default_rng(0)
+    ideal = rng.normal(0.0, 0.1, 50)
+    d = shift + rng.normal(0.0, extra_noise, 50)
+    values = {IDEAL: {"a_px": ideal, "n_count": np.full(50, 100.0)},
+              "fx": {"a_px": ideal + d, "n_count": np.full(50, 100.0 - lost)},
+              ALL: {"a_px": ideal + d, "n_count": np.full(50, 100.0 - lost)}}
+    return RobustnessResult("test", "rig", 0, 50, Q, (IDEAL, "fx", ALL), values, {c: 1.0 for c in values}), ideal, d
+
+
+def test_added_error_is_the_rms_of_the_paired_difference():
+    res, ideal, d = _result(0.02, 0.01, 0)
+    rows = {(r["config"], r["quantity"]): r for r in summarise(res)}
+    r = rows[("fx", "a_px")]
+    assert r["added_rms"] == pytest.approx(math.sqrt(np.mean(d**2)), rel=1e-12)
+    assert r["reference"] == pytest.approx(math.sqrt(np.mean(ideal**2)), rel=1e-12)
+    assert r["mean"] == pytest.approx(np.mean(ideal + d), rel=1e-12)
+    assert rows[(IDEAL, "a_px")]["added_rms"] == 0.0
+    assert not verdicts(res)["fx"]["must_handle"]                      # adds ~0.02 of ~0.1
+
+
+def test_verdict_flags_an_error_beyond_the_limit_and_lost_stars():
+    res, _ideal, _ = _result(ADDED_LIMIT * 0.1 * 1.5, 0.0, 0)
+    v = verdicts(res)["fx"]
+    assert v["must_handle"] and "a:" in v["reasons"][0]
+    res, _, _ = _result(0.0, 0.0, 3)
+    v = verdicts(res)["fx"]
+    assert v["must_handle"] and v["reasons"] == ["stars: -3 per trial"]
+
+
+def test_files_carry_units_in_the_column_names(tmp_path):
+    res, _, _ = _result(0.02, 0.01, 0)
+    files = write_robustness_files(tmp_path, res)
+    t = read_table(files["csv"], [Column("a_added_rms", "px"), Column("n_count_mean", "")])
+    assert t["a_added_rms_px"][0] == 0.0 and t["n_count_mean"][1] == 100.0
+    d = json.loads(files["json"].read_text())
+    assert d["pipelines"][0]["verdict"]["fx"]["must_handle"] is False
+    assert "## Verdict" in files["report"].read_text()
+
+
+@pytest.fixture(scope="module")
+def short_star_rig(tmp_path_factory):
+    """The default star rig with a 6-frame sequence and a storm of particles (fast enough for a test)."""
+    src = Path(__file__).resolve().parents[2] / "scenes" / "star_sensor.toml"
+    text = src.read_text().replace("n_frames = 20 ", "n_frames = 6  ").replace("flux_per_cm2_s = 1.2 ", "flux_per_cm2_s = 400.0")
+    assert "n_frames = 6" in text and "flux_per_cm2_s = 400.0" in text
+    p = tmp_path_factory.mktemp("rig") / "short_star.toml"
+    p.write_text(text)
+    return p
+
+
+def test_run_robustness_measures_what_hot_pixels_do_with_and_without_the_filter(short_star_rig, tmp_path):
+    out = tmp_path / "rob"
+    rc = main(["run", "robustness", str(short_star_rig), "--trials", "2", "--effects", "hot_pixels,cosmic_rays",
+               "--workers", "1", "--out", str(out), "--quiet"])
+    assert rc == 0
+    for name in ("robustness.md", "robustness.json", "robustness.csv", "robustness.png", "frames.png"):
+        assert (out / name).stat().st_size > 0
+    d = json.loads((out / "robustness.json").read_text())
+    assert d["configs"] == [IDEAL, "hot_pixels", "cosmic_rays", ALL]
+    on, off = d["pipelines"]
+    assert on["pipeline"].startswith("as configured (single-pixel filter on") and off["pipeline"] == "single-pixel filter off"
+
+    def ident(p, c):
+        return np.mean(p["trials_values"][c]["identified_count"])
+
+    # 0.5 % hot pixels put one in a third of the stars' 9×9 windows: without the filter those stars are lost
+    assert ident(off, "hot_pixels") < 0.85 * ident(off, IDEAL)
+    assert ident(on, "hot_pixels") > 0.95 * ident(on, IDEAL)
+    assert off["verdict"]["hot_pixels"]["must_handle"]
+    # the ideal frames are the same for both pipelines: the filter finds nothing to repair on them
+    assert on["trials_values"][IDEAL] == off["trials_values"][IDEAL]
+
+
+def test_run_robustness_refuses_what_it_cannot_do(short_star_rig, capsys):
+    assert main(["run", "robustness", "sun_sensor_2axis_diaphragm", "--trials", "2"]) == 2
+    assert "star-sensor rigs only" in capsys.readouterr().err
+    assert main(["run", "robustness", str(short_star_rig), "--effects", "ghosts"]) == 2
+    assert "--effects = 'ghosts'" in capsys.readouterr().err
