@@ -14,11 +14,14 @@ from rigsim.imaging.cosmetics import psf_peak_ratio, repair_pixels, single_pixel
 from rigsim.render.star import render_stars
 
 
+def _gauss(x, s):
+    return math.exp(-x * x / (2 * s * s)) / (math.sqrt(2 * math.pi) * s)
+
+
 def test_peak_ratio_is_the_pixel_integrated_gaussian_s():
     for s in (0.5, 0.77, 1.2):
-        g = lambda x: math.exp(-x * x / (2 * s * s)) / (math.sqrt(2 * math.pi) * s)
-        p0 = integrate.quad(g, -0.5, 0.5)[0]
-        p1 = integrate.quad(g, 0.5, 1.5)[0]
+        p0 = integrate.quad(_gauss, -0.5, 0.5, args=(s,))[0]
+        p1 = integrate.quad(_gauss, 0.5, 1.5, args=(s,))[0]
         assert psf_peak_ratio(s) == pytest.approx(p0 / p1, rel=1e-9)
 
 
