@@ -64,3 +64,32 @@ def repair_pixels(img, mask: np.ndarray) -> np.ndarray:
         info = np.iinfo(a.dtype)
         return np.clip(np.rint(out), info.min, info.max).astype(a.dtype)
     return out.astype(a.dtype)
+
+
+def sequence_fixed_pattern(frames, *, k_sigma: float = 5.0) -> np.ndarray:
+    """The detector's defects (hot pixels, and any pixel with a fixed excess) from a sequence in
+    which the scene moves: the per-pixel median over the N frames, less its own median, kept where
+    it exceeds ``k_sigma`` times the noise of such a median (1.2533 σ/√N, σ the frames' robust
+    pixel noise, 1.4826 × MAD) and zero elsewhere, so that the noise of a median of few frames is
+    not subtracted from every pixel. Float32, DN. Each pixel must see sky, not a star, in more
+    than half of the frames."""
+    stack = np.stack([np.asarray(f, dtype=np.float32) for f in frames])
+    n = stack.shape[0]
+    if n < 3:
+        raise ValueError(f"a fixed pattern from a sequence needs at least 3 frames, got {n}")
+    med = np.median(stack, axis=0)
+    level = np.float32(np.median(med))
+    pattern = med - level
+    sigma = float(np.median([1.4826 * np.median(np.abs(f - np.median(f))) for f in stack]))
+    sigma = max(sigma, math.sqrt(1.0 / 12.0))  # at least the quantisation of a DN frame
+    pattern[np.abs(pattern) <= k_sigma * 1.2533 * sigma / math.sqrt(n)] = 0.0
+    return pattern
+
+
+def subtract_pattern(dn, pattern: np.ndarray | None) -> np.ndarray:
+    """``dn`` less the fixed ``pattern`` (clipped at 0; float32), or ``dn`` itself when None."""
+    if pattern is None:
+        return dn
+    if np.shape(dn) != np.shape(pattern):
+        raise ValueError(f"frame {np.shape(dn)} and fixed pattern {np.shape(pattern)} differ in shape")
+    return np.maximum(np.asarray(dn, dtype=np.float32) - pattern, 0.0)

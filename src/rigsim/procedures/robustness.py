@@ -263,6 +263,7 @@ def write_robustness_files(out: Path, results, *, frames_png: Path | None = None
     files["csv"] = write_table(out / "robustness.csv", table)
     res0 = results[0]
     files["json"] = write_json(out / "robustness.json", {
+        "format": "rigsim.robustness/1", "procedure": f"robustness ({res0.family})", "mode": "rendered",
         "family": res0.family, "rig": res0.rig_name, "seed": res0.seed, "trials": res0.trials,
         "configs": list(res0.configs), "added_limit": ADDED_LIMIT, "effects": res0.effects,
         "quantities": [q.__dict__ for q in res0.quantities], "render_ms_per_frame": res0.render_ms_per_frame,

@@ -201,6 +201,9 @@ class Calibration(_Model):
     centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
     single_pixel_filter: StrictBool = Field(True, description="repair single-pixel events (hot pixels, particle "
                                                                "hits) before extracting the stars")
+    fixed_pattern: Literal["none", "sequence"] = Field(
+        "none", description="subtract the detector's fixed pattern (hot pixels, DSNU) estimated from the sequence "
+                            "itself (per-pixel median over the frames) before extracting the stars")
 
 
 class Study(_Model):

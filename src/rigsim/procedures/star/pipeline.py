@@ -15,10 +15,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from rigsim.errors import InputError
 from rigsim.estimation.observability import observability
 from rigsim.estimation.star_calibration import MODELS, FrameObs, batch_lsq, run_ekf
 from rigsim.estimation.star_id import IdentResult, identify
 from rigsim.estimation.star_lis import identify_lost_in_space
+from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
 from rigsim.imaging.stars import Observations, extract_stars
 from rigsim.optics.sky import SkyCatalogue
 from rigsim.rig.star import NominalStarRig
@@ -104,12 +106,19 @@ class StarPipeline:
         self.frames_obs: list[FrameObs] = []
         self.counts = {"detected": 0, "usable": 0}
         self.times = {"extract": 0.0, "identify": 0.0}
+        self.fixed_pattern = None  # a DN image subtracted from every frame before extraction (or None)
+        self.fixed_pattern_note = "none"  # what was subtracted, for the output
+
+    def set_sequence_pattern(self, observations) -> None:
+        """Subtract the fixed pattern of these observations (:func:`sequence_pattern`) from every frame."""
+        self.fixed_pattern = sequence_pattern(observations, self.nominal)
+        self.fixed_pattern_note = f"sequence: {int(np.count_nonzero(self.fixed_pattern))} pixels"
 
     def add(self, obs: StarObservation) -> IdentResult:
         s, idc = self.nominal.sensor, self.nominal.identification
         t0 = time.perf_counter()
         c = self.nominal.calibration
-        found = extract_stars(obs.dn, s.detector, s.psf_sigma_px, method=c.centroid_method,
+        found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, method=c.centroid_method,
                               repair_single_pixels=c.single_pixel_filter)
         usable = found.subset(np.flatnonzero(found.usable))
         t1 = time.perf_counter()
@@ -145,6 +154,7 @@ class StarPipeline:
         ident_stats = {"frames": len(self.ident), "frames_identified": int(sum(i.ok for i in self.ident)),
                        **self.counts, "identified": int(sum(len(i) for i in self.ident)),
                        "attitude_error_deg": self.nominal.identification.attitude_error_deg,
+                       "fixed_pattern": self.fixed_pattern_note,
                        "reasons": [i.reason for i in self.ident if not i.ok]}
         out = PipelineOutput(self.nominal, self.usable, self.ident, self.frames_obs, ident_stats, times=dict(self.times))
         t0 = time.perf_counter()
@@ -167,10 +177,39 @@ class StarPipeline:
         return out
 
 
+MIN_PATTERN_MOTION_PX = 3.0
+"""Least image motion between consecutive commanded attitudes for a fixed pattern from the sequence:
+about 4 PSF σ, so that each pixel sees sky in most frames."""
+
+
+def sequence_pattern(observations, nominal: NominalStarRig) -> np.ndarray:
+    """The fixed pattern of a sequence (:func:`rigsim.imaging.cosmetics.sequence_fixed_pattern`),
+    after checking from the commanded attitudes that the stars move enough for it (a staring
+    sequence would take its stars for defects)."""
+    obs = list(observations)
+    R = [o.R_commanded for o in obs]
+    if any(r is None for r in R):
+        raise InputError("[calibration] fixed_pattern = 'sequence': needs the commanded attitude of every frame")
+    f = nominal.sensor.f_px
+    steps = [f * float(np.arccos(np.clip(R[k][2] @ R[k + 1][2], -1.0, 1.0))) for k in range(len(R) - 1)]
+    if not steps or float(np.median(steps)) < MIN_PATTERN_MOTION_PX:
+        got = f"{float(np.median(steps)):.2f} px" if steps else "a single frame"
+        raise InputError(f"[calibration] fixed_pattern = 'sequence': the stars move {got} between frames (median), "
+                         f"at least {MIN_PATTERN_MOTION_PX:g} px is needed; use 'none' for a staring sequence")
+    return sequence_fixed_pattern([o.dn for o in obs])
+
+
 def calibrate_frames(frames: Iterable[StarObservation], nominal: NominalStarRig, sky: SkyCatalogue, *,
                      identification: str = "commanded") -> PipelineOutput:
-    """The whole pipeline on a sequence of observations (a user's own frames welcome)."""
+    """The whole pipeline on a sequence of observations (a user's own frames welcome). With the rig's
+    ``[calibration] fixed_pattern = "sequence"`` the frames are read twice: once for the pattern."""
     pipe = StarPipeline(nominal, sky, identification=identification)
+    if nominal.calibration.fixed_pattern == "sequence":
+        frames = list(frames)
+        if any(f.R_commanded is None for f in frames):  # lost in space: nothing tells that the stars move
+            pipe.fixed_pattern_note = "none: no commanded attitudes to check that the stars move"
+        else:
+            pipe.set_sequence_pattern(frames)
     for fr in frames:
         pipe.add(fr)
     return pipe.calibrate()

@@ -42,15 +42,25 @@ def _rig_with(rig, config: str, names):
     return rig.model_copy(update={"effects": rig.effects.only(on)})
 
 
+def _describe(cal) -> str:
+    return f"single-pixel filter {'on' if cal.single_pixel_filter else 'off'}, fixed pattern: {cal.fixed_pattern}"
+
+
 def pipeline_variants(rig) -> dict[str, object]:
-    """The pipelines every robustness run's frames go through: as the rig configures it, and with
-    its single-pixel filter switched the other way (name → nominal rig)."""
+    """The pipelines every robustness run's frames go through (name → nominal rig): as the rig
+    configures it, with its single-pixel filter switched the other way, and with its fixed-pattern
+    subtraction switched the other way (``none`` ↔ ``sequence``)."""
     nominal = rig.nominal_rig()
-    on = nominal.calibration.single_pixel_filter
-    other = nominal.model_copy(update={"calibration": nominal.calibration.model_copy(
-        update={"single_pixel_filter": not on})})
-    state = {True: "single-pixel filter on", False: "single-pixel filter off"}
-    return {f"as configured ({state[on]})": nominal, state[not on]: other}
+    cal = nominal.calibration
+
+    def with_cal(**upd):
+        return nominal.model_copy(update={"calibration": cal.model_copy(update=upd)})
+
+    other_pattern = "sequence" if cal.fixed_pattern == "none" else "none"
+    out = {f"as configured ({_describe(cal)})": nominal}
+    for alt in (with_cal(single_pixel_filter=not cal.single_pixel_filter), with_cal(fixed_pattern=other_pattern)):
+        out[_describe(alt.calibration)] = alt
+    return out
 
 
 def _score(out, truths, rig, sky, truth_theta) -> dict:
@@ -80,15 +90,19 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
         _SKY[rig.name] = StarSky(rig).sky
     sky = StarSky(r, sky=_SKY[rig.name])
     pipes = {v: StarPipeline(nom, sky.sky) for v, nom in pipeline_variants(r).items()}
-    truths, t_render, n = [], 0.0, 0
+    truths, held, t_render = [], [], 0.0
     t0 = time.perf_counter()
     for obs, truth, _fr in generate(r, seed=int(seed), sky=sky):
         t_render += time.perf_counter() - t0
-        n += 1
         truths.append(truth)
-        for p in pipes.values():
-            p.add(obs)
+        held.append(obs)
         t0 = time.perf_counter()
+    n = len(held)
+    for p in pipes.values():
+        if p.nominal.calibration.fixed_pattern == "sequence":
+            p.set_sequence_pattern(held)
+        for obs in held:
+            p.add(obs)
     s = r.sensor
     truth_theta = np.array([s.f_px, *s.principal_point_px, s.k1, s.k2])
     out = {v: _score(p.calibrate(), truths, r, sky, truth_theta) for v, p in pipes.items()}

@@ -119,16 +119,25 @@ def run_pipeline(rig: StarRig, *, seed: int = 0, renderer: str = "analytic", mit
     truths, sample = [], None
     t_render = 0.0
     tr0 = time.perf_counter()
+    use_pattern = nominal.calibration.fixed_pattern == "sequence"
+    held = []  # the observations, when the fixed pattern comes from the whole sequence
     for obs, truth, fr in generate(rig, seed=seed, renderer=renderer, mitsuba=mitsuba, noiseless=noiseless, sky=sky):
         t_render += time.perf_counter() - tr0
         sample = sample if sample is not None else fr
         truths.append(truth)
         if on_frame is not None:
             on_frame(obs)
-        pipe.add(obs)
+        if use_pattern:
+            held.append(obs)
+        else:
+            pipe.add(obs)
         if progress is not None:
             progress.update(1)
         tr0 = time.perf_counter()
+    if use_pattern:
+        pipe.set_sequence_pattern(held)
+        for obs in held:
+            pipe.add(obs)
     out = pipe.calibrate(equations=equations, weighting=weighting)
     times.update(render=t_render, **out.times)
     ident_stats, centroid_stats = compare(out, truths, rig, sky)
