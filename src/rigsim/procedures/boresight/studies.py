@@ -240,7 +240,7 @@ def _orbit_estimates(geoms, ref_uv, meas, truth: OrbitTruth, o, reading) -> dict
 
 def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider: str = "tcom",
               reading: str = "consistent", spp: int | None = None, measurements: int | None = None,
-              jitter_px: float = 0.1, on_frame=None) -> dict:
+              jitter_px: float = 0.1, on_frame=None, workers: int | None = None) -> dict:
     """Render the four CMOS ROIs at every measurement of the orbit scenario, centroid, estimate
     per camera (DVAD, and the simplified method for comparison), form the relative angle and compare
     with truth. ``progress(n)`` is called after each rendered frame.
@@ -249,11 +249,11 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
     measured centroid (an *equivalent* centroid error, the paper's 0.1 px: vibration, thermal
     gradients, stray light — not modelled physically); key ``estimates_jitter``.
     ``on_frame(stage, camera, detector, k, frame)`` sees every rendered ROI (stage "reference" or
-    "measurement"), e.g. to write it as a file."""
-    import warnings
-
-    from rigsim.imaging import NoiseModel
-    from rigsim.imaging.rois import centroid_rois
+    "measurement"), e.g. to write it as a file.
+    ``workers``: processes rendering the frames (1, or 2: camera 1's frames in a worker subprocess,
+    :mod:`~rigsim.procedures.boresight.frame_pool`); default 2 on two or more CPUs. The frames and every
+    number are the same for any ``workers``."""
+    from rigsim.procedures.boresight.frame_pool import FramePool, default_workers, render_task
     from rigsim.render.boresight import LoopRenderer
 
     t_start = time.perf_counter()
@@ -262,12 +262,49 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         raise ValueError("the orbit scenario needs two cameras")
     o = rig.orbit
     n_meas = measurements or o.measurements
+    workers = default_workers() if workers is None else workers
+    if int(workers) != workers or workers < 1:
+        raise ValueError(f"workers = {workers!r}: must be an integer >= 1")
     truth = orbit_truth(rig, geoms, np.linspace(0.0, o.orbits * o.period_min, n_meas))
-    rends = {(c, j): LoopRenderer(rig, c, j, spp=spp) for c in range(2) for j in range(2)}
+    # every frame as a task (camera, detector, E, Δf, seed, with truth), in the order they are used
+    tasks = [(c, j, None, 0.0, seed * 1000 + 100 * c + 10 * j + k, k == 0)
+             for c in range(2) for j in range(2) for k in range(o.reference_frames)]
+    tasks += [(c, j, truth.E[c][k], truth.delta_f_mm[c][k], seed * 7919 + 1000 * k + 10 * c + j, True)
+              for k in range(n_meas) for c in range(2) for j in range(2)]
+    with FramePool(rig, tasks, {1} if workers > 1 else set(), spp=spp) as pool:   # the worker starts first
+        rends = {(c, j): LoopRenderer(rig, c, j, spp=spp) for c in range(1 if workers > 1 else 2) for j in range(2)}
+        for r in rends.values():
+            r.warm_up()
+        t_warm = time.perf_counter() - t_start
+        frames = iter(range(len(tasks)))
+
+        def next_frame():
+            i = next(frames)
+            fr = pool.result(i)
+            if fr is None:   # this process's camera, or the worker failed
+                key = tasks[i][:2]
+                if key not in rends:
+                    rends[key] = LoopRenderer(rig, key[0], key[1], spp=spp)
+                fr = render_task(rends, tasks[i])
+            return fr
+
+        res = _orbit_frames(rig, geoms, truth, next_frame, seed=seed, progress=progress, centroider=centroider,
+                            reading=reading, jitter_px=jitter_px, on_frame=on_frame)
+    res.update({"seconds": time.perf_counter() - t_start, "warm_up_seconds": t_warm,
+                "spp": rends[(0, 0)].spp, "window_px": rends[(0, 0)].window_px})
+    return res
+
+
+def _orbit_frames(rig, geoms, truth, next_frame, *, seed, progress, centroider, reading, jitter_px, on_frame) -> dict:
+    """:func:`run_orbit` from the frames (``next_frame()``, in the tasks' order) on: centroids, estimates, truth."""
+    import warnings
+
+    from rigsim.imaging import NoiseModel
+    from rigsim.imaging.rois import centroid_rois
+
     noise = NoiseModel.from_detector(rig.detector)
-    for r in rends.values():
-        r.warm_up()
-    t_warm = time.perf_counter() - t_start
+    o = rig.orbit
+    n_meas = len(truth.t_min)
     step = 0
 
     def tick():
@@ -282,10 +319,9 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         warnings.simplefilter("always")
         for c in range(2):
             for j in range(2):
-                r = rends[(c, j)]
                 rois, origins = [], []
                 for k in range(o.reference_frames):
-                    fr = r.render(None, 0.0, seed=seed * 1000 + 100 * c + 10 * j + k, with_truth=(k == 0))
+                    fr = next_frame()
                     if on_frame is not None:
                         on_frame("reference", c, j, k, fr)
                     if k == 0:
@@ -304,8 +340,7 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         for k in range(n_meas):
             for c in range(2):
                 for j in range(2):
-                    r = rends[(c, j)]
-                    fr = r.render(truth.E[c][k], truth.delta_f_mm[c][k], seed=seed * 7919 + 1000 * k + 10 * c + j)
+                    fr = next_frame()
                     if on_frame is not None:
                         on_frame("measurement", c, j, k, fr)
                     fidelity.append(float(np.abs(fr.photon_centroid() - np.array(fr.truth["pixel_centroid_uv"])).max()))
@@ -348,8 +383,6 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         "_spots": {"geoms": geoms, "ref_uv": ref_uv, "meas": meas, "truth": truth, "reference_frames": o.reference_frames,
                    "ref_std": np.std(ref_single, axis=1, ddof=1)},
         "frames_rendered": int(4 * (o.reference_frames + n_meas)),
-        "seconds": time.perf_counter() - t_start, "warm_up_seconds": t_warm,
-        "spp": next(iter(rends.values())).spp, "window_px": next(iter(rends.values())).window_px,
     })
     return res
 
