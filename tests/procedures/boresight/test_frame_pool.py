@@ -87,3 +87,11 @@ def test_workers_must_be_a_positive_integer(rig):
     for bad in (0, -1, 1.5):
         with pytest.raises(ValueError, match="workers"):
             run_orbit(rig, measurements=3, workers=bad)
+
+
+def test_a_pool_closed_before_its_tasks_stops_its_worker(rig):
+    pool = frame_pool.FramePool(rig, {1})
+    proc = pool._proc
+    pool.close()
+    assert proc.poll() is not None
+    assert pool.result(0) is None

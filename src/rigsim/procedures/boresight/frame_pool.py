@@ -8,14 +8,16 @@ workers. The worker renders the frames of the cameras it is given, this process 
 The worker is a fresh interpreter started as ``python -m rigsim.procedures.boresight.frame_pool`` (not
 multiprocessing's spawn, which re-imports the caller's main script: a script without an
 ``if __name__ == "__main__"`` guard would run again in the worker). It reads its renderers and its
-whole task list as one message on stdin and streams the frames back on its stdout (length-prefixed
-pickles; anything else the worker prints goes to stderr). If it cannot start, dies, or stays silent
+whole task list as two messages on stdin (so it can start, and compile its kernels, before the tasks
+are known) and streams the frames back on its stdout (length-prefixed pickles; anything else the worker
+prints goes to stderr). If it cannot start, dies, or stays silent
 for :data:`SILENCE_S`, :meth:`FramePool.result` returns ``None`` after one warning, and the caller
 renders the frame itself: the same frames, slower.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import queue
@@ -70,20 +72,23 @@ def _recv(stream):
 
 
 class FramePool:
-    """Renders ``tasks`` (a list of :data:`Task`) of the cameras in ``remote`` in a worker subprocess,
-    started at once; :meth:`result` (i) returns task i's frame when it is the worker's, ``None`` when the
-    worker failed (render it here). ``spp``: the renderers' samples per pixel (``None``: the rig's)."""
+    """A worker subprocess rendering the frames of the cameras in ``remote`` (both detectors; ``spp``: the
+    renderers' samples per pixel, ``None``: the rig's). It starts at once and builds and warms up its
+    renderers while the caller does other work; :meth:`start` then hands it the task list (a list of
+    :data:`Task`), and :meth:`result` (i) returns task i's frame when it is the worker's, ``None`` when
+    it is not or the worker failed (render it here). No worker when ``remote`` is empty."""
 
-    def __init__(self, rig, tasks: list, remote: set, spp: int | None = None):
-        self._index = {i: t for i, t in enumerate(tasks) if t[0] in remote}
+    def __init__(self, rig, remote=(), spp: int | None = None):
+        self.remote = frozenset(int(c) for c in remote)
+        self._index: dict = {}
         self._results: dict = {}
         self._inbox: queue.Queue = queue.Queue()
+        self._outbox: queue.Queue = queue.Queue()
         self._failed = False
         self._proc = None
-        if not self._index:
+        if not self.remote:
             return
-        keys = sorted({(t[0], t[1]) for t in self._index.values()})
-        message = {"rig": rig, "renderers": keys, "spp": spp, "tasks": self._index}
+        init = {"rig": rig, "renderers": [(c, j) for c in sorted(self.remote) for j in range(2)], "spp": spp}
         root = str(Path(__file__).resolve().parents[3])   # the folder holding this rigsim package
         env = dict(os.environ)
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
@@ -93,17 +98,24 @@ class FramePool:
         except OSError as exc:
             self._fail(f"could not start ({exc})")
             return
-        self._thread = threading.Thread(target=self._talk, args=(message,), daemon=True,
-                                        name="rigsim-boresight-frames")
-        self._thread.start()
+        threading.Thread(target=self._talk, args=(self._proc, init), daemon=True, name="rigsim-boresight-frames").start()
 
-    def _talk(self, message) -> None:
-        """The worker's pipes: send the one message, then queue every reply until the stream ends."""
+    def start(self, tasks: list) -> None:
+        """Hand the worker its tasks: those of ``tasks`` whose camera is remote (indices are kept)."""
+        self._index = {i: t for i, t in enumerate(tasks) if t[0] in self.remote}
+        self._outbox.put(self._index)
+
+    def _talk(self, proc, init) -> None:
+        """The worker's pipes: send the renderers, then the tasks, then queue every reply until the stream ends."""
         try:
-            _send(self._proc.stdin, message)
-            self._proc.stdin.close()
+            _send(proc.stdin, init)
+            tasks = self._outbox.get()
+            if tasks is None:   # closed before any task
+                return
+            _send(proc.stdin, tasks)
+            proc.stdin.close()
             while True:
-                self._inbox.put(_recv(self._proc.stdout))
+                self._inbox.put(_recv(proc.stdout))
         except Exception as exc:  # noqa: BLE001  (EOF, a broken pipe, an unpicklable reply: the worker is gone)
             self._inbox.put(("gone", exc))
 
@@ -143,6 +155,7 @@ class FramePool:
         p, self._proc = self._proc, None
         if p is None:
             return
+        self._outbox.put(None)
         if p.poll() is None:
             p.kill()
         p.wait()
@@ -160,26 +173,32 @@ class FramePool:
 
 
 def _serve() -> None:
-    """The worker: read the message, build the renderers, render the tasks in order, reply per frame."""
+    """The worker: build and warm up the renderers, read the tasks, render them in order, reply per frame.
+    An error is one message (the caller renders the frames itself and meets it there)."""
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)              # whatever else writes to stdout (Mitsuba's log, a print) goes to stderr
     sys.stdout = sys.stderr
-    msg = _recv(sys.stdin.buffer)
-    from rigsim.render.boresight import LoopRenderer
+    try:
+        init = _recv(sys.stdin.buffer)
+        from rigsim.render.boresight import LoopRenderer
 
-    rends = {key: LoopRenderer(msg["rig"], key[0], key[1], spp=msg["spp"]) for key in msg["renderers"]}
-    for r in rends.values():
-        r.warm_up()
-    for i, task in msg["tasks"].items():
-        try:
+        rends = {key: LoopRenderer(init["rig"], key[0], key[1], spp=init["spp"]) for key in init["renderers"]}
+        for r in rends.values():
+            r.warm_up()
+        tasks = _recv(sys.stdin.buffer)
+        for i, task in tasks.items():
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 frame = render_task(rends, task)
-        except Exception as exc:  # noqa: BLE001  (reported to the caller, which renders the frame itself)
+            _send(out, ("frame", i, frame, [(w.category, str(w.message)) for w in caught]))
+    except EOFError:   # the caller closed before sending the tasks
+        return
+    except Exception as exc:  # noqa: BLE001  (reported to the caller, which renders the frames itself)
+        with contextlib.suppress(OSError):   # unless the caller is gone
             _send(out, ("error", f"{type(exc).__name__}: {exc}"))
-            return
-        _send(out, ("frame", i, frame, [(w.category, str(w.message)) for w in caught]))
-    out.close()
+    finally:
+        with contextlib.suppress(OSError):
+            out.close()
 
 
 if __name__ == "__main__":
