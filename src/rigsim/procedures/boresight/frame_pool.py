@@ -93,8 +93,9 @@ class FramePool:
         env = dict(os.environ)
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         try:
+            # its own session: a Ctrl-C reaches this process only, which stops the worker (no second traceback)
             self._proc = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
-                                          stdout=subprocess.PIPE, env=env)
+                                          stdout=subprocess.PIPE, env=env, start_new_session=True)
         except OSError as exc:
             self._fail(f"could not start ({exc})")
             return

@@ -309,7 +309,7 @@ def _start_rig_picture(rig_path, png: Path):
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     try:
         return subprocess.Popen([sys.executable, "-c", _PICTURE, str(rig_path), str(png)], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, start_new_session=True)
     except OSError as exc:
         return exc
 
