@@ -5,13 +5,17 @@ point, report written to a temporary folder), default options (rig dual_line_arr
 Prints the best wall time, speed-up and peak RSS of each side, and from the written boresight.json:
 the orbit's relative-angle RMS errors (DVAD, x/y/z in arcsec), Fig 5's DVAD 3σ α/β/γ (arcsec), the
 render-vs-exact fidelity (px), which should agree between old and new; and the run's stage seconds
-(analyses, orbit, orbit warm-up).
+(analyses, orbit, orbit warm-up). The new side renders camera 1's frames in a worker subprocess
+(procedures/boresight/frame_pool.py) and draws the report's rig picture in another; both are in their
+own session, so on a shared machine (Linux autogroups) they also get their own share of the CPU. The
+load average is printed before and after: compare the ratio, not the seconds, on a busy machine.
 
 Usage: PYTHONPATH=src .venv/bin/python benchmarks/run_boresight.py [--repeat 1] [--rounds 1]
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -43,7 +47,9 @@ result = {"orbit_rel_rms_x_arcsec": rel[0], "orbit_rel_rms_y_arcsec": rel[1], "o
 
 def main() -> None:
     rig = str(Path(__file__).resolve().parents[1] / "scenes" / "dual_line_array_prism.toml")
+    print("load average before: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
     main_for(__doc__, "run boresight (default)", SETUP, STMT, target="<= 20 s", rig=rig)
+    print("load average after:  {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
 
 
 if __name__ == "__main__":

@@ -247,15 +247,12 @@ class LoopRenderer:
         ROI (what a perfect renderer gives), plus geometry flags."""
         g = self.geom
         p = self._rendered_params(E_hrc, delta_f_mm)
-        rng = np.random.default_rng(rng_seed)
+        sx, sy = self._truth_sources(int(rng_seed))
         n = self.truth_rays
-        r = self.core_radius_mm * np.sqrt(rng.random(n))
-        t = 2 * np.pi * rng.random(n)
         du, dv = np.empty(n), np.empty(n)
         for a in range(0, n, TRUTH_CHUNK):   # in cache-sized chunks: the trace is many passes over its arrays
             sl = slice(a, a + TRUTH_CHUNK)
-            lx, ly = _trace_xy(self.laser_W[0] + r[sl] * np.cos(t[sl]), self.laser_W[1] + r[sl] * np.sin(t[sl]),
-                               p["C"], p["f_lens"], p["N"], self.facet_point_W, self.det_centre_W[2])
+            lx, ly = _trace_xy(sx[sl], sy[sl], p["C"], p["f_lens"], p["N"], self.facet_point_W, self.det_centre_W[2])
             ex, ey = lx - self.det_centre_W[0], ly - self.det_centre_W[1]   # the landing plane is the detector's
             du[sl] = (ex * self.u_axis[0] + ey * self.u_axis[1]) / g.pitch_mm + g.cx
             dv[sl] = (ex * self.v_axis[0] + ey * self.v_axis[1]) / g.pitch_mm + g.cy
@@ -280,6 +277,20 @@ class LoopRenderer:
                 "pixel_centroid_uv": binned.tolist(), "window_origin_uv": [int(u0), int(v0)],
                 "fraction_in_window": float(inside.mean()), "flags": flags,
                 "facet_normal_ota_f32": p["N"].tolist(), "lens_focal_length_mm_f32": p["f_lens"]}
+
+    def _truth_sources(self, rng_seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """The truth's ray origins on the core (uniform on the disk, drawn from ``rng_seed``): the same for
+        every frame of a seed, so they are drawn once per seed (the last one is kept)."""
+        cached = getattr(self, "_sources", None)
+        if cached is not None and cached[0] == (rng_seed, self.truth_rays):
+            return cached[1], cached[2]
+        rng = np.random.default_rng(rng_seed)
+        n = self.truth_rays
+        r = self.core_radius_mm * np.sqrt(rng.random(n))
+        t = 2 * np.pi * rng.random(n)
+        sx, sy = self.laser_W[0] + r * np.cos(t), self.laser_W[1] + r * np.sin(t)
+        self._sources = ((rng_seed, self.truth_rays), sx, sy)
+        return sx, sy
 
     def _window_for(self, uv) -> tuple[int, int]:
         if not self.follow:

@@ -32,7 +32,7 @@ from rigsim.truth.boresight import OrbitTruth, orbit_truth
 
 __all__ = ["PARAMS", "mc_errors", "predicted_3sigma", "sweep", "fig8_residual", "rotation_order",
            "orbit_truth", "run_orbit", "claims", "run_study", "EQ20_COS2BETA", "eq20_focal_threshold",
-           "beta_noise_excess", "loop_model_comparison"]
+           "beta_noise_excess", "loop_model_comparison", "orbit_frame_pool"]
 
 PARAMS = ("delta_f_um", "alpha_arcsec", "beta_arcsec", "gamma_arcsec")
 AS = ARCSEC_PER_RAD
@@ -240,7 +240,7 @@ def _orbit_estimates(geoms, ref_uv, meas, truth: OrbitTruth, o, reading) -> dict
 
 def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider: str = "tcom",
               reading: str = "consistent", spp: int | None = None, measurements: int | None = None,
-              jitter_px: float = 0.1, on_frame=None) -> dict:
+              jitter_px: float = 0.1, on_frame=None, workers: int | None = None, frame_pool=None) -> dict:
     """Render the four CMOS ROIs at every measurement of the orbit scenario, centroid, estimate
     per camera (DVAD, and the simplified method for comparison), form the relative angle and compare
     with truth. ``progress(n)`` is called after each rendered frame.
@@ -249,11 +249,12 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
     measured centroid (an *equivalent* centroid error, the paper's 0.1 px: vibration, thermal
     gradients, stray light — not modelled physically); key ``estimates_jitter``.
     ``on_frame(stage, camera, detector, k, frame)`` sees every rendered ROI (stage "reference" or
-    "measurement"), e.g. to write it as a file."""
-    import warnings
-
-    from rigsim.imaging import NoiseModel
-    from rigsim.imaging.rois import centroid_rois
+    "measurement"), e.g. to write it as a file.
+    ``workers``: processes rendering the frames (1, or 2: camera 1's frames in a worker subprocess,
+    :mod:`~rigsim.procedures.boresight.frame_pool`); default 2 on two or more CPUs. The frames and every
+    number are the same for any ``workers``. ``frame_pool``: one from :func:`orbit_frame_pool`, started
+    earlier (then ``workers`` is its, and the caller closes it)."""
+    from rigsim.procedures.boresight.frame_pool import render_task
     from rigsim.render.boresight import LoopRenderer
 
     t_start = time.perf_counter()
@@ -262,12 +263,65 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         raise ValueError("the orbit scenario needs two cameras")
     o = rig.orbit
     n_meas = measurements or o.measurements
-    truth = orbit_truth(rig, geoms, np.linspace(0.0, o.orbits * o.period_min, n_meas))
-    rends = {(c, j): LoopRenderer(rig, c, j, spp=spp) for c in range(2) for j in range(2)}
+    own_pool = frame_pool is None
+    pool = orbit_frame_pool(rig, workers, spp) if own_pool else frame_pool
+    try:
+        truth = orbit_truth(rig, geoms, np.linspace(0.0, o.orbits * o.period_min, n_meas))
+        # every frame as a task (camera, detector, E, Δf, seed, with truth), in the order they are used
+        tasks = [(c, j, None, 0.0, seed * 1000 + 100 * c + 10 * j + k, k == 0)
+                 for c in range(2) for j in range(2) for k in range(o.reference_frames)]
+        tasks += [(c, j, truth.E[c][k], truth.delta_f_mm[c][k], seed * 7919 + 1000 * k + 10 * c + j, True)
+                  for k in range(n_meas) for c in range(2) for j in range(2)]
+        pool.start(tasks)
+        rends = {(c, j): LoopRenderer(rig, c, j, spp=spp) for c in range(2) if c not in pool.remote for j in range(2)}
+        for r in rends.values():
+            r.warm_up()
+        t_warm = time.perf_counter() - t_start
+        frames = iter(range(len(tasks)))
+
+        def next_frame():
+            i = next(frames)
+            fr = pool.result(i)
+            if fr is None:   # this process's camera, or the worker failed
+                key = tasks[i][:2]
+                if key not in rends:
+                    rends[key] = LoopRenderer(rig, key[0], key[1], spp=spp)
+                fr = render_task(rends, tasks[i])
+            return fr
+
+        res = _orbit_frames(rig, geoms, truth, next_frame, seed=seed, progress=progress, centroider=centroider,
+                            reading=reading, jitter_px=jitter_px, on_frame=on_frame)
+    finally:
+        if own_pool:
+            pool.close()
+    res.update({"seconds": time.perf_counter() - t_start, "warm_up_seconds": t_warm,
+                "spp": rends[(0, 0)].spp, "window_px": rends[(0, 0)].window_px})
+    return res
+
+
+def orbit_frame_pool(rig: BoresightRig, workers: int | None = None, spp: int | None = None):
+    """The :class:`~rigsim.procedures.boresight.frame_pool.FramePool` of :func:`run_orbit` for ``workers``
+    processes (``None``: :func:`~rigsim.procedures.boresight.frame_pool.default_workers`): with 2, a worker
+    renders camera 1's frames. Started early (e.g. before the analyses) it has its kernels compiled when the
+    orbit begins; pass it as ``run_orbit(frame_pool=…)`` and close it."""
+    from rigsim.procedures.boresight.frame_pool import FramePool, default_workers
+
+    workers = default_workers() if workers is None else workers
+    if isinstance(workers, bool) or int(workers) != workers or workers < 1:
+        raise ValueError(f"workers = {workers!r}: must be an integer >= 1")
+    return FramePool(rig, {1} if workers > 1 and len(rig.cameras) >= 2 else (), spp=spp)
+
+
+def _orbit_frames(rig, geoms, truth, next_frame, *, seed, progress, centroider, reading, jitter_px, on_frame) -> dict:
+    """:func:`run_orbit` from the frames (``next_frame()``, in the tasks' order) on: centroids, estimates, truth."""
+    import warnings
+
+    from rigsim.imaging import NoiseModel
+    from rigsim.imaging.rois import centroid_rois
+
     noise = NoiseModel.from_detector(rig.detector)
-    for r in rends.values():
-        r.warm_up()
-    t_warm = time.perf_counter() - t_start
+    o = rig.orbit
+    n_meas = len(truth.t_min)
     step = 0
 
     def tick():
@@ -282,10 +336,9 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         warnings.simplefilter("always")
         for c in range(2):
             for j in range(2):
-                r = rends[(c, j)]
                 rois, origins = [], []
                 for k in range(o.reference_frames):
-                    fr = r.render(None, 0.0, seed=seed * 1000 + 100 * c + 10 * j + k, with_truth=(k == 0))
+                    fr = next_frame()
                     if on_frame is not None:
                         on_frame("reference", c, j, k, fr)
                     if k == 0:
@@ -304,8 +357,7 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         for k in range(n_meas):
             for c in range(2):
                 for j in range(2):
-                    r = rends[(c, j)]
-                    fr = r.render(truth.E[c][k], truth.delta_f_mm[c][k], seed=seed * 7919 + 1000 * k + 10 * c + j)
+                    fr = next_frame()
                     if on_frame is not None:
                         on_frame("measurement", c, j, k, fr)
                     fidelity.append(float(np.abs(fr.photon_centroid() - np.array(fr.truth["pixel_centroid_uv"])).max()))
@@ -348,8 +400,6 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
         "_spots": {"geoms": geoms, "ref_uv": ref_uv, "meas": meas, "truth": truth, "reference_frames": o.reference_frames,
                    "ref_std": np.std(ref_single, axis=1, ddof=1)},
         "frames_rendered": int(4 * (o.reference_frames + n_meas)),
-        "seconds": time.perf_counter() - t_start, "warm_up_seconds": t_warm,
-        "spp": next(iter(rends.values())).spp, "window_px": next(iter(rends.values())).window_px,
     })
     return res
 
@@ -598,33 +648,40 @@ def run_study(rig: BoresightRig, *, seed: int | None = None, runs: int | None = 
     eq20_block = {"reading": eq20_cos2beta, "target_arcsec": 0.1, "sigma_px": st.centroid_sigma_px,
                   **{c: {"F_m": v["F_mm"] / 1000.0, "beta_half_angle_deg": v["beta_half_angle_deg"]}
                      for c, v in eq20.items()}}
-    per_model = {}
-    for lm in [loop_model] + [m for m in LOOP_MODELS if m != loop_model]:
-        methods = ("dvad", "simplified") + (("dvad_physical_loop",) if lm != "physical" else ())
-        per_model[lm] = _analyses(g, g2, st, seed, runs, sweep_runs, kw, lm, methods)
-        per_model[lm]["_loop_model"] = lm
-        per_model[lm]["_eq20"] = eq20_claim
-        if progress:
-            progress(4 if lm == loop_model else 1, "analyses" if lm == loop_model else f"analyses ({lm} loop)")
-    res.update({k: v for k, v in per_model[loop_model].items() if not k.startswith("_")})
-    res["_loop_model"] = loop_model
-    res["_eq20"] = eq20_claim
-    res["analysis_seconds"] = time.perf_counter() - t0
-    if orbit:
-        res["orbit"] = run_orbit(rig, seed=seed, progress=(lambda n: progress(n, "orbit")) if progress else None,
-                                 reading=reading, **(orbit_kw or {}))
-    res["claims"] = claims(res)
-    per_model[loop_model]["claims"] = res["claims"]
-    for lm in LOOP_MODELS:
-        if lm != loop_model:
-            per_model[lm]["claims"] = claims(per_model[lm])
-    res["loop_models"] = loop_model_comparison(per_model, loop_model, eq20_block, beta_noise_excess(g))
-    from rigsim.procedures.boresight.result_json import boresight_result_json, orbit_result_json
+    orbit_kw = dict(orbit_kw or {})
+    # the orbit's render worker starts now: it compiles its kernels during the analyses
+    pool = orbit_frame_pool(rig, orbit_kw.pop("workers", None), orbit_kw.get("spp")) if orbit else None
+    try:
+        per_model = {}
+        for lm in [loop_model] + [m for m in LOOP_MODELS if m != loop_model]:
+            methods = ("dvad", "simplified") + (("dvad_physical_loop",) if lm != "physical" else ())
+            per_model[lm] = _analyses(g, g2, st, seed, runs, sweep_runs, kw, lm, methods)
+            per_model[lm]["_loop_model"] = lm
+            per_model[lm]["_eq20"] = eq20_claim
+            if progress:
+                progress(4 if lm == loop_model else 1, "analyses" if lm == loop_model else f"analyses ({lm} loop)")
+        res.update({k: v for k, v in per_model[loop_model].items() if not k.startswith("_")})
+        res["_loop_model"] = loop_model
+        res["_eq20"] = eq20_claim
+        res["analysis_seconds"] = time.perf_counter() - t0
+        if orbit:
+            res["orbit"] = run_orbit(rig, seed=seed, progress=(lambda n: progress(n, "orbit")) if progress else None,
+                                     reading=reading, frame_pool=pool, **orbit_kw)
+        res["claims"] = claims(res)
+        per_model[loop_model]["claims"] = res["claims"]
+        for lm in LOOP_MODELS:
+            if lm != loop_model:
+                per_model[lm]["claims"] = claims(per_model[lm])
+        res["loop_models"] = loop_model_comparison(per_model, loop_model, eq20_block, beta_noise_excess(g))
+        from rigsim.procedures.boresight.result_json import boresight_result_json, orbit_result_json
 
-    if orbit:
-        res["_result"] = orbit_result_json(rig, res["orbit"]["_spots"], seed=seed, reading=reading)
-    else:  # the analyses only: the result's header, no sample measured
-        res["_result"] = boresight_result_json(rig, {}, {}, [], [], np.zeros((0, 2, 2)), np.zeros((0, 4)), {},
-                                               reading=reading, mode="analytic", seed=seed)
-    res["seconds"] = time.perf_counter() - t0
-    return res
+        if orbit:
+            res["_result"] = orbit_result_json(rig, res["orbit"]["_spots"], seed=seed, reading=reading)
+        else:  # the analyses only: the result's header, no sample measured
+            res["_result"] = boresight_result_json(rig, {}, {}, [], [], np.zeros((0, 2, 2)), np.zeros((0, 4)), {},
+                                                   reading=reading, mode="analytic", seed=seed)
+        res["seconds"] = time.perf_counter() - t0
+        return res
+    finally:
+        if pool is not None:
+            pool.close()
