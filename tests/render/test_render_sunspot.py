@@ -219,6 +219,17 @@ def test_tight_render_is_the_window_with_fewer_paths(wide_sun):
         np.testing.assert_allclose(got.centroid(), ref.centroid(), atol=0.006)
 
 
+def test_tight_render_of_a_spot_overflowing_the_window_is_the_window():
+    r = SunSpotRenderer(NARROW, full_angle_rad=math.radians(2.0), window_px=38, spp=16)
+    s = _dir(25, 45)
+    with pytest.warns(GeometryWarning, match="does not fit"):
+        a = r.render(s, seed=3)
+    with pytest.warns(GeometryWarning, match="does not fit"):
+        b = r.render(s, seed=3, tight=True)
+    assert a.flags["spot_exceeds_window"] and b.flags == a.flags
+    np.testing.assert_array_equal(a.image, b.image)
+
+
 def test_tight_render_statistics_over_seeds(wide_sun):
     """The tight tile's pixels have the window's expectation: over 16 seeds each, the per-pixel means
     agree within 4 standard errors (from the two samples' own scatter) and the mean centroids to 1e-3 px."""

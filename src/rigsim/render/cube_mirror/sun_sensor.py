@@ -185,7 +185,7 @@ class SunSpotRenderer:
             warnings.warn(f"the spot ({flags['spot_extent_px']} px) does not fit the "
                           f"{W} px window; flux is lost", GeometryWarning, stacklevel=2)
         t = self._tile_px(s) if tight else W
-        if t >= W:  # the whole window (a spot overflowing it is flagged above)
+        if not 4 <= t < W:  # the whole window (a spot overflowing it is flagged above)
             arr = self._scene.render({"sun_dir": s, "window_origin": origin}, seed=int(seed), spp=self.spp)
         else:
             a = W // 2 - t // 2
