@@ -1,6 +1,8 @@
 """The worker task writes a frame on its I/O thread while the next renders: every frame of the chunk is
 whole and complete when the task returns, and a failed write fails the task (to be retried)."""
 
+import json
+
 import pytest
 
 from rigsim.dataset import runner
@@ -31,6 +33,8 @@ def test_every_frame_is_complete_when_the_task_returns(chunk, tmp_path):
     for i, digest in done:
         assert frame_complete(tmp_path, i, "png", params=chunk[2][i])
         assert sha256_file(frame_files(tmp_path, i, "png")[0]) == digest
+        render = json.loads(frame_files(tmp_path, i, "png")[1].read_text())["render"]
+        assert render["spp"] == 16 and 4 <= render["tile_px"] < render["window_px"]  # Mitsuba drew the spot's tile
     assert _run(chunk, tmp_path) == done  # all complete: nothing rendered again, same checksums
 
 

@@ -211,6 +211,7 @@ def test_tight_render_is_the_window_with_fewer_paths(wide_sun):
         t = int(spot_tile_px(WIDE, s[None], SUN_FULL_ANGLE_RAD)[0])
         a = 16 - t // 2
         assert 4 <= t < 32 and ref.image.sum() == pytest.approx(ref.image[a:a + t, a:a + t].sum(), rel=1e-12)
+        assert got.settings["tile_px"] == t and "tile_px" not in ref.settings
         outside = np.ones((32, 32), bool)
         outside[a:a + t, a:a + t] = False
         assert np.all(got.image[outside] == 0.0) and np.all(ref.image[outside] == 0.0)

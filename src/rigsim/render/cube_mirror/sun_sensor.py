@@ -192,6 +192,7 @@ class SunSpotRenderer:
             arr = np.zeros((W, W))
             arr[a:a + t, a:a + t] = self._tile_scene(t).render(
                 {"sun_dir": s, "window_origin": (origin[0] + a, origin[1] + a)}, seed=int(seed), spp=self.spp)
+            settings["tile_px"] = t  # what Mitsuba rendered, centred in the window
         return SpotWindow(arr, origin, s, center, flags, self.spp, int(seed), self.variant,
                           time.perf_counter() - t0, settings)
 
