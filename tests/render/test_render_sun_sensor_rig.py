@@ -22,10 +22,11 @@ def scene():
 POSES_DEG = [(0.0, 0.0), (35.0, -20.0), (-60.0, 0.0), (0.0, 60.0), (45.0, 40.0)]
 
 
+@pytest.mark.parametrize("tight", [False, True], ids=["window", "tight"])
 @pytest.mark.parametrize("x_deg,y_deg", POSES_DEG)
-def test_rendered_spot_matches_analytic_model(scene, x_deg, y_deg):
+def test_rendered_spot_matches_analytic_model(scene, x_deg, y_deg, tight):
     pose = {"X": math.radians(x_deg), "Y": math.radians(y_deg)}
-    fr = scene.render(pose, seed=3, noiseless=True)
+    fr = scene.render(pose, seed=3, noiseless=True, tight=tight)
     win = fr.extra["window"]
     assert not fr.sidecar["flags"]["spot_off_detector"] and not fr.sidecar["flags"]["saturated"]
     # 1) the sun direction is the analytic campaign's: same projection as cube_mirror's sweep model

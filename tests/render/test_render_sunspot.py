@@ -20,7 +20,7 @@ import pytest
 
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
-from rigsim.optics.sun_disk import SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, spot_truth
+from rigsim.optics.sun_disk import SIMULATOR_32ARCMIN_RAD, SUN_FULL_ANGLE_RAD, spot_truth, window_centroid
 from rigsim.render.cube_mirror.sun_sensor import SunSpotRenderer
 
 WIDE = PinholeBrown(fx=500.0, fy=502.0, cx=515.3, cy=508.7, width=1024, height=1024,
@@ -75,11 +75,12 @@ FIELD = [(0, 0), (15, 30), (30, 120), (45, 0), (45, 200), (52, 300),
          (60, 45), (60, 135), (60, 225), (60, 315)]
 
 
-def test_sun_spot_centroid_matches_exact_projection_across_field(wide_sun):
+@pytest.mark.parametrize("tight", [False, True], ids=["window", "tight"])
+def test_sun_spot_centroid_matches_exact_projection_across_field(wide_sun, tight):
     errs, centre_dev = [], []
     for k, (th, az) in enumerate(FIELD):
         s = _dir(th, az)
-        win = wide_sun.render(s, seed=k)
+        win = wide_sun.render(s, seed=k, tight=tight)
         assert not any(win.flags[f] for f in ("spot_off_detector", "spot_cut_by_edge",
                                               "spot_exceeds_window", "spot_outside_model"))
         truth = cv2_truth(WIDE, s, SUN_FULL_ANGLE_RAD)
@@ -99,11 +100,12 @@ def test_sun_spot_centroid_matches_exact_projection_across_field(wide_sun):
 @pytest.mark.parametrize("cam,field", [
     (NARROW, [(0, 0), (10, 60), (20, 250), (25, 45)]),
 ], ids=["narrow"])
-def test_simulator_32arcmin_spot_narrow_camera(cam, field):
+@pytest.mark.parametrize("tight", [False, True], ids=["window", "tight"])
+def test_simulator_32arcmin_spot_narrow_camera(cam, field, tight):
     r = SunSpotRenderer(cam, full_angle_rad=SIMULATOR_32ARCMIN_RAD, window_px=32, spp=1024)
     for k, (th, az) in enumerate(field):
         s = _dir(th, az)
-        c = r.render(s, seed=100 + k).centroid()
+        c = r.render(s, seed=100 + k, tight=tight).centroid()
         truth = cv2_truth(cam, s, SIMULATOR_32ARCMIN_RAD)
         assert np.max(np.abs(c - truth["pixel"])) <= REQUIREMENT_PX
 
@@ -197,6 +199,53 @@ def test_same_seed_same_window(wide_sun):
     assert np.any(a != c)
 
 
+def test_tight_render_is_the_window_with_fewer_paths(wide_sun):
+    """``tight=True`` renders only the spot's tile at the same spp per pixel: the same window (origin,
+    flags, pixels) to the sampler's noise, exactly 0 outside the tile, where the window is 0 too."""
+    from rigsim.render.cube_mirror.sun_batch import spot_tile_px
+
+    for k, (th, az) in enumerate([(0, 0), (30, 120), (52, 300), (60, 45)]):
+        s = _dir(th, az)
+        ref, got = wide_sun.render(s, seed=20 + k), wide_sun.render(s, seed=40 + k, tight=True)
+        assert got.origin_uv == ref.origin_uv and got.flags == ref.flags and got.image.shape == ref.image.shape
+        t = int(spot_tile_px(WIDE, s[None], SUN_FULL_ANGLE_RAD)[0])
+        a = 16 - t // 2
+        assert 4 <= t < 32 and ref.image.sum() == pytest.approx(ref.image[a:a + t, a:a + t].sum(), rel=1e-12)
+        assert got.settings["tile_px"] == t and "tile_px" not in ref.settings
+        outside = np.ones((32, 32), bool)
+        outside[a:a + t, a:a + t] = False
+        assert np.all(got.image[outside] == 0.0) and np.all(ref.image[outside] == 0.0)
+        assert np.abs(got.image - ref.image).max() <= 0.01 * ref.image.max()  # as a sweep tile (test_render_sun_batch)
+        assert got.image.sum() == pytest.approx(ref.image.sum(), rel=2e-3)
+        np.testing.assert_allclose(got.centroid(), ref.centroid(), atol=0.006)
+
+
+def test_tight_render_of_a_spot_overflowing_the_window_is_the_window():
+    r = SunSpotRenderer(NARROW, full_angle_rad=math.radians(2.0), window_px=38, spp=16)
+    s = _dir(25, 45)
+    with pytest.warns(GeometryWarning, match="does not fit"):
+        a = r.render(s, seed=3)
+    with pytest.warns(GeometryWarning, match="does not fit"):
+        b = r.render(s, seed=3, tight=True)
+    assert a.flags["spot_exceeds_window"] and b.flags == a.flags
+    np.testing.assert_array_equal(a.image, b.image)
+
+
+def test_tight_render_statistics_over_seeds(wide_sun):
+    """The tight tile's pixels have the window's expectation: over 16 seeds each, the per-pixel means
+    agree within 4 standard errors (from the two samples' own scatter) and the mean centroids to 1e-3 px."""
+    s = _dir(40, 70)
+    full = np.array([wide_sun.render(s, seed=1000 + k).image for k in range(16)])
+    tight = np.array([wide_sun.render(s, seed=2000 + k, tight=True).image for k in range(16)])
+    lit = full.mean(0) > 0
+    se = np.sqrt((full.var(0, ddof=1) + tight.var(0, ddof=1)) / 16)[lit]
+    diff = np.abs(full.mean(0) - tight.mean(0))[lit]
+    assert np.all(diff <= 4 * se + 1e-9 * full.max())
+    c_full = np.mean([window_centroid(im) for im in full], axis=0)
+    c_tight = np.mean([window_centroid(im) for im in tight], axis=0)
+    np.testing.assert_allclose(c_tight, c_full, atol=1e-3)
+
+
 def test_off_detector_and_edge_cut_are_flagged(wide_sun):
     with pytest.warns(GeometryWarning, match="off the detector|outside"):
         w = wide_sun.render(_dir(60, 0), seed=0)    # 60 deg along +x lands at u ~ 1078 > 1023
@@ -222,6 +271,10 @@ def test_off_detector_and_edge_cut_are_flagged(wide_sun):
     off = np.arange(32) + u0 > 1023
     assert off.any() and np.all(w.image[:, off] == 0.0)   # pixels beyond the detector get nothing
     assert w.image.sum() > 0
+    with pytest.warns(GeometryWarning, match="cut by the detector edge"):
+        wt = wide_sun.render(s, seed=1, tight=True)
+    assert wt.flags == w.flags and wt.origin_uv == w.origin_uv and np.all(wt.image[:, off] == 0.0)
+    assert wt.image.sum() == pytest.approx(w.image.sum(), rel=2e-3)
 
 
 def test_window_too_small_is_rejected_or_flagged():

@@ -83,21 +83,36 @@ def _maybe_inject_fault(root: Path, index: int) -> None:
 
 def render_chunk(kind: str, rig_text: str, rig_source: str, opts: dict, root: str, fmt: str,
                  items: list[tuple[int, dict]]) -> list[tuple[int, str]]:
-    """Worker task: render and write every frame of ``items`` that is not complete yet."""
+    """Worker task: render and write every frame of ``items`` that is not complete yet.
+
+    A frame is encoded and written (fsync included) on one I/O thread while the next one renders; at
+    most one write is in flight, and the task returns once every write has finished."""
+    from concurrent.futures import ThreadPoolExecutor
+
     root_p = Path(root)
     gen = worker_generator(kind, rig_text, rig_source, opts)
-    done = []
-    for index, params in items:
-        if frame_complete(root_p, index, fmt, params=params):
-            ip, _ = frame_files(root_p, index, fmt)
-            done.append((index, sha256_file(ip)))
-            continue
-        _maybe_inject_fault(root_p, index)
-        img, sidecar, row = gen.render(index, params)
-        sidecar = dict(sidecar)
-        sidecar.setdefault("dataset", {})["truth_row"] = row
-        done.append((index, write_frame_atomic(root_p, index, img, sidecar, fmt, params=params)))
-    return done
+    done: list = []
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rigsim-write") as io:
+        pending = None
+        for index, params in items:
+            if frame_complete(root_p, index, fmt, params=params):
+                ip, _ = frame_files(root_p, index, fmt)
+                done.append((index, sha256_file(ip)))
+                continue
+            _maybe_inject_fault(root_p, index)
+            img, sidecar, row = gen.render(index, params)
+            sidecar = dict(sidecar)
+            sidecar.setdefault("dataset", {})["truth_row"] = row
+            if pending is not None:
+                done.append(pending.result())
+            pending = io.submit(_write_frame, root_p, index, img, sidecar, fmt, params)
+        if pending is not None:
+            done.append(pending.result())
+    return sorted(done)
+
+
+def _write_frame(root: Path, index: int, img, sidecar: dict, fmt: str, params: dict) -> tuple[int, str]:
+    return index, write_frame_atomic(root, index, img, sidecar, fmt, params=params)
 
 
 @dataclass

@@ -50,6 +50,14 @@ def _disk_pattern(full_angle_rad: float, n: int) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=4)
+def _disk_pattern_rows(full_angle_rad: float, n: int) -> np.ndarray:
+    """:func:`_disk_pattern` transposed, (3, n) contiguous: what :func:`spot_truth` reads."""
+    out = np.ascontiguousarray(_disk_pattern(full_angle_rad, n).T)
+    out.flags.writeable = False
+    return out
+
+
 def disk_directions(sun_dir, full_angle_rad: float, n: int) -> np.ndarray:
     """``n`` unit directions filling the cone of the given full angle with equal solid angle each.
 
@@ -86,23 +94,33 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
     * ``disk_bias_px`` = mean - centre, ``pixel_bias_px`` = pixel_centroid - mean;
     * ``relative_flux``: flux relative to the same disk on axis (= <cos theta> for ``flux``).
     """
-    d = disk_directions(sun_dir, full_angle_rad, n)
-    uv, valid = camera.project_valid(d)
-    c_uv, c_valid = camera.project_valid(_unit(sun_dir)[None, :])
-    if not (np.all(valid) and c_valid[0]):
+    s = _unit(sun_dir)
+    e1, e2 = _basis(s)
+    # the directions of disk_directions as rows (x, y, z) of one (3, n) array: contiguous columns
+    d = np.einsum("kn,kj->jn", _disk_pattern_rows(float(full_angle_rad), int(n)), np.array([s, e1, e2]))
+    z = d[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x, y = d[0] / z, d[1] / z
+        valid = bool(np.all(z > 0)) and bool(np.all(x * x + y * y < camera.r2_max))  # project_valid's mask
+    c_uv, c_valid = camera.project_valid(s[None, :])
+    if not (valid and c_valid[0]):
         return {"valid": False, "center_uv": c_uv[0].tolist() if c_valid[0] else None}
+    xd, yd = camera.distort(x, y)
+    uv = np.empty((len(z), 2))  # (n, 2) as project_valid returns it: the sums below add in its order
+    np.multiply(camera.fx, xd, out=uv[:, 0])
+    np.multiply(camera.fy, yd, out=uv[:, 1])
+    uv += (camera.cx, camera.cy)
     if response == "flux":
-        w = d[:, 2].copy()
+        w = z
     elif response == "radiance":
-        x, y = d[:, 0] / d[:, 2], d[:, 1] / d[:, 2]
         a, b, c, dd = camera.distort_jacobian(x, y)
-        w = (a * dd - b * c) / d[:, 2] ** 3
+        w = (a * dd - b * c) / z ** 3
     else:
         raise ValueError(f"response = {response!r}: must be 'flux' or 'radiance'")
     wsum = w.sum()
     mean = (w[:, None] * uv).sum(axis=0) / wsum
-    binned = np.floor(uv + 0.5)
-    pix = (w[:, None] * binned).sum(axis=0) / wsum
+    np.floor(uv + 0.5, out=uv)  # each point binned into the pixel that holds it
+    pix = (w[:, None] * uv).sum(axis=0) / wsum
     return {
         "valid": True,
         "center_uv": c_uv[0].tolist(),

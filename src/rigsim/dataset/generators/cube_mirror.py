@@ -58,9 +58,6 @@ class SunSensorGenerator:
         enc = {a.label: float(rng.normal(0.0, a.encoder_sigma_arcsec)) for a in tt.axes}
         return {"perpendicularity_arcsec": perp, "encoder_error_arcsec": enc}
 
-    def sweepable(self) -> list[str]:
-        return [a.label for a in self.rig.turntable.axes]
-
     def plan(self, n_frames: int | None, sweep: str | None, seed: int) -> list[dict]:
         labels = self.sweepable()
         rng_range = self.rig.procedure.sweep_range_deg
@@ -120,7 +117,8 @@ class SunSensorGenerator:
         pose = {k: math.radians(v) for k, v in pose_deg.items()}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            fr = self._scene.render(pose, seed=int(params["seed"]), full_frame=True, truth_points=200_000)
+            fr = self._scene.render(pose, seed=int(params["seed"]), full_frame=True, truth_points=200_000,
+                                     tight=True)
         sc = dict(fr.sidecar)
         enc = params["draws"]["encoder_error_arcsec"]
         reading = {k: v + enc.get(k, 0.0) / 3600.0 for k, v in pose_deg.items()}

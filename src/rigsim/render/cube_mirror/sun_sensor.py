@@ -115,6 +115,7 @@ class SunSpotRenderer:
                              "diameter on axis (need diameter + 2 px margin)")
         self._scene = self._build(window_px, window_px, self.spp)
         self._full = None  # (Scene, spp) for render_full, built on demand
+        self._tiles: dict[int, Scene] = {}  # tile_px -> Scene for render(tight=True), built on demand
 
     # -- scene --------------------------------------------------------------------------------
     def _radiance(self) -> float:
@@ -154,9 +155,14 @@ class SunSpotRenderer:
                 int(math.floor(center_uv[1] + 0.5)) - half)
 
     # -- rendering ----------------------------------------------------------------------------
-    def render(self, sun_dir_cam, seed: int = 0) -> SpotWindow:
+    def render(self, sun_dir_cam, seed: int = 0, *, tight: bool = False) -> SpotWindow:
         """Render the crop window around the predicted spot. Geometry problems become flags
-        (and a :class:`GeometryWarning`); a spot outside the model/detector is not rendered."""
+        (and a :class:`GeometryWarning`); a spot outside the model/detector is not rendered.
+
+        ``tight``: Mitsuba renders only the smallest even tile holding the spot
+        (:func:`~rigsim.render.cube_mirror.sun_batch.spot_tile_px`, centred as the window), at the
+        same spp per pixel; the window's other pixels are 0, as they are in expectation (nothing
+        but the disk emits). Same expectation, fewer light paths; only the random numbers differ."""
         s = _unit(sun_dir_cam)
         t0 = time.perf_counter()
         c_uv, c_ok = self.camera.project_valid(s[None, :])
@@ -178,9 +184,28 @@ class SunSpotRenderer:
         if flags["spot_exceeds_window"]:
             warnings.warn(f"the spot ({flags['spot_extent_px']} px) does not fit the "
                           f"{W} px window; flux is lost", GeometryWarning, stacklevel=2)
-        arr = self._scene.render({"sun_dir": s, "window_origin": origin}, seed=int(seed), spp=self.spp)
+        t = self._tile_px(s) if tight else W
+        if not 4 <= t < W:  # the whole window (a spot overflowing it is flagged above)
+            arr = self._scene.render({"sun_dir": s, "window_origin": origin}, seed=int(seed), spp=self.spp)
+        else:
+            a = W // 2 - t // 2
+            arr = np.zeros((W, W))
+            arr[a:a + t, a:a + t] = self._tile_scene(t).render(
+                {"sun_dir": s, "window_origin": (origin[0] + a, origin[1] + a)}, seed=int(seed), spp=self.spp)
+            settings["tile_px"] = t  # what Mitsuba rendered, centred in the window
         return SpotWindow(arr, origin, s, center, flags, self.spp, int(seed), self.variant,
                           time.perf_counter() - t0, settings)
+
+    def _tile_px(self, s: np.ndarray) -> int:
+        """The tight tile of :meth:`render` for unit direction ``s`` (even, like the window)."""
+        from rigsim.render.cube_mirror.sun_batch import spot_tile_px
+
+        return int(spot_tile_px(self.camera, s[None, :], self.full_angle_rad)[0])
+
+    def _tile_scene(self, t: int) -> Scene:
+        if t not in self._tiles:
+            self._tiles[t] = self._build(t, t, self.spp)
+        return self._tiles[t]
 
     def window(self, sun_dir_cam, image: np.ndarray, seed: int = 0, seconds: float = 0.0, **settings) -> SpotWindow:
         """A :class:`SpotWindow` (``window_px`` wide, placed as :meth:`render` places it, with its
@@ -273,13 +298,14 @@ class SunSensorScene:
         return s / np.linalg.norm(s)
 
     def render(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False, truth_points: int = 400_000,
-               full_frame: bool = True) -> Frame:
+               full_frame: bool = True, tight: bool = False) -> Frame:
         """Render one frame. ``full_frame=False`` digitises only the crop window (same pixels, same
-        fixed pattern, same noise statistics as the full frame; 10× faster for sweeps). The frame's
-        ``extra["window"]`` is the rendered :class:`SpotWindow`."""
+        fixed pattern, same noise statistics as the full frame; 10× faster for sweeps). ``tight``:
+        Mitsuba renders only the spot's tile of the window (:meth:`SunSpotRenderer.render`). The
+        frame's ``extra["window"]`` is the rendered :class:`SpotWindow`."""
         t0 = time.perf_counter()
         s = self.sun_dir_cam(pose_rad)
-        win = self.renderer.render(s, seed=seed)
+        win = self.renderer.render(s, seed=seed, tight=tight)
         return self.frame(pose_rad, win, seed=seed, noiseless=noiseless, truth_points=truth_points,
                           full_frame=full_frame, t0=t0)
 
