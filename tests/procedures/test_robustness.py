@@ -86,26 +86,27 @@ def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_
         assert (out / name).stat().st_size > 0
     d = json.loads((out / "robustness.json").read_text())
     assert d["configs"] == [IDEAL, "hot_pixels"]
-    conf, no_filter, no_pattern = d["pipelines"]
-    assert conf["pipeline"] == "as configured (single-pixel filter on, fixed pattern: sequence)"
-    assert no_filter["pipeline"] == "single-pixel filter off, fixed pattern: sequence"
-    assert no_pattern["pipeline"] == "single-pixel filter on, fixed pattern: none"
+    conf, no_filter, no_pattern, poor_kept = d["pipelines"]
+    assert conf["pipeline"] == "as configured (single-pixel filter on, fixed pattern: sequence, poor fits rejected)"
+    assert no_filter["pipeline"] == "single-pixel filter off, fixed pattern: sequence, poor fits rejected"
+    assert no_pattern["pipeline"] == "single-pixel filter on, fixed pattern: none, poor fits rejected"
+    assert poor_kept["pipeline"] == "single-pixel filter on, fixed pattern: sequence, poor fits kept"
 
     def mean(p, c, key):
         return np.mean(p["trials_values"][c][key])
 
     ideal_n, ideal_c = mean(conf, IDEAL, "identified_count"), mean(conf, IDEAL, "centroid_rms_px")
-    # 0.5 % hot pixels put one in a third of the stars' 9×9 windows. The single-pixel filter alone keeps
-    # the stars (it repairs the isolated ones) but not their accuracy (those under a star or below 4σ
-    # stay); the pattern from the sequence takes them all, with or without the filter.
-    assert mean(no_pattern, "hot_pixels", "identified_count") > 0.95 * ideal_n
-    assert mean(no_pattern, "hot_pixels", "centroid_rms_px") > 1.2 * ideal_c
-    assert no_pattern["verdict"]["hot_pixels"]["must_handle"]
+    # 0.5 % hot pixels put one in a third of the stars' 9×9 windows. Without the pattern from the sequence
+    # the filter repairs the isolated ones, the poor-fit test drops the stars a hot pixel spoils, and a few
+    # per cent of the stars are lost; with the pattern, with or without the filter, nothing is.
+    assert 0.90 * ideal_n < mean(no_pattern, "hot_pixels", "identified_count") < 0.97 * ideal_n
+    assert mean(no_pattern, "hot_pixels", "centroid_rms_px") > mean(conf, "hot_pixels", "centroid_rms_px")
     for p in (conf, no_filter):
         assert mean(p, "hot_pixels", "identified_count") > 0.98 * ideal_n
         assert mean(p, "hot_pixels", "centroid_rms_px") < 1.05 * ideal_c
     # the ideal frames are the same for every pipeline: neither the filter nor the pattern finds anything on them
     assert conf["trials_values"][IDEAL] == no_filter["trials_values"][IDEAL] == no_pattern["trials_values"][IDEAL]
+    assert poor_kept["trials_values"][IDEAL]["identified_count"] >= conf["trials_values"][IDEAL]["identified_count"]
 
 
 def test_run_robustness_refuses_what_it_cannot_do(short_star_rig, capsys):

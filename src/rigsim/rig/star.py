@@ -201,6 +201,8 @@ class Calibration(_Model):
     centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
     single_pixel_filter: StrictBool = Field(True, description="repair single-pixel events (hot pixels, particle "
                                                                "hits) before extracting the stars")
+    reject_poor_fits: StrictBool = Field(True, description="leave out of the calibration the stars whose PSF fit is "
+                                                            "poor (reduced χ² far above 1: a particle hit, a blend)")
     fixed_pattern: Literal["none", "sequence"] = Field(
         "none", description="subtract the detector's fixed pattern (hot pixels, DSNU) estimated from the sequence "
                             "itself (per-pixel median over the frames) before extracting the stars")

@@ -20,6 +20,7 @@ from rigsim.estimation.observability import observability
 from rigsim.estimation.star_calibration import MODELS, FrameObs, batch_lsq, run_ekf
 from rigsim.estimation.star_id import IdentResult, identify
 from rigsim.estimation.star_lis import identify_lost_in_space
+from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
 from rigsim.imaging.stars import Observations, extract_stars
 from rigsim.optics.sky import SkyCatalogue
@@ -120,7 +121,10 @@ class StarPipeline:
         c = self.nominal.calibration
         found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, method=c.centroid_method,
                               repair_single_pixels=c.single_pixel_filter)
-        usable = found.subset(np.flatnonzero(found.usable))
+        keep = found.usable
+        if c.reject_poor_fits:
+            keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
+        usable = found.subset(np.flatnonzero(keep))
         t1 = time.perf_counter()
         kw = {"search_radius_px": idc.search_radius_px, "match_tolerance_px": idc.match_tolerance_px,
               "min_matches": idc.min_matches}

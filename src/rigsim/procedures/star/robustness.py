@@ -43,13 +43,14 @@ def _rig_with(rig, config: str, names):
 
 
 def _describe(cal) -> str:
-    return f"single-pixel filter {'on' if cal.single_pixel_filter else 'off'}, fixed pattern: {cal.fixed_pattern}"
+    return (f"single-pixel filter {'on' if cal.single_pixel_filter else 'off'}, fixed pattern: {cal.fixed_pattern}, "
+            f"poor fits {'rejected' if cal.reject_poor_fits else 'kept'}")
 
 
 def pipeline_variants(rig) -> dict[str, object]:
     """The pipelines every robustness run's frames go through (name → nominal rig): as the rig
-    configures it, with its single-pixel filter switched the other way, and with its fixed-pattern
-    subtraction switched the other way (``none`` ↔ ``sequence``)."""
+    configures it, then with each of its defect settings switched the other way in turn (the
+    single-pixel filter, the fixed pattern ``none`` ↔ ``sequence``, the rejection of poor fits)."""
     nominal = rig.nominal_rig()
     cal = nominal.calibration
 
@@ -58,7 +59,8 @@ def pipeline_variants(rig) -> dict[str, object]:
 
     other_pattern = "sequence" if cal.fixed_pattern == "none" else "none"
     out = {f"as configured ({_describe(cal)})": nominal}
-    for alt in (with_cal(single_pixel_filter=not cal.single_pixel_filter), with_cal(fixed_pattern=other_pattern)):
+    for alt in (with_cal(single_pixel_filter=not cal.single_pixel_filter), with_cal(fixed_pattern=other_pattern),
+                with_cal(reject_poor_fits=not cal.reject_poor_fits)):
         out[_describe(alt.calibration)] = alt
     return out
 
