@@ -56,6 +56,8 @@ __all__ = [
     "doctor_report",
     "loaded_libllvm",
     "cache_path",
+    "release_memory",
+    "trim_memory",
 ]
 
 log = logging.getLogger("rigsim.render")
@@ -447,11 +449,17 @@ def set_thread_count(threads: int) -> None:
 def release_memory() -> None:
     """Give the memory of renders that are no longer referenced back to the system: Python's garbage, Dr.Jit's
     allocation cache and the C heap's free pages (a campaign holds ~200 MB of them after its last frame)."""
-    import ctypes
     import gc
-    import sys
 
     gc.collect()
+    trim_memory()
+
+
+def trim_memory() -> None:
+    """Dr.Jit's allocation cache and the C heap's free pages back to the system, without a garbage collection
+    (cheap enough to call after every frame)."""
+    import ctypes
+
     if "drjit" in sys.modules:
         sys.modules["drjit"].flush_malloc_cache()
     try:

@@ -171,7 +171,7 @@ def _run_cube_mirror_rendered(args) -> int:
             camp = rc.run_rendered_campaign(rig, real, seed=args.seed, axis_order=axis_order, noise=noise,
                                             noiseless=args.ideal, threshold=threshold, sweep_spp=args.sweep_spp,
                                             sweep_step_deg=args.sweep_step, repeat_frames=args.repeat_frames,
-                                            progress=bar, frames=frames, aiming_workers=min(2, cores()))
+                                            progress=_Releasing(bar), frames=frames, aiming_workers=min(2, cores()))
     wall = dict(camp.times)
     res = camp.result
     cal = camp.calibration
@@ -229,6 +229,26 @@ def _run_cube_mirror_rendered(args) -> int:
         atomic_write_text(Path(args.json_out), files["json"].read_text())
         print(f"wrote {args.json_out}")
     return 0
+
+
+class _Releasing:
+    """The campaign's progress bar, giving freed render memory back to the system after every frame and
+    between stages, so that the next frame's transient arrays start from a smaller process."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def update(self, n: int = 1) -> None:
+        from rigsim.render.backend import trim_memory
+
+        self.bar.update(n)
+        trim_memory()
+
+    def set_description(self, s: str) -> None:
+        from rigsim.render.backend import release_memory
+
+        release_memory()
+        self.bar.set_description(s)
 
 
 def _rig_picture_first(rig) -> tuple[bytes | None, str]:
