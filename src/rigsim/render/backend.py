@@ -58,6 +58,7 @@ __all__ = [
     "cache_path",
     "release_memory",
     "trim_memory",
+    "cap_mmap_threshold",
 ]
 
 log = logging.getLogger("rigsim.render")
@@ -466,3 +467,23 @@ def trim_memory() -> None:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):  # not glibc
         pass
+
+
+MMAP_THRESHOLD_BYTES = 1 << 20
+
+
+def cap_mmap_threshold(nbytes: int = MMAP_THRESHOLD_BYTES) -> bool:
+    """Serve every C allocation of at least ``nbytes`` by its own memory map, in this process and in the processes
+    it starts from now on (``MALLOC_MMAP_THRESHOLD_``; a value the user set is kept).
+
+    glibc raises its threshold (128 kB) after each large block is freed, up to 32 MB, so that the
+    frames' large arrays end up on the heap, where freed space is kept and fragmented; with a fixed
+    threshold a freed array goes back to the system at once. Returns False where this is not glibc."""
+    import ctypes
+
+    os.environ.setdefault("MALLOC_MMAP_THRESHOLD_", str(int(nbytes)))
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.mallopt(-3, int(os.environ["MALLOC_MMAP_THRESHOLD_"])))  # M_MMAP_THRESHOLD
+    except (OSError, AttributeError, ValueError):
+        return False

@@ -159,6 +159,9 @@ def _run_cube_mirror_rendered(args) -> int:
     print(f"rigsim {rigsim.__version__} — cube-mirror campaign on rendered frames (seed {rig.seed_document}), rig '{rig.name}'")
     print(f"rig file: {args.rig}   seed: {args.seed}   axis order (outer→inner): {axis_order}   "
           f"errors: {'none (ideal rig, noise-free detector)' if args.ideal else 'the rig file’s true errors + detector and encoder noise'}")
+    from rigsim.render.backend import cap_mmap_threshold
+
+    cap_mmap_threshold()  # the frames' large arrays go back to the system when freed (here and in the workers)
     picture = _rig_picture_first(rig)  # while this process is small: see _rig_picture_first
     from rigsim.render.threads import cores
 
