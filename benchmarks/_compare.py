@@ -48,6 +48,7 @@ class Side:
     times: list[float] = field(default_factory=list)
     rss_mb: float = 0.0
     result: dict = field(default_factory=dict)
+    tree_pss_mb: float = 0.0  # with ``tree=True``: peak of the summed PSS of the child's process tree
 
     @property
     def best(self) -> float:
@@ -73,30 +74,93 @@ def old_src(base: str = BASE) -> Path:
     return cache[base]
 
 
-def run_side(src: Path, setup: str, stmt: str, repeat: int, env: dict | None = None) -> Side:
+def _tree_pids(pid: int) -> list[int]:
+    """``pid`` and all its descendants (from /proc/<pid>/task/<tid>/children)."""
+    out, i = [pid], 0
+    while i < len(out):
+        try:
+            for tid in os.listdir(f"/proc/{out[i]}/task"):
+                with open(f"/proc/{out[i]}/task/{tid}/children") as fh:
+                    out += [int(x) for x in fh.read().split()]
+        except OSError:
+            pass
+        i += 1
+    return out
+
+
+def _pss_kb(pid: int) -> int:
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as fh:
+            for line in fh:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+class TreeSampler:
+    """Polls the summed proportional set size (PSS) of a process and its descendants every ``period``
+    seconds in a thread (Linux /proc); ``peak_mb`` is the largest sum seen (shared pages counted once)."""
+
+    def __init__(self, pid: int, period: float = 0.05):
+        import threading
+
+        self.pid, self.period, self.peak_mb = int(pid), float(period), 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            total = sum(_pss_kb(p) for p in _tree_pids(self.pid)) / 1024.0
+            self.peak_mb = max(self.peak_mb, total)
+            self._stop.wait(self.period)
+
+    def stop(self) -> float:
+        self._stop.set()
+        self._thread.join()
+        return self.peak_mb
+
+
+def run_side(src: Path, setup: str, stmt: str, repeat: int, env: dict | None = None, tree: bool = False) -> Side:
     code = _CHILD.format(setup=textwrap.dedent(setup), stmt=textwrap.dedent(stmt), repeat=int(repeat))
     e = dict(os.environ)
     e.update(env or {})
     e["PYTHONPATH"] = str(src)
-    p = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, env=e, cwd=str(REPO))
+    tree_mb = 0.0
+    if tree and Path("/proc/self/smaps_rollup").exists():
+        p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=e, cwd=str(REPO))
+        sampler = TreeSampler(p.pid)
+        out, err = p.communicate()
+        tree_mb = sampler.stop()
+        p = subprocess.CompletedProcess(p.args, p.returncode, out, err)
+    else:
+        p = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, env=e,
+                           cwd=str(REPO))
     if p.returncode:
         raise RuntimeError(f"benchmark child failed ({src}):\n{p.stderr[-4000:]}")
     payload = p.stdout.rsplit("@@RESULT@@", 1)[1]
     d = json.loads(payload)
-    return Side(d["times"], d["rss_mb"], d["result"])
+    return Side(d["times"], d["rss_mb"], d["result"], tree_mb)
 
 
 def compare(name: str, setup: str, stmt: str, *, repeat: int = 3, rounds: int = 2, old: bool = True,
-            base: str = BASE, env: dict | None = None, target: str = "") -> dict:
-    """Run ``stmt`` (after ``setup``) under the old and the new package; print one row; return both."""
+            base: str = BASE, env: dict | None = None, target: str = "", tree: bool = False) -> dict:
+    """Run ``stmt`` (after ``setup``) under the old and the new package; print one row; return both.
+
+    ``tree``: also sample the summed PSS of the child's process tree (its worker processes included)
+    and print its peak under the row."""
     sides = {"old": Side(), "new": Side()}
     new_src = REPO / "src"
     for _ in range(int(rounds)):
         order = (("old", old_src(base)), ("new", new_src)) if old else (("new", new_src),)
         for label, src in order:
-            s = run_side(src, setup, stmt, repeat, env)
+            s = run_side(src, setup, stmt, repeat, env, tree=tree)
             sides[label].times += s.times
             sides[label].rss_mb = max(sides[label].rss_mb, s.rss_mb)
+            sides[label].tree_pss_mb = max(sides[label].tree_pss_mb, s.tree_pss_mb)
             sides[label].result = s.result
     _print_row(name, sides, old, target)
     return sides
@@ -116,6 +180,10 @@ def _print_row(name: str, sides: dict, old: bool, target: str) -> None:
         print(f"{name:<38} {o.best:>10.3f} {n.best:>10.3f} {o.best / n.best:>7.2f}x {o.rss_mb:>8.0f} {n.rss_mb:>8.0f}  {target}")
     else:
         print(f"{name:<38} {'—':>10} {n.best:>10.3f} {'—':>8} {'—':>8} {n.rss_mb:>8.0f}  {target}")
+    if any(sides[label].tree_pss_mb for label in sides):
+        print(f"{'':<6}peak memory, MB: " + ", ".join(
+            f"{label} main-process RSS {sides[label].rss_mb:.0f} / process-tree PSS {sides[label].tree_pss_mb:.0f}"
+            for label in (("old", "new") if old else ("new",))))
     for label in ("old", "new") if old else ("new",):
         r = sides[label].result
         if r:

@@ -56,6 +56,9 @@ __all__ = [
     "doctor_report",
     "loaded_libllvm",
     "cache_path",
+    "release_memory",
+    "trim_memory",
+    "cap_mmap_threshold",
 ]
 
 log = logging.getLogger("rigsim.render")
@@ -447,14 +450,40 @@ def set_thread_count(threads: int) -> None:
 def release_memory() -> None:
     """Give the memory of renders that are no longer referenced back to the system: Python's garbage, Dr.Jit's
     allocation cache and the C heap's free pages (a campaign holds ~200 MB of them after its last frame)."""
-    import ctypes
     import gc
-    import sys
 
     gc.collect()
+    trim_memory()
+
+
+def trim_memory() -> None:
+    """Dr.Jit's allocation cache and the C heap's free pages back to the system, without a garbage collection
+    (cheap enough to call after every frame)."""
+    import ctypes
+
     if "drjit" in sys.modules:
         sys.modules["drjit"].flush_malloc_cache()
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):  # not glibc
         pass
+
+
+MMAP_THRESHOLD_BYTES = 1 << 20
+
+
+def cap_mmap_threshold(nbytes: int = MMAP_THRESHOLD_BYTES) -> bool:
+    """Serve every C allocation of at least ``nbytes`` by its own memory map, in this process and in the processes
+    it starts from now on (``MALLOC_MMAP_THRESHOLD_``; a value the user set is kept).
+
+    glibc raises its threshold (128 kB) after each large block is freed, up to 32 MB, so that the
+    frames' large arrays end up on the heap, where freed space is kept and fragmented; with a fixed
+    threshold a freed array goes back to the system at once. Returns False where this is not glibc."""
+    import ctypes
+
+    os.environ.setdefault("MALLOC_MMAP_THRESHOLD_", str(int(nbytes)))
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.mallopt(-3, int(os.environ["MALLOC_MMAP_THRESHOLD_"])))  # M_MMAP_THRESHOLD
+    except (OSError, AttributeError, ValueError):
+        return False

@@ -159,6 +159,10 @@ def _run_cube_mirror_rendered(args) -> int:
     print(f"rigsim {rigsim.__version__} — cube-mirror campaign on rendered frames (seed {rig.seed_document}), rig '{rig.name}'")
     print(f"rig file: {args.rig}   seed: {args.seed}   axis order (outer→inner): {axis_order}   "
           f"errors: {'none (ideal rig, noise-free detector)' if args.ideal else 'the rig file’s true errors + detector and encoder noise'}")
+    from rigsim.render.backend import cap_mmap_threshold
+
+    cap_mmap_threshold()  # the frames' large arrays go back to the system when freed (here and in the workers)
+    picture = _rig_picture_first(rig)  # while this process is small: see _rig_picture_first
     from rigsim.render.threads import cores
 
     t_all = time.perf_counter()
@@ -170,7 +174,7 @@ def _run_cube_mirror_rendered(args) -> int:
             camp = rc.run_rendered_campaign(rig, real, seed=args.seed, axis_order=axis_order, noise=noise,
                                             noiseless=args.ideal, threshold=threshold, sweep_spp=args.sweep_spp,
                                             sweep_step_deg=args.sweep_step, repeat_frames=args.repeat_frames,
-                                            progress=bar, frames=frames, aiming_workers=min(2, cores()))
+                                            progress=_Releasing(bar), frames=frames, aiming_workers=min(2, cores()))
     wall = dict(camp.times)
     res = camp.result
     cal = camp.calibration
@@ -191,7 +195,7 @@ def _run_cube_mirror_rendered(args) -> int:
     user = _user_frames_finish(args, rig, frames, camp, real, axis_order)
     from rigsim.render.backend import release_memory
 
-    release_memory()  # the renderers are gone: the budget's workers and the report's 3D view start smaller
+    release_memory()  # the renderers are gone: the budget's workers start smaller
     budget = None
     if not args.no_budget:
         mn = camp.measured_noise
@@ -219,8 +223,8 @@ def _run_cube_mirror_rendered(args) -> int:
         rig_path = os.path.relpath(resolve_rig_path(args.rig))
     except Exception:
         rig_path = args.rig
-    release_memory()  # the budget's arrays: the report's 3D view (~300 MB of off-screen OpenGL) starts smaller
-    files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall, user=user,
+    release_memory()  # the budget's arrays
+    files = write_report(out_dir, camp, rig, budget=budget, rig_path=rig_path, wall_times=wall, user=user, picture=picture,
                          command="rigsim " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rigsim") else None)
     print("\nWall time by stage (s): " + ", ".join(f"{k} {v:.1f}" for k, v in wall.items()))
     print(f"report: {files['report']}  (plots: " + ", ".join(p.name for k, p in files.items() if k not in ("report", "json")) + ")")
@@ -228,6 +232,43 @@ def _run_cube_mirror_rendered(args) -> int:
         atomic_write_text(Path(args.json_out), files["json"].read_text())
         print(f"wrote {args.json_out}")
     return 0
+
+
+class _Releasing:
+    """The campaign's progress bar, giving freed render memory back to the system after every frame and
+    between stages, so that the next frame's transient arrays start from a smaller process."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def update(self, n: int = 1) -> None:
+        from rigsim.render.backend import trim_memory
+
+        self.bar.update(n)
+        trim_memory()
+
+    def set_description(self, s: str) -> None:
+        from rigsim.render.backend import release_memory
+
+        release_memory()
+        self.bar.set_description(s)
+
+
+def _rig_picture_first(rig) -> tuple[bytes | None, str]:
+    """The report's 3D rig picture at the first face's exact null, rendered now in a child process.
+
+    pyvista, VTK and Mesa's off-screen OpenGL take ~350 MB; rendered in this process after the
+    campaign they would add to what the renderers leave behind, and in a child at the end to all
+    of this process. Before Mitsuba is imported this process is small, and the picture needs only
+    the rig and the pose (the exact null: the search's null differs by arcseconds). Returns (PNG
+    bytes, "") or (None, one line saying why there is no picture)."""
+    import tempfile
+
+    from rigsim.view.picture_process import picture_in_child
+
+    with tempfile.TemporaryDirectory(prefix="rigsim-picture-") as tmp:
+        path, why = picture_in_child(rig, Path(tmp) / "rig.png", pose_deg="null", size=(1400, 800))
+        return (path.read_bytes(), "") if path is not None else (None, why)
 
 
 def _user_frames(args, rig):

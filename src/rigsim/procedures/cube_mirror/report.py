@@ -9,7 +9,8 @@ Files written to ``out`` (``rigsim run cube-mirror --out DIR``; default renders/
 * ``search_path.png`` — each face's measured and exact offsets/readings per frame, with the
   stopping threshold;
 * ``budget_histogram.png`` — per-axis error distributions of the Monte-Carlo budget;
-* ``rig.png`` — the rig in 3D at the first face's null (rigsim.view, off screen);
+* ``rig.png`` — the rig in 3D at the first face's null (rigsim.view, off screen; ``rigsim run
+  cube-mirror`` renders it in a child process at the exact null before the campaign, see ``picture``);
 * ``campaign.json`` — every number on the page;
 * ``report.html`` — the same page, self-contained (images embedded).
 """
@@ -191,7 +192,14 @@ def _search_table_md(s) -> list[str]:
 
 
 def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None = None,
-                 wall_times: dict | None = None, command: str | None = None, user: dict | None = None) -> dict[str, Path]:
+                 wall_times: dict | None = None, command: str | None = None, user: dict | None = None,
+                 picture: tuple[bytes | None, str] | None = None) -> dict[str, Path]:
+    """Write the report's files into ``out``; returns them by kind.
+
+    ``picture``: the rig picture made beforehand, ``(PNG bytes of the rig at the first face's exact
+    null, "")`` or ``(None, why it is missing)``; by default it is rendered here, in this process, at
+    the first face's null as the search found it.
+    """
     out = Path(out)
     output_folder(out)
     files = {"calibration_residuals": plot_calibration_residuals(campaign, out / "calibration_residuals.png"),
@@ -208,11 +216,22 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
           f"readings: axis order {r.axis_order}, eq 8 `beam` (every number below unless a table says otherwise; "
           "`rigsim readings`)", ""]
     L += rig_summary_md(rig)
-    first = r.null_poses_deg[0] if r.null_poses_deg else None
-    pic, why = _rig_picture(rig, out, {k: v for k, v in first.items()} if first else None)
+    if picture is None:
+        first = r.null_poses_deg[0] if r.null_poses_deg else None
+        pic, why = _rig_picture(rig, out, {k: v for k, v in first.items()} if first else None)
+        caption = "the rig at the first face's null (rigsim view)"
+    else:
+        png, why = picture
+        pic = None
+        if png is not None:
+            from rigsim.files.atomic import atomic_write_bytes
+
+            pic = out / "rig.png"
+            atomic_write_bytes(pic, png)
+        caption = "the rig at the first face's exact null (rigsim view)"
     if pic is not None:
         files["rig_picture"] = pic
-        L += ["![the rig at the first face's null (rigsim view)](rig.png)", ""]
+        L += [f"![{caption}]({pic.name})", ""]
     else:
         L += [f"(rig picture unavailable: {why})", ""]
     L += ["## Truth vs recovered", "",
