@@ -167,6 +167,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
                     pb.update(1)
                 times["aiming-camera repeatability frames"] = time.perf_counter() - t0
             renderer.close()
+            del renderer, meas  # the next face's scene is built without this one's still held
         measured.update(_null_noise(resid, "px"))
     else:
         from rigsim.procedures.cube_mirror.autocollimation import (
