@@ -8,16 +8,20 @@ import numpy as np
 __all__ = ["poisson_inverse_cdf"]
 
 
-def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
+def _walk(lam: np.ndarray, u: np.ndarray, past_mode=None) -> np.ndarray:
     """Inversion for small λ: the smallest k with u <= F(k), by walking up the CDF (in the
     precision of ``lam``: float32 sums the CDF to ~1e-7).
 
     Dense steps over all values while many are undecided, then steps over the undecided ones only,
     compacted whenever half of them are decided: the cost is ~ Σλ element-steps. A value whose u
     lies above the rounded CDF's top stops past the mode where the pmf falls below a quarter of the
-    float epsilon (its tail holds less than the uniforms' resolution): a deep-tail count."""
+    float epsilon (its tail holds less than the uniforms' resolution): a deep-tail count.
+    ``past_mode``: that mode bound (default max λ + 1), a number or one per value."""
     dt = lam.dtype.type
-    past_mode = float(lam.max()) + 1.0
+    if past_mode is None:
+        past_mode = float(lam.max()) + 1.0
+    per_value = np.ndim(past_mode) > 0
+    pm_min = float(np.min(past_mode))
     tiny = dt(np.finfo(lam.dtype).eps / 4)  # a pmf below it no longer moves a CDF near 1
     p = np.exp(-lam)
     c = p.copy()
@@ -31,22 +35,23 @@ def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
         p *= dt(1.0 / step)
         c += p
         np.greater(u, c, out=m)
-        if step > past_mode:
-            m &= p >= tiny
+        if step > pm_min:
+            m &= (p >= tiny) | (step <= past_mode) if per_value else p >= tiny
         k += m
         n_alive = int(np.count_nonzero(m))
     if not n_alive:
         return k
     act = np.flatnonzero(m)
     lam_a, u_a, p_a, c_a, k_a = lam[act], u[act], p[act], c[act], k[act]
+    pm_a = past_mode[act] if per_value else past_mode
     while True:
         step += 1
         p_a *= lam_a
         p_a *= dt(1.0 / step)
         c_a += p_a
         m = u_a > c_a
-        if step > past_mode:
-            m &= p_a >= tiny
+        if step > pm_min:
+            m &= (p_a >= tiny) | (step <= pm_a) if per_value else p_a >= tiny
         k_a += m
         n_alive = int(np.count_nonzero(m))
         if n_alive == 0:
@@ -54,6 +59,8 @@ def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
         if 2 * n_alive <= m.size:
             k[act] = k_a
             act, lam_a, u_a, p_a, c_a, k_a = act[m], lam_a[m], u_a[m], p_a[m], c_a[m], k_a[m]
+            if per_value:
+                pm_a = pm_a[m]
     k[act] = k_a
     return k
 
@@ -72,7 +79,7 @@ def _cornish_fisher(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.maximum(np.floor(lam + np.sqrt(lam) * x + 0.5), 0.0)
 
 
-def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0) -> np.ndarray:
+def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0, *, run: int | None = None) -> np.ndarray:
     """Poisson(λ) variates from uniforms ``u`` by inverting the CDF (one uniform per value).
 
     float32 ``lam`` and ``u`` give float32 counts (the CDF summed in float32, ~1e-7), otherwise
@@ -82,12 +89,18 @@ def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0) -> 
     λ > ``small``: the Cornish–Fisher quantile of the Poisson distribution to O(1/λ) (skewness and
     kurtosis terms), rounded to an integer (mean, variance and histogram tested against the exact
     distribution); the exact inverse (scipy's ppf) costs ~1 s per megapixel.
+
+    ``run`` (1-D input): the same counts as this function applied to each consecutive ``run``
+    values alone (the walk's deep-tail stop takes each run's largest λ; one call saves the
+    per-call overhead).
     """
     lam, u = np.asarray(lam), np.asarray(u)
     dt = np.float32 if lam.dtype == np.float32 and u.dtype == np.float32 else np.float64
     lam, u = lam.astype(dt, copy=False), u.astype(dt, copy=False)
     if lam.size == 0:
         return np.zeros(lam.shape, dt)
+    if run is not None and lam.ndim == 1 and lam.size > run:
+        return _by_runs(lam, u, small, int(run))
     if lam.max() <= small:
         return _walk(lam, u)
     if lam.min() > small:
@@ -95,6 +108,28 @@ def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0) -> 
     out = np.empty(lam.shape, dtype=dt)
     lo = lam <= small
     out[lo] = _walk(lam[lo], u[lo])
+    hi = ~lo
+    out[hi] = _cornish_fisher(lam[hi], u[hi])
+    return out
+
+
+def _by_runs(lam: np.ndarray, u: np.ndarray, small: float, run: int) -> np.ndarray:
+    """:func:`poisson_inverse_cdf` of 1-D values as if called on each ``run`` of them alone."""
+    n = lam.size
+    lo = None if float(lam.max()) <= small else lam <= small
+    walked = lam if lo is None else np.where(lo, lam, -np.inf)
+    full = (n // run) * run
+    top = walked[:full].reshape(-1, run).max(axis=1)
+    if full < n:
+        top = np.append(top, walked[full:].max())
+    # each run's mode bound (its largest walked λ + 1) compares with integer steps as its floor
+    bound = np.floor(top.astype(np.float64) + 1.0)
+    pm = float(bound[0]) if (bound == bound[0]).all() else np.repeat(bound, run)[:n]
+    if lo is None:
+        return _walk(lam, u, pm)
+    out = np.empty(n, lam.dtype)
+    if lo.any():
+        out[lo] = _walk(lam[lo], u[lo], pm if np.ndim(pm) == 0 else pm[lo])
     hi = ~lo
     out[hi] = _cornish_fisher(lam[hi], u[hi])
     return out
