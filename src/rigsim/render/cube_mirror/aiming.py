@@ -64,7 +64,8 @@ class ConcentricityRenderer:
     :meth:`close`, with the renderer or at exit.
 
     ``spp`` is the pencil's light paths per camera pixel. They are traced onto a film binned
-    ``film_binning`` × ``film_binning`` (``spp·b²`` multijittered samples per film pixel): the
+    ``film_binning`` × ``film_binning`` (``spp·b²`` multijittered samples per film pixel, per chunk
+    rounded up to a count the sampler stratifies): the
     pencil is blurred by a disk of ~400 px radius next, so the coarser film costs nothing in the
     spot, and the larger stratified sample sets cut the spot centre's Monte-Carlo noise
     (docs/campaign.md). The hole glow is rendered at full resolution with ``hole_spp`` (default
@@ -99,8 +100,11 @@ class ConcentricityRenderer:
         self.hole_spp = max(4, self.spp) if hole_spp is None else int(hole_spp)
         if self.hole_spp < 1:
             raise ValueError(f"hole_spp = {hole_spp!r}: must be an integer >= 1")
-        # spp light paths per camera pixel = spp·b² per pixel of the b × b binned pencil film
-        pencil_kw = {"spp": self.spp * b * b, "beam": "collimated", "return_into_hole": "diffuse",
+        # spp light paths per camera pixel = spp·b² per pixel of the b × b binned pencil film, per
+        # chunk rounded up to a count the multijitter sampler stratifies (as Mitsuba would round it)
+        n = chunk_count(self.spp * b * b)
+        per_chunk = _multijitter_count(self.spp * b * b // n)
+        pencil_kw = {"spp": n * per_chunk, "sampler_count": per_chunk, "beam": "collimated", "return_into_hole": "diffuse",
                      "hole_glow_ratio": hole_glow_ratio, "spot_photons_per_px": self.spot_photons_per_px,
                      "detector": det, "deterministic": deterministic, "warmup": False,
                      "spot_film_binning": b}
@@ -292,6 +296,12 @@ class ConcentricityRenderer:
                   "pencil_chunks": chunk_count(self.pencil.spp), "spp_per_camera_pixel": self.spp,
                   "hole_spp": self.hole_spp})
         return s
+
+
+def _multijitter_count(n: int) -> int:
+    """The sample count Mitsuba's ``multijitter`` sampler uses for ``n`` (⌊√n⌋ × ⌈n/⌊√n⌋⌉ strata)."""
+    rx = math.isqrt(n)
+    return rx * -(-n // rx)
 
 
 def _homography(H: np.ndarray, x, y) -> tuple[np.ndarray, np.ndarray]:

@@ -343,7 +343,8 @@ class DiaphragmRenderer:
                  screen_reflectance: float = 0.9, spot_photons_per_px: float | None = None,
                  hole_glow_ratio: float = 1.0, hole_glow_in_spot_frame: bool | None = None,
                  view_azimuth_deg: float = 0.0, principal_point_px=None, detector=None, mesh_dir=None,
-                 deterministic: bool = True, warmup: bool = True, spot_film_binning: int = 1):
+                 deterministic: bool = True, warmup: bool = True, spot_film_binning: int = 1,
+                 sampler_count: int | None = None):
         from rigsim.render.backend import ensure_variant
 
         self.variant = ensure_variant()
@@ -373,7 +374,8 @@ class DiaphragmRenderer:
         self.hole_glow_in_spot_frame = bool(hole_glow_in_spot_frame)
         # point-symmetric quadrature: an even number of pencils
         self.divergence_directions = 2 * ((int(divergence_directions) + 1) // 2) if beam == "divergent" else 1
-        self._opts = dict(spp=self.spp, mesh_dir=mesh_dir, divergence_directions=self.divergence_directions,
+        # the samplers' built-in sample count (every render passes its own): ``sampler_count``
+        self._opts = dict(spp=self.spp if sampler_count is None else int(sampler_count), mesh_dir=mesh_dir, divergence_directions=self.divergence_directions,
                           screen_reflectance=self.screen_reflectance, beam_irradiance=1.0,
                           hole_glow_ratio=self.hole_glow_ratio, sampler=sampler, geometry=self.geometry)
         # photons per pixel per unit rendered radiance
