@@ -16,18 +16,16 @@ def _walk(lam: np.ndarray, u: np.ndarray, past_mode=None) -> np.ndarray:
     compacted whenever half of them are decided: the cost is ~ Σλ element-steps. A value whose u
     lies above the rounded CDF's top stops past the mode where the pmf falls below a quarter of the
     float epsilon (its tail holds less than the uniforms' resolution): a deep-tail count.
-    ``past_mode``: that mode bound (default max λ + 1), a number or one per value."""
+    ``past_mode``: that mode bound (default max λ + 1)."""
     dt = lam.dtype.type
     if past_mode is None:
         past_mode = float(lam.max()) + 1.0
-    per_value = np.ndim(past_mode) > 0
-    pm_min = float(np.min(past_mode))
     tiny = dt(np.finfo(lam.dtype).eps / 4)  # a pmf below it no longer moves a CDF near 1
     p = np.exp(-lam)
     c = p.copy()
     m = u > c
     # counts as uint16 while walking (cheaper to add to), exact as floats at the end
-    kt = np.uint16 if float(np.max(past_mode)) < 30000.0 else lam.dtype
+    kt = np.uint16 if past_mode < 30000.0 else lam.dtype
     k = m.astype(kt)
     n_alive = int(np.count_nonzero(m))
     step = 0
@@ -37,23 +35,22 @@ def _walk(lam: np.ndarray, u: np.ndarray, past_mode=None) -> np.ndarray:
         p *= dt(1.0 / step)
         c += p
         np.greater(u, c, out=m)
-        if step > pm_min:
-            m &= (p >= tiny) | (step <= past_mode) if per_value else p >= tiny
+        if step > past_mode:
+            m &= p >= tiny
         k += m
         n_alive = int(np.count_nonzero(m))
     if not n_alive:
         return k.astype(lam.dtype, copy=False)
     act = np.flatnonzero(m)
     lam_a, u_a, p_a, c_a, k_a = lam[act], u[act], p[act], c[act], k[act]
-    pm_a = past_mode[act] if per_value else past_mode
     while True:
         step += 1
         p_a *= lam_a
         p_a *= dt(1.0 / step)
         c_a += p_a
         m = u_a > c_a
-        if step > pm_min:
-            m &= (p_a >= tiny) | (step <= pm_a) if per_value else p_a >= tiny
+        if step > past_mode:
+            m &= p_a >= tiny
         k_a += m
         n_alive = int(np.count_nonzero(m))
         if n_alive == 0:
@@ -61,8 +58,6 @@ def _walk(lam: np.ndarray, u: np.ndarray, past_mode=None) -> np.ndarray:
         if 2 * n_alive <= m.size:
             k[act] = k_a
             act, lam_a, u_a, p_a, c_a, k_a = act[m], lam_a[m], u_a[m], p_a[m], c_a[m], k_a[m]
-            if per_value:
-                pm_a = pm_a[m]
     k[act] = k_a
     return k.astype(lam.dtype, copy=False)
 
@@ -116,22 +111,16 @@ def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0, *, 
 
 
 def _by_runs(lam: np.ndarray, u: np.ndarray, small: float, run: int) -> np.ndarray:
-    """:func:`poisson_inverse_cdf` of 1-D values as if called on each ``run`` of them alone."""
+    """:func:`poisson_inverse_cdf` of 1-D values as if called on each ``run`` of them alone: one
+    walk when every run is walked whole with the same mode bound (compared with integer steps,
+    a bound acts as its floor), else run by run."""
     n = lam.size
-    lo = None if float(lam.max()) <= small else lam <= small
-    walked = lam if lo is None else np.where(lo, lam, -np.inf)
-    full = (n // run) * run
-    top = walked[:full].reshape(-1, run).max(axis=1)
-    if full < n:
-        top = np.append(top, walked[full:].max())
-    # each run's mode bound (its largest walked λ + 1) compares with integer steps as its floor
-    bound = np.floor(top.astype(np.float64) + 1.0)
-    pm = float(bound[0]) if (bound == bound[0]).all() else np.repeat(bound, run)[:n]
-    if lo is None:
-        return _walk(lam, u, pm)
-    out = np.empty(n, lam.dtype)
-    if lo.any():
-        out[lo] = _walk(lam[lo], u[lo], pm if np.ndim(pm) == 0 else pm[lo])
-    hi = ~lo
-    out[hi] = _cornish_fisher(lam[hi], u[hi])
-    return out
+    if float(lam.max()) <= small:
+        full = (n // run) * run
+        top = lam[:full].reshape(-1, run).max(axis=1)
+        if full < n:
+            top = np.append(top, lam[full:].max())
+        bound = np.floor(top.astype(np.float64) + 1.0)
+        if (bound == bound[0]).all():
+            return _walk(lam, u, float(bound[0]))
+    return np.concatenate([poisson_inverse_cdf(lam[a:a + run], u[a:a + run], small) for a in range(0, n, run)])
