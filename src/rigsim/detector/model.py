@@ -12,8 +12,7 @@ from rigsim.detector.poisson import poisson_inverse_cdf
 
 __all__ = ["DetectorFrame", "apply_detector", "fixed_pattern", "poisson_inverse_cdf"]
 
-_CHUNK = 1 << 17  # pixels per block of the noisy chain: its temporaries stay in the cache
-_RUN = 1 << 15    # the random stream's unit: read-noise pairs and the Poisson walk's tail bound per run
+_CHUNK = 1 << 15  # pixels per block of the noisy chain: its temporaries stay in the cache
 
 
 @dataclass
@@ -83,12 +82,11 @@ def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn, cla
     t = np.minimum(e, fw)
     np.multiply(t, np.float32(K), out=expected_dn)
     expected_dn += cfg.offset_dn
-    n = poisson_inverse_cdf(e, u, run=_RUN)
+    n = poisson_inverse_cdf(e, u)
     well = n >= fw
     np.minimum(n, fw, out=n)
     if cfg.read_noise_e > 0:
-        for i in range(0, n.size, _RUN):
-            _add_normals_f32(rng_read, n[i:i + _RUN], cfg.read_noise_e)
+        _add_normals_f32(rng_read, n, cfg.read_noise_e)
     n *= np.float32(K)
     n += np.float32(cfg.offset_dn + 0.5)       # round half up: truncation of y + 0.5 once clipped to >= 0
     top = np.float32(cfg.max_dn)

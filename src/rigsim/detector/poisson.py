@@ -8,18 +8,16 @@ import numpy as np
 __all__ = ["poisson_inverse_cdf"]
 
 
-def _walk(lam: np.ndarray, u: np.ndarray, past_mode=None) -> np.ndarray:
+def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Inversion for small λ: the smallest k with u <= F(k), by walking up the CDF (in the
     precision of ``lam``: float32 sums the CDF to ~1e-7).
 
     Dense steps over all values while many are undecided, then steps over the undecided ones only,
     compacted whenever half of them are decided: the cost is ~ Σλ element-steps. A value whose u
     lies above the rounded CDF's top stops past the mode where the pmf falls below a quarter of the
-    float epsilon (its tail holds less than the uniforms' resolution): a deep-tail count.
-    ``past_mode``: that mode bound (default max λ + 1)."""
+    float epsilon (its tail holds less than the uniforms' resolution): a deep-tail count."""
     dt = lam.dtype.type
-    if past_mode is None:
-        past_mode = float(lam.max()) + 1.0
+    past_mode = float(lam.max()) + 1.0
     tiny = dt(np.finfo(lam.dtype).eps / 4)  # a pmf below it no longer moves a CDF near 1
     p = np.exp(-lam)
     c = p.copy()
@@ -76,7 +74,7 @@ def _cornish_fisher(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.maximum(np.floor(lam + np.sqrt(lam) * x + 0.5), 0.0)
 
 
-def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0, *, run: int | None = None) -> np.ndarray:
+def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0) -> np.ndarray:
     """Poisson(λ) variates from uniforms ``u`` by inverting the CDF (one uniform per value).
 
     float32 ``lam`` and ``u`` give float32 counts (the CDF summed in float32, ~1e-7), otherwise
@@ -86,18 +84,12 @@ def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0, *, 
     λ > ``small``: the Cornish–Fisher quantile of the Poisson distribution to O(1/λ) (skewness and
     kurtosis terms), rounded to an integer (mean, variance and histogram tested against the exact
     distribution); the exact inverse (scipy's ppf) costs ~1 s per megapixel.
-
-    ``run`` (1-D input): the same counts as this function applied to each consecutive ``run``
-    values alone (the walk's deep-tail stop takes each run's largest λ; one call saves the
-    per-call overhead).
     """
     lam, u = np.asarray(lam), np.asarray(u)
     dt = np.float32 if lam.dtype == np.float32 and u.dtype == np.float32 else np.float64
     lam, u = lam.astype(dt, copy=False), u.astype(dt, copy=False)
     if lam.size == 0:
         return np.zeros(lam.shape, dt)
-    if run is not None and lam.ndim == 1 and lam.size > run:
-        return _by_runs(lam, u, small, int(run))
     if lam.max() <= small:
         return _walk(lam, u)
     if lam.min() > small:
@@ -108,19 +100,3 @@ def poisson_inverse_cdf(lam: np.ndarray, u: np.ndarray, small: float = 30.0, *, 
     hi = ~lo
     out[hi] = _cornish_fisher(lam[hi], u[hi])
     return out
-
-
-def _by_runs(lam: np.ndarray, u: np.ndarray, small: float, run: int) -> np.ndarray:
-    """:func:`poisson_inverse_cdf` of 1-D values as if called on each ``run`` of them alone: one
-    walk when every run is walked whole with the same mode bound (compared with integer steps,
-    a bound acts as its floor), else run by run."""
-    n = lam.size
-    if float(lam.max()) <= small:
-        full = (n // run) * run
-        top = lam[:full].reshape(-1, run).max(axis=1)
-        if full < n:
-            top = np.append(top, lam[full:].max())
-        bound = np.floor(top.astype(np.float64) + 1.0)
-        if (bound == bound[0]).all():
-            return _walk(lam, u, float(bound[0]))
-    return np.concatenate([poisson_inverse_cdf(lam[a:a + run], u[a:a + run], small) for a in range(0, n, run)])
