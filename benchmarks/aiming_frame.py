@@ -2,6 +2,7 @@
 
     PYTHONPATH=src .venv/bin/python benchmarks/aiming_frame.py            # 3 frames × 2 rounds per side
     PYTHONPATH=src .venv/bin/python benchmarks/aiming_frame.py --quick    # 2 frames × 1 round
+    ... benchmarks/aiming_frame.py --base COMMIT                          # old side at COMMIT
 
 Cases (each in fresh subprocesses, old package = git archive of the base commit, alternating):
 
@@ -24,7 +25,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _compare import REPO, compare
+from _compare import BASE, REPO, compare
 
 COMMON = """
 import math, warnings, hashlib
@@ -95,15 +96,17 @@ print("frame SHA-1 with 1 Dr.Jit thread:", out[1], " with 2:", out[2], " identic
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--base", default=BASE, help=f"git commit of the old side (default {BASE})")
     args = ap.parse_args()
     repeat, rounds = (2, 1) if args.quick else (3, 2)
+    b = args.base
     compare("aiming-camera scene build, face +Z", COMMON, "r = ConcentricityRenderer(rig, real, 0)",
-            repeat=repeat, rounds=rounds)
+            repeat=repeat, rounds=rounds, base=b)
     compare("aiming-camera frame (hole + spot)", FRAME_SETUP, FRAME_STMT, repeat=repeat, rounds=rounds,
-            target="≤ 1.0 s")
+            target="≤ 1.0 s", base=b)
     compare("same, workers=2 (new only)", FRAME_SETUP.replace("(rig, real, 0)", "(rig, real, 0, workers=2)"),
             FRAME_STMT, repeat=repeat, rounds=rounds, old=False, target="≤ 1.0 s")
-    compare("concentricity search, face +Z", SEARCH_SETUP, SEARCH_STMT, repeat=1, rounds=rounds)
+    compare("concentricity search, face +Z", SEARCH_SETUP, SEARCH_STMT, repeat=1, rounds=rounds, base=b)
     import os
     import subprocess
 

@@ -1,6 +1,6 @@
 """Detector model (rigsim.detector.apply_detector), old vs new side by side.
 
-    .venv/bin/python benchmarks/detector.py [--quick]
+    .venv/bin/python benchmarks/detector.py [--quick] [--base COMMIT]
 
 Cases: a 1024² sun-sensor-like frame (dark sky, one bright spot), a 1024² star-like frame (λ ≈ 9 e-
 background everywhere), the sun frame with a new sensor seed every call (fixed patterns drawn each
@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _compare import compare
+from _compare import BASE, compare
 
 # glibc: a fixed mmap threshold returns every freed array to the system at once, so that the RSS
 # before a call is the live memory and the peak during it measures that call (both sides alike)
@@ -75,15 +75,20 @@ del f, d
 """
 
 
+_BASE = [BASE]
+
+
 def case(name, h, w, kind="sun", win=None, cold=False, repeat=3, rounds=2, target=""):
     setup = SETUP.format(h=h, w=w, kind=kind, win=win, cold=cold)
-    return compare(name, setup, STMT, repeat=repeat, rounds=rounds, env=ENV, target=target)
+    return compare(name, setup, STMT, repeat=repeat, rounds=rounds, env=ENV, target=target, base=_BASE[0])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="one round per side, skip the 4096² and 5120×3840 cases")
+    ap.add_argument("--base", default=BASE, help=f"git commit of the old side (default {BASE})")
     a = ap.parse_args()
+    _BASE[0] = a.base
     r = 1 if a.quick else 2
     print(f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs")
     case("sun-sensor 1024²", 1024, 1024, rounds=r, target="≤ 20 ms, ≤ 40 B/px")

@@ -32,15 +32,20 @@ class DetectorFrame:
 
     @property
     def saturated_pixels(self) -> int:
-        return int(self.saturated.sum())
+        return int(np.count_nonzero(self.saturated))
 
 
-def _check_photons(ph: np.ndarray) -> None:
+def _check_photons(ph: np.ndarray) -> float:
+    """Raise unless ``ph`` is a 2-D image of finite values >= 0; return its largest value."""
     if ph.ndim != 2:
         raise ValueError(f"photons_per_px must be a 2-D image, got shape {ph.shape}")
-    if ph.size and not (ph.min() >= 0 and ph.max() < np.inf):  # NaN fails both comparisons
+    if not ph.size:
+        return 0.0
+    top = ph.max()
+    if not (ph.min() >= 0 and top < np.inf):  # NaN fails both comparisons
         bad = int(np.sum(~np.isfinite(ph) | (ph < 0)))
         raise ValueError(f"photons_per_px must be finite and >= 0 ({bad} pixels are not)")
+    return float(top)
 
 
 def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float) -> None:
@@ -62,14 +67,16 @@ def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float) -> N
     x[m:] += g[:n - m]
 
 
-def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn, added=None):
+def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn, added=None, clamp=True):
     """The noisy chain over one block of pixels (flat views); writes the outputs in place and
     returns the counts of full-well and ADC-clipped pixels. ``added``: electrons added after the
-    shot noise (or None)."""
+    shot noise (or None). ``clamp=False``: no value of photons × QE × PRNU reaches 1e15 (the clamp
+    would change nothing)."""
     e = np.empty(ph.size, np.float32)
     np.minimum(ph, 1e30, out=e, casting="unsafe")
     e *= eg
-    np.minimum(e, np.float32(1e15), out=e)
+    if clamp:
+        np.minimum(e, np.float32(1e15), out=e)
     e += dark                                  # λ: photo-electrons and dark electrons are Poisson
     fw = np.float32(cfg.full_well_e)
     K = cfg.gain_dn_per_e
@@ -116,7 +123,7 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     ph = np.asarray(photons_per_px)
     if ph.dtype.kind not in "fiub":
         ph = ph.astype(np.float64)
-    _check_photons(ph)
+    ph_max = _check_photons(ph)
     if not noiseless and seed is None:
         raise ValueError("apply_detector needs an explicit seed (or noiseless=True)")
     det_shape = tuple(ph.shape) if detector_shape is None else tuple(int(x) for x in detector_shape)
@@ -153,6 +160,8 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         # samples with atomic float adds (ptracer) reproduce photon images only to ~1e-7; with
         # numpy's Poisson sampler (a value-dependent number of draws per pixel) that would
         # reshuffle the noise of every later pixel, with an inverse CDF it changes nothing.
+        # the PRNU gain is 1 + prnu_frac·z with |z| <= 5.8 (24-bit Box–Muller uniforms)
+        clamp = not ph_max * eta * (1.0 + 6.0 * float(cfg.prnu_frac)) < 1e14
         ss_shot, ss_read = np.random.SeedSequence([int(seed), 0x7E4D_0A11]).spawn(2)
         rng_shot, rng_read = np.random.default_rng(ss_shot), np.random.default_rng(ss_read)
         dn = np.empty(ph.shape, np.uint16)
@@ -165,7 +174,7 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
             s = slice(i, min(ph.size, i + _CHUNK))
             u = rng_shot.random(s.stop - s.start, dtype=np.float32)
             w, a = _noisy_block(*(f[s] for f in flat[:3]), u, cfg, rng_read, *(f[s] for f in flat[3:]),
-                                None if flat_added is None else flat_added[s])
+                                None if flat_added is None else flat_added[s], clamp=clamp)
             n_well += w
             n_adc += a
     meta = {
@@ -174,7 +183,7 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         "noiseless": bool(noiseless),
         "origin_uv": [int(origin_uv[0]), int(origin_uv[1])],
         "detector_shape": [int(det_shape[0]), int(det_shape[1])],
-        "saturated_pixels": int(saturated.sum()),
+        "saturated_pixels": int(np.count_nonzero(saturated)),
         "full_well_pixels": n_well,
         "adc_clipped_pixels": n_adc,
         "config": cfg.model_dump(),

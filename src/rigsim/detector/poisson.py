@@ -22,7 +22,9 @@ def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
     p = np.exp(-lam)
     c = p.copy()
     m = u > c
-    k = m.astype(lam.dtype)
+    # counts as uint16 while walking (cheaper to add to), exact as floats at the end
+    kt = np.uint16 if past_mode < 30000.0 else lam.dtype
+    k = m.astype(kt)
     n_alive = int(np.count_nonzero(m))
     step = 0
     while 8 * n_alive > m.size:  # dense phase
@@ -36,7 +38,7 @@ def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
         k += m
         n_alive = int(np.count_nonzero(m))
     if not n_alive:
-        return k
+        return k.astype(lam.dtype, copy=False)
     act = np.flatnonzero(m)
     lam_a, u_a, p_a, c_a, k_a = lam[act], u[act], p[act], c[act], k[act]
     while True:
@@ -55,7 +57,7 @@ def _walk(lam: np.ndarray, u: np.ndarray) -> np.ndarray:
             k[act] = k_a
             act, lam_a, u_a, p_a, c_a, k_a = act[m], lam_a[m], u_a[m], p_a[m], c_a[m], k_a[m]
     k[act] = k_a
-    return k
+    return k.astype(lam.dtype, copy=False)
 
 
 def _cornish_fisher(lam: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -62,12 +62,21 @@ class ConcentricityRenderer:
     pencil's fixed sample chunks (:mod:`rigsim.render.cube_mirror.pencil_chunks`): the frames are
     bit-identical for any ``workers``; ``workers > 1`` spawns ``workers - 1`` processes, stopped by
     :meth:`close`, with the renderer or at exit.
+
+    ``spp`` is the pencil's light paths per camera pixel. They are traced onto a film binned
+    ``film_binning`` × ``film_binning`` (``spp·b²`` multijittered samples per film pixel, per chunk
+    rounded up to a count the sampler stratifies): the
+    pencil is blurred by a disk of ~400 px radius next, so the coarser film costs nothing in the
+    spot, and the larger stratified sample sets cut the spot centre's Monte-Carlo noise
+    (docs/campaign.md). The hole glow is rendered at full resolution with ``hole_spp`` (default
+    ``max(4, spp)``), once per face and seed.
     """
 
-    def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, face_index: int = 0, *, spp: int = 4,
+    def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, face_index: int = 0, *, spp: int = 2,
                  divergence_full_angle_arcmin: float | None = None, grid_mm: float = 0.01,
                  spot_photons_per_px: float | None = None, hole_glow_ratio: float = 1.0,
-                 deterministic: bool = True, detector=None, workers: int = 1):
+                 deterministic: bool = True, detector=None, workers: int = 1, film_binning: int = 4,
+                 hole_spp: int | None = None):
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
         arcmin = rig.sun_simulator.collimation_full_angle_arcmin if divergence_full_angle_arcmin is None \
@@ -82,9 +91,23 @@ class ConcentricityRenderer:
         if spot_photons_per_px is None:
             spot_photons_per_px = 0.5 * det.full_well_e / det.quantum_efficiency
         self.spot_photons_per_px = float(spot_photons_per_px)
-        pencil_kw = {"spp": spp, "beam": "collimated", "return_into_hole": "diffuse",
+        b = int(film_binning)
+        if b != film_binning or b < 1:
+            raise ValueError(f"film_binning = {film_binning!r}: must be an integer >= 1")
+        if int(spp) != spp or spp < 1:
+            raise ValueError(f"spp = {spp!r}: must be an integer >= 1")
+        self.spp = int(spp)
+        self.hole_spp = max(4, self.spp) if hole_spp is None else int(hole_spp)
+        if self.hole_spp < 1:
+            raise ValueError(f"hole_spp = {hole_spp!r}: must be an integer >= 1")
+        # spp light paths per camera pixel = spp·b² per pixel of the b × b binned pencil film, per
+        # chunk rounded up to a count the multijitter sampler stratifies (as Mitsuba would round it)
+        n = chunk_count(self.spp * b * b)
+        per_chunk = _multijitter_count(self.spp * b * b // n)
+        pencil_kw = {"spp": n * per_chunk, "sampler_count": per_chunk, "beam": "collimated", "return_into_hole": "diffuse",
                      "hole_glow_ratio": hole_glow_ratio, "spot_photons_per_px": self.spot_photons_per_px,
-                     "detector": det, "deterministic": deterministic, "warmup": False}
+                     "detector": det, "deterministic": deterministic, "warmup": False,
+                     "spot_film_binning": b}
         self.pencil = DiaphragmRenderer(rig, self.real, face_index, **pencil_kw)
         # the pencil's samples in fixed chunks: the same image for any number of worker processes
         self._chunks = PencilChunks(self.pencil, workers, init=(rig, self.real, int(face_index), pencil_kw))
@@ -131,18 +154,22 @@ class ConcentricityRenderer:
             self._kernel_fft[shape] = F
         return F
 
-    def diverge(self, pencil_img: np.ndarray) -> np.ndarray:
+    def diverge(self, pencil_img: np.ndarray, binning: int = 1) -> np.ndarray:
         """Blur a collimated-pencil image by the divergence disk on the screen plane, then drop the
         light that falls into the hole. Units are kept (the plateau scales by (r/R)²).
 
         Only the lit part is processed: the grid window around the pencil's nonzero pixels, its
         full linear convolution with the disk (float32 FFT, the disk's spectrum cached per size),
-        and the image pixels that window covers; the rest of the frame is exactly zero."""
+        and the image pixels that window covers; the rest of the frame is exactly zero.
+
+        ``binning`` = b: ``pencil_img`` is a film of b × b camera pixels per pixel (the pencil's
+        binned render); it is sampled at the grid points' camera positions all the same."""
         import cv2
         from scipy import fft
 
         img = np.asarray(pencil_img)
-        Hh, Ww = img.shape
+        b = int(binning)
+        Hh, Ww = img.shape[0] * b, img.shape[1] * b
         out = np.zeros((Hh, Ww))
         rows = np.flatnonzero(np.any(img != 0, axis=1))
         if rows.size == 0:
@@ -151,8 +178,9 @@ class ConcentricityRenderer:
         gs = self.grid_mm
         lo = self._grid_lo
         nt, ns = self._grid_shape
-        # grid window: every grid point whose bilinear sample touches a lit pixel
-        u_lo, u_hi, v_lo, v_hi = cols[0] - 1.0, cols[-1] + 1.0, rows[0] - 1.0, rows[-1] + 1.0
+        # grid window: every grid point whose bilinear sample touches a lit pixel (camera pixels)
+        u_lo, u_hi = b * cols[0] - 0.5 * (b + 1), b * cols[-1] + 0.5 * (3 * b - 1)
+        v_lo, v_hi = b * rows[0] - 0.5 * (b + 1), b * rows[-1] + 0.5 * (3 * b - 1)
         st = _homography(self._Hi, np.array([u_lo, u_hi, u_lo, u_hi]), np.array([v_lo, v_lo, v_hi, v_hi]))
         j0 = max(0, math.floor((st[0].min() - lo[0]) / gs) - 1)
         j1 = min(ns, math.ceil((st[0].max() - lo[0]) / gs) + 2)
@@ -163,6 +191,8 @@ class ConcentricityRenderer:
         s = lo[0] + gs * np.arange(j0, j1)
         t = lo[1] + gs * np.arange(i0, i1)
         uv = _homography(self._H, s[None, :], t[:, None])
+        if b > 1:  # camera pixel (u, v) → binned film pixel ((u + 0.5)/b − 0.5, …)
+            uv = tuple((x + 0.5) / b - 0.5 for x in uv)
         f = cv2.remap(np.asarray(img, np.float32), uv[0].astype(np.float32), uv[1].astype(np.float32),
                       cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         # full linear convolution: grid rows i0 - k … i1 - 1 + k, columns likewise
@@ -196,14 +226,14 @@ class ConcentricityRenderer:
     def hole_photons(self, seed: int = 0) -> np.ndarray:
         """The glowing hole alone (rendered once per seed: the hole does not move)."""
         if seed not in self._hole_cache:
-            self._hole_cache[seed] = self.pencil._render(self.pencil._hole_scene, _derived_seed(seed, 2)) \
+            self._hole_cache[seed] = self.pencil._render(self.pencil._hole_scene, _derived_seed(seed, 2), self.hole_spp) \
                 if self.pencil._hole_scene is not None else np.zeros((self.geometry.camera.height,
                                                                       self.geometry.camera.width))
         return self._hole_cache[seed]
 
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
         pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
-        return self.diverge(pencil) * self._gain
+        return self.diverge(pencil, self.pencil.spot_film_binning) * self._gain
 
     def close(self) -> None:
         """Stop the worker processes (``workers > 1``); they also stop with the renderer or at exit."""
@@ -263,8 +293,15 @@ class ConcentricityRenderer:
         s.update({"beam": "divergent (screen-plane convolution of the rendered pencil)",
                   "divergence_full_angle_rad": self.divergence_rad, "divergence_radius_mm": self.R_div_mm,
                   "grid_mm": self.grid_mm, "spot_photons_per_px": self.spot_photons_per_px,
-                  "pencil_chunks": chunk_count(self.pencil.spp)})
+                  "pencil_chunks": chunk_count(self.pencil.spp), "spp_per_camera_pixel": self.spp,
+                  "hole_spp": self.hole_spp})
         return s
+
+
+def _multijitter_count(n: int) -> int:
+    """The sample count Mitsuba's ``multijitter`` sampler uses for ``n`` (⌊√n⌋ × ⌈n/⌊√n⌋⌉ strata)."""
+    rx = math.isqrt(n)
+    return rx * -(-n // rx)
 
 
 def _homography(H: np.ndarray, x, y) -> tuple[np.ndarray, np.ndarray]:

@@ -158,7 +158,7 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
                                beam_irradiance: float = 1.0, hole_glow_ratio: float = 1.0,
                                view_azimuth_deg: float = 0.0, principal_point_px=None,
                                sampler: str = "independent", max_depth: int | None = None,
-                               geometry: DiaphragmGeometry | None = None) -> dict:
+                               geometry: DiaphragmGeometry | None = None, film_binning: int = 1) -> dict:
     """Mitsuba scene dict (millimetres, origin at the face centre's null position) of the diaphragm
     rig at turntable pose ``pose_rad`` (true angles, ``{label: rad}``).
 
@@ -167,6 +167,10 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
     the rendered image: radiance, with the beam's irradiance ``beam_irradiance`` (on a plane
     normal to the beam); the spot's radiance is ρE/π (:func:`spot_radiance`), the hole glow's
     ``hole_glow_ratio`` times that. The dict only uses built-in plugins.
+
+    ``film_binning`` = b > 1 renders onto a film of (width/b) × (height/b) pixels with the same field
+    of view and principal point: each film pixel is a b × b block of camera pixels (same radiance
+    units, b² times the light paths per film pixel for the same ``spp``).
     """
     from rigsim.render.backend import ensure_variant
 
@@ -179,6 +183,9 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
         raise ValueError(f"content = {content!r}: must be one of {CONTENTS}")
     if int(spp) != spp or spp < 1:
         raise ValueError(f"spp = {spp!r}: must be an integer >= 1")
+    b = int(film_binning)
+    if b != film_binning or b < 1:
+        raise ValueError(f"film_binning = {film_binning!r}: must be an integer >= 1")
     if not (0.0 < screen_reflectance <= 1.0):
         raise ValueError(f"screen_reflectance = {screen_reflectance!r}: must be in (0, 1]")
     if not (beam_irradiance > 0 and math.isfinite(beam_irradiance)):
@@ -198,7 +205,10 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
     ds = rig.diaphragm_screen
     T = mi.ScalarTransform4f
     cam = geom.camera
-    film = {"type": "hdrfilm", "width": cam.width, "height": cam.height, "rfilter": {"type": "box"},
+    if cam.width % b or cam.height % b:
+        raise ValueError(f"film_binning = {b}: must divide the camera's {cam.width} × {cam.height} pixels")
+    # the perspective sensor's fov and principal-point fractions are the same for the binned film
+    film = {"type": "hdrfilm", "width": cam.width // b, "height": cam.height // b, "rfilter": {"type": "box"},
             "pixel_format": "luminance", "component_format": "float32"}
     sensor = {"type": "perspective", **perspective_props(cam), "near_clip": 1.0, "far_clip": 1.0e5,
               "to_world": T(perspective_to_world(cam)), "film": film,
@@ -333,7 +343,8 @@ class DiaphragmRenderer:
                  screen_reflectance: float = 0.9, spot_photons_per_px: float | None = None,
                  hole_glow_ratio: float = 1.0, hole_glow_in_spot_frame: bool | None = None,
                  view_azimuth_deg: float = 0.0, principal_point_px=None, detector=None, mesh_dir=None,
-                 deterministic: bool = True, warmup: bool = True):
+                 deterministic: bool = True, warmup: bool = True, spot_film_binning: int = 1,
+                 sampler_count: int | None = None):
         from rigsim.render.backend import ensure_variant
 
         self.variant = ensure_variant()
@@ -363,7 +374,8 @@ class DiaphragmRenderer:
         self.hole_glow_in_spot_frame = bool(hole_glow_in_spot_frame)
         # point-symmetric quadrature: an even number of pencils
         self.divergence_directions = 2 * ((int(divergence_directions) + 1) // 2) if beam == "divergent" else 1
-        self._opts = dict(spp=self.spp, mesh_dir=mesh_dir, divergence_directions=self.divergence_directions,
+        # the samplers' built-in sample count (every render passes its own): ``sampler_count``
+        self._opts = dict(spp=self.spp if sampler_count is None else int(sampler_count), mesh_dir=mesh_dir, divergence_directions=self.divergence_directions,
                           screen_reflectance=self.screen_reflectance, beam_irradiance=1.0,
                           hole_glow_ratio=self.hole_glow_ratio, sampler=sampler, geometry=self.geometry)
         # photons per pixel per unit rendered radiance
@@ -372,7 +384,9 @@ class DiaphragmRenderer:
         pose0 = dict(self.geometry.layout.null_pose_rad)
         self._cube_local = np.array(true_cube_mesh(rig, self.real).vertices, float)
         # the render loop's elements: per frame only the cube moves (its vertices follow the pose)
-        self._spot_scene = Scene.from_dict(self.scene_dict(pose0, "spot"), {"cube": self._cube_update})
+        self.spot_film_binning = int(spot_film_binning)
+        self._spot_scene = Scene.from_dict(self.scene_dict(pose0, "spot", film_binning=self.spot_film_binning),
+                                           {"cube": self._cube_update})
         n_loaded = len(self._spot_scene.params["cube.vertex_positions"]) // 3
         if n_loaded != len(self._cube_local):
             raise RuntimeError(f"Mitsuba loaded {n_loaded} cube vertices, expected {len(self._cube_local)}")
@@ -387,10 +401,10 @@ class DiaphragmRenderer:
             self.warmup_seconds = time.perf_counter() - t0
 
     # -- scene --------------------------------------------------------------------------------
-    def scene_dict(self, pose_rad: dict, content: str = "spot") -> dict:
+    def scene_dict(self, pose_rad: dict, content: str = "spot", film_binning: int = 1) -> dict:
         """The Mitsuba scene dict of this renderer at ``pose_rad`` (``content``: spot/hole/both)."""
         return build_diaphragm_scene_dict(self.rig, self.real, pose_rad, self.face_index, content=content,
-                                          **self._opts)
+                                          film_binning=film_binning, **self._opts)
 
     def _cube_update(self, state) -> dict:
         import mitsuba as mi
@@ -406,13 +420,14 @@ class DiaphragmRenderer:
         return time.perf_counter() - t0
 
     # -- rendering ----------------------------------------------------------------------------
-    def _render(self, scene: Scene, seed: int) -> np.ndarray:
-        arr = scene.render(seed=int(seed), spp=self.spp, single_thread=self.deterministic)
+    def _render(self, scene: Scene, seed: int, spp: int | None = None) -> np.ndarray:
+        arr = scene.render(seed=int(seed), spp=self.spp if spp is None else int(spp), single_thread=self.deterministic)
         return np.maximum(arr, 0.0) * self.photons_per_radiance
 
     def render_chunk(self, seed: int, spp: int) -> np.ndarray:
-        """Photons per pixel of the spot scene at its current pose: ``spp`` samples, Mitsuba seed
-        ``seed`` (one chunk of :mod:`rigsim.render.cube_mirror.pencil_chunks`)."""
+        """Photons per camera pixel of the spot scene at its current pose: ``spp`` samples, Mitsuba
+        seed ``seed`` (one chunk of :mod:`rigsim.render.cube_mirror.pencil_chunks`), on the spot
+        film (``spot_film_binning`` × coarser than the camera when that is > 1)."""
         arr = self._spot_scene.render(seed=int(seed), spp=int(spp), single_thread=self.deterministic)
         return np.maximum(arr, 0.0) * self.photons_per_radiance
 
@@ -422,6 +437,9 @@ class DiaphragmRenderer:
         sec = {"update": self.set_pose(pose_rad)}
         t0 = time.perf_counter()
         spot = self._render(self._spot_scene, _derived_seed(seed, 1))
+        b = self.spot_film_binning
+        if b > 1:  # each binned film pixel's value on its b × b camera pixels
+            spot = np.repeat(np.repeat(spot, b, axis=0), b, axis=1)
         sec["render_spot"] = time.perf_counter() - t0
         hole_img = None
         if hole:
@@ -485,7 +503,8 @@ class DiaphragmRenderer:
             "sampler": self.sampler,
             "spp": self.spp,
             "deterministic_single_thread": self.deterministic,
-            "light_paths_per_frame": self.spp * g.camera.width * g.camera.height,
+            "light_paths_per_frame": self.spp * g.camera.width * g.camera.height // self.spot_film_binning ** 2,
+            "spot_film_binning": self.spot_film_binning,
             "sensor": "perspective (built-in)",
             "units": "millimetres; scene origin = measured face centre at its null pose",
             "beam": g.beam,
