@@ -13,7 +13,6 @@ from rigsim.cli import main
 from rigsim.files import read_table
 from rigsim.files.tables import Column
 from rigsim.procedures.robustness import (
-    ADDED_LIMIT,
     ALL,
     IDEAL,
     Quantity,
@@ -44,16 +43,20 @@ def test_added_error_is_the_rms_of_the_paired_difference():
     assert r["reference"] == pytest.approx(math.sqrt(np.mean(ideal**2)), rel=1e-12)
     assert r["mean"] == pytest.approx(np.mean(ideal + d), rel=1e-12)
     assert rows[(IDEAL, "a_px")]["added_rms"] == 0.0
-    assert not verdicts(res)["fx"]["must_handle"]                      # adds ~0.02 of ~0.1
+    assert verdicts(res)["fx"]["level"] == "none"                      # adds ~0.02 of ~0.1
 
 
-def test_verdict_flags_an_error_beyond_the_limit_and_lost_stars():
-    res, _ideal, _ = _result(ADDED_LIMIT * 0.1 * 1.5, 0.0, 0)
+def test_verdict_levels_follow_the_limits():
+    res, _, _ = _result(0.1 * 0.75, 0.0, 0)                               # adds 0.75× the ideal rms
     v = verdicts(res)["fx"]
-    assert v["must_handle"] and "a:" in v["reasons"][0]
-    res, _, _ = _result(0.0, 0.0, 3)
+    assert v["level"] == "marginal" and not v["must_handle"] and v["reasons"][0].startswith("[marginal] a:")
+    res, _, _ = _result(0.1 * 1.5, 0.0, 0)                                # 1.5×
+    assert verdicts(res)["fx"]["level"] == "must"
+    res, _, _ = _result(0.0, 0.0, 3)                                      # 3 % of the stars lost
     v = verdicts(res)["fx"]
-    assert v["must_handle"] and v["reasons"] == ["stars: -3 per trial"]
+    assert v["level"] == "marginal" and v["reasons"] == ["[marginal] stars: -3 per trial (-3.0 %)"]
+    res, _, _ = _result(0.0, 0.0, 6)
+    assert verdicts(res)["fx"]["must_handle"]
 
 
 def test_files_carry_units_in_the_column_names(tmp_path):

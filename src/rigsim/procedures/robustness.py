@@ -19,6 +19,7 @@ __all__ = [
     "ADDED_LIMIT",
     "ALL",
     "IDEAL",
+    "MUST_LIMIT",
     "Quantity",
     "RobustnessResult",
     "run_configs",
@@ -29,8 +30,13 @@ __all__ = [
 
 IDEAL, ALL = "ideal", "all effects"
 ADDED_LIMIT = 0.5
-"""An effect must be handled when the error it adds (RMS of the paired difference to the ideal run)
-exceeds this fraction of the ideal run's RMS error (or of the budget, when the quantity has one)."""
+"""An effect is marginal when the error it adds (RMS of the paired difference to the ideal run)
+exceeds this fraction of the reference (the quantity's budget, else the ideal run's RMS error):
+in quadrature the RMS grows by more than 12 %."""
+MUST_LIMIT = 1.0
+"""…and must be handled beyond this fraction: the RMS grows by more than 41 %."""
+COUNT_LOSS_MARGINAL, COUNT_LOSS_LIMIT = 0.01, 0.05
+"""Shares of the ideal run's identified stars or frames whose loss is marginal / must be handled."""
 
 
 @dataclass(frozen=True)
@@ -108,9 +114,16 @@ def summarise(res: RobustnessResult) -> list[dict]:
     return rows
 
 
+def _level(ratio: float) -> str | None:
+    return "must" if ratio > MUST_LIMIT else ("marginal" if ratio > ADDED_LIMIT else None)
+
+
 def verdicts(res: RobustnessResult, rows: list[dict] | None = None) -> dict[str, dict]:
-    """Per config: ``must_handle`` and the reasons (quantities whose added error exceeds
-    ``ADDED_LIMIT`` × reference, counts that got worse by more than their trial-to-trial spread)."""
+    """Per config: ``level`` ("none", "marginal" or "must"), ``must_handle`` and the reasons.
+    An error quantity is marginal when the error the effect adds exceeds ``ADDED_LIMIT`` × its
+    reference and must be handled beyond ``MUST_LIMIT`` ×; a count of stars or frames likewise when
+    it loses more than ``COUNT_LOSS_MARGINAL`` / ``COUNT_LOSS_LIMIT`` of the ideal run's; wrong
+    identifications must be handled when they rise by more than 0.5 per trial."""
     rows = summarise(res) if rows is None else rows
     qs = {q.key: q for q in res.quantities}
     ideal = {r["quantity"]: r for r in rows if r["config"] == IDEAL}
@@ -118,19 +131,27 @@ def verdicts(res: RobustnessResult, rows: list[dict] | None = None) -> dict[str,
     for c in res.configs:
         if c == IDEAL:
             continue
-        reasons = []
+        found = []
         for r in (r for r in rows if r["config"] == c):
             q = qs[r["quantity"]]
-            if q.kind == "error" and r["added_over_reference"] > ADDED_LIMIT:
-                reasons.append(f"{q.label}: adds {r['added_rms']:.3g} {q.unit} rms "
-                               f"({r['added_over_reference']:.2f}× the {'budget' if q.budget else 'ideal error'})")
-            elif q.kind == "count":
-                worse = r["change"] if q.lower_is_better else -r["change"]
-                spread = ideal[q.key]["sigma"]
-                spread = 0.0 if not np.isfinite(spread) else spread
-                if worse > max(spread, 0.5):
-                    reasons.append(f"{q.label}: {r['change']:+.3g} per trial")
-        out[c] = {"must_handle": bool(reasons), "reasons": reasons}
+            if q.kind == "error":
+                lvl = _level(r["added_over_reference"])
+                if lvl:
+                    ref = "budget" if q.budget else "ideal error"
+                    found.append((lvl, f"{q.label}: adds {r['added_rms']:.3g} {q.unit} rms "
+                                       f"({r['added_over_reference']:.2f}× the {ref})"))
+            elif q.lower_is_better:
+                if r["change"] > 0.5:
+                    found.append(("must", f"{q.label}: {r['change']:+.3g} per trial"))
+            else:
+                base = ideal[q.key]["mean"]
+                loss = -r["change"] / base if base > 0 else 0.0
+                lvl = "must" if loss > COUNT_LOSS_LIMIT else ("marginal" if loss > COUNT_LOSS_MARGINAL else None)
+                if lvl:
+                    found.append((lvl, f"{q.label}: {r['change']:+.3g} per trial ({-100 * loss:+.1f} %)"))
+        level = "must" if any(lv == "must" for lv, _ in found) else ("marginal" if found else "none")
+        order = sorted(found, key=lambda f: f[0] != "must")
+        out[c] = {"level": level, "must_handle": level == "must", "reasons": [f"[{lv}] {t}" for lv, t in order]}
     return out
 
 
@@ -155,7 +176,8 @@ def _plot(results: list[RobustnessResult], rows: list[list[dict]], path: Path) -
             rs = {r["config"]: r for r in rr if r["quantity"] == q.key}
             mean = [rs[c]["mean"] for c in res.configs]
             sig = [rs[c]["sigma"] for c in res.configs]
-            colours = ["0.5"] + ["C3" if rs[c]["added_over_reference"] > ADDED_LIMIT else "C0" for c in res.configs[1:]]
+            colours = ["0.5"] + [{"must": "C3", "marginal": "C1", None: "C0"}[_level(rs[c]["added_over_reference"])]
+                                 for c in res.configs[1:]]
             ax.bar(x + (j - (len(results) - 1) / 2) * w, mean, w * 0.95, yerr=sig, color=colours, capsize=2,
                    hatch="//" if j else None, edgecolor="k" if j else None, linewidth=0.3,
                    label=res.pipeline if len(results) > 1 else None)
@@ -171,8 +193,8 @@ def _plot(results: list[RobustnessResult], rows: list[list[dict]], path: Path) -
     for ax in list(axs.flat)[n:]:
         ax.axis("off")
     fig.suptitle(f"{res0.rig_name}: bias ± σ over {res0.trials} trials per configuration "
-                 "(red: the effect must be handled; hatched: " + ", ".join(r.pipeline for r in results[1:]) + ")"
-                 if len(results) > 1 else "(red: the effect must be handled)", fontsize=10)
+                 "(orange: marginal, red: the effect must be handled; hatched: " + ", ".join(r.pipeline for r in results[1:]) + ")"
+                 if len(results) > 1 else "(orange: marginal, red: the effect must be handled)", fontsize=10)
     fig.tight_layout()
     out = save_figure(fig, path, dpi=110)
     plt.close(fig)
@@ -204,9 +226,10 @@ def _markdown(results: list[RobustnessResult], rows: list[list[dict]], verdict: 
              "every configuration), each a full rendered run compared with its truth"
              + (f"; every run's frames go through {len(results)} pipeline variants" if len(results) > 1 else "")
              + ". *added* is the RMS of the paired difference to the ideal run: the error the effect itself adds. "
-             f"An effect must be handled when it adds more than {ADDED_LIMIT:g}× the reference (the budget, or the "
-             "ideal run's RMS error), or when it loses identified stars or frames, or adds wrong identifications, "
-             "beyond the ideal run's trial-to-trial spread.", ""]
+             f"An effect is *marginal* when it adds more than {ADDED_LIMIT:g}× the reference (the budget, or the "
+             f"ideal run's RMS error: the RMS grows by 12 %) or loses more than {100 * COUNT_LOSS_MARGINAL:g} % of the "
+             f"identified stars or frames; it *must be handled* beyond {MUST_LIMIT:g}× (the RMS grows by 41 %), "
+             f"beyond {100 * COUNT_LOSS_LIMIT:g} % lost, or with more than 0.5 wrong identifications per run.", ""]
     if frames_png:
         lines += [f"![a frame, ideal and with every effect]({frames_png})", ""]
     lines += ["## Verdict", ""]
@@ -214,8 +237,9 @@ def _markdown(results: list[RobustnessResult], rows: list[list[dict]], verdict: 
         if len(results) > 1:
             lines += [f"### pipeline: {r.pipeline}", ""]
         for c, d in v.items():
-            lines.append(f"* **{c}** — " + ("must be handled: " + "; ".join(d["reasons"]) if d["must_handle"]
-                                             else "no action needed at these values"))
+            lines.append(f"* **{c}** — " + {"must": "must be handled: ", "marginal": "marginal: ",
+                                             "none": "no action needed at these values"}[d["level"]]
+                         + "; ".join(d["reasons"]))
         lines.append("")
     lines += ["## Recovered quantities", "", "![bias and σ per configuration](robustness.png)", ""]
     for r, rr in zip(results, rows):

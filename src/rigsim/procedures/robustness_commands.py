@@ -76,8 +76,8 @@ def cmd_run_robustness(args) -> int:
     for r in res:
         print(f"pipeline {r.pipeline}:")
         for c, v in verdicts(r).items():
-            print(f"  {c}: " + ("MUST BE HANDLED — " + "; ".join(v["reasons"][:3])
-                                + (f" (+{len(v['reasons']) - 3} more)" if len(v["reasons"]) > 3 else "")
-                                if v["must_handle"] else "no action needed at these values"))
+            head = {"must": "MUST BE HANDLED — ", "marginal": "marginal — ", "none": "no action needed at these values"}
+            print(f"  {c}: " + head[v["level"]] + "; ".join(v["reasons"][:3])
+                  + (f" (+{len(v['reasons']) - 3} more)" if len(v["reasons"]) > 3 else ""))
     print(f"wall time {time.perf_counter() - t0:.1f} s; report: {files['report']}")
     return 0
