@@ -138,8 +138,8 @@ def verdicts(res: RobustnessResult, rows: list[dict] | None = None) -> dict[str,
                 lvl = _level(r["added_over_reference"])
                 if lvl:
                     ref = "budget" if q.budget else "ideal error"
-                    found.append((lvl, f"{q.label}: adds {r['added_rms']:.3g} {q.unit} rms "
-                                       f"({r['added_over_reference']:.2f}× the {ref})"))
+                    text = f"{q.label}: adds {r['added_rms']:.3g} {q.unit} rms ({r['added_over_reference']:.2f}× the {ref})"
+                    found.append((lvl, text))
             elif q.lower_is_better:
                 if r["change"] > 0.5:
                     found.append(("must", f"{q.label}: {r['change']:+.3g} per trial"))
