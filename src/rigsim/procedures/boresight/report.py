@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,8 +10,9 @@ import numpy as np
 from rigsim.files import write_json
 from rigsim.files.atomic import atomic_write_text, output_folder, save_figure
 from rigsim.procedures.boresight.studies import PARAMS
+from rigsim.view.picture_process import start_picture
 
-__all__ = ["write_report", "key_numbers"]
+__all__ = ["key_numbers", "write_report"]
 
 LABEL = {"delta_f_um": "Δf error [µm]", "alpha_arcsec": "α error [″]", "beta_arcsec": "β error [″]",
          "gamma_arcsec": "γ error [″]"}
@@ -288,62 +286,13 @@ def _fmt(x, nd=3):
     return "–" if x is None else f"{x:.{nd}f}"
 
 
-# the rig in 3D (rigsim.view, off screen) in a subprocess, while this one draws the figures
-_PICTURE = """
-import sys
-try:
-    from rigsim.view import rig_picture
-    rig_picture(sys.argv[1], sys.argv[2], size=(1400, 800))
-except Exception as e:
-    sys.stderr.write(f"\\n@@rig-picture@@{type(e).__name__}: {e}")
-    sys.exit(1)
-"""
 PICTURE_TIMEOUT_S = 300.0
-
-
-def _start_rig_picture(rig_path, png: Path):
-    """The subprocess drawing the rig picture (rigsim's own package first on its path), or the OSError
-    that prevented it."""
-    env = dict(os.environ)
-    root = str(Path(__file__).resolve().parents[3])   # the folder holding this rigsim package
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    try:
-        return subprocess.Popen([sys.executable, "-c", _PICTURE, str(rig_path), str(png)], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, start_new_session=True)
-    except OSError as exc:
-        return exc
-
-
-def _finish_rig_picture(picture, rig_path, png: Path) -> str | None:
-    """Wait for the rig picture: ``None`` when it is written, else why not (the report goes on without it,
-    e.g. when OpenGL is unavailable). Drawn here when no subprocess could be started."""
-    if isinstance(picture, OSError):
-        try:
-            from rigsim.view import rig_picture
-
-            rig_picture(rig_path, png, size=(1400, 800))
-            return None
-        except Exception as e:
-            return f"{type(e).__name__}: {e}"
-    try:
-        _, err = picture.communicate(timeout=PICTURE_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        picture.kill()
-        picture.communicate()
-        return f"not drawn within {PICTURE_TIMEOUT_S:.0f} s"
-    if picture.returncode == 0 and png.exists():
-        return None
-    err = err.decode(errors="replace")
-    if "@@rig-picture@@" in err:
-        return err.rsplit("@@rig-picture@@", 1)[1]
-    lines = [x for x in err.splitlines() if x.strip()]
-    return lines[-1] if lines else f"the picture's process exited with status {picture.returncode}"
 
 
 def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_prism.toml", command: str = "") -> Path:
     out = Path(out_dir)
     output_folder(out)
-    picture = _start_rig_picture(rig_path, out / "rig.png")   # drawn by another process meanwhile
+    picture = start_picture(rig_path, out / "rig.png", size=(1400, 800))   # drawn by another process meanwhile
     files = {}
     _sweep_figure(res["fig4"]["rows"], "centroid error σ [px]", "Fig 4: 3σ errors vs centroid error "
                   f"({res['runs']} runs per point)", out / "fig4_centroid_error.png", relative=True)
@@ -378,8 +327,8 @@ def write_report(res: dict, out_dir, *, rig_path: str = "scenes/dual_line_array_
              f"L = Lc1 − Lc2 = {cam['L_mm']:g} mm, β (half the angle between OA0 and OB0) = {cam['beta_half_angle_deg']:.3f}°. "
              f"Monte-Carlo state: α = β = γ = {res['state']['arcsec']:g}″, Δf = {res['state']['df_um']:g} µm; "
              f"reference spots averaged over N = {res['state']['n_ref']} measurements.\n")
-    why = _finish_rig_picture(picture, rig_path, out / "rig.png")
-    if why is None:
+    png, why = picture.finish(PICTURE_TIMEOUT_S)
+    if png is not None:
         files["rig"] = "rig.png"
         L.append("![the two cameras, the prism and the laser loops (rigsim view)](rig.png)\n")
     else:
