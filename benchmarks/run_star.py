@@ -43,8 +43,9 @@ for k, v in d.get("times_s", {}).items():   # per-stage seconds of the run (its 
 
 
 def main() -> None:
-    rig = str(Path(__file__).resolve().parents[1] / "scenes" / "star_sensor.toml")
-    main_for(__doc__, "run star-calibration (default)", SETUP, STMT, target="<= 40 s", rig=rig)
+    # the default rig by name: each side reads its own scenes/star_sensor.toml (the old package does not
+    # know the new file's [effects] and defect settings)
+    main_for(__doc__, "run star-calibration (default)", SETUP, STMT, target="<= 40 s", rig="star_sensor")
 
 
 if __name__ == "__main__":
