@@ -65,3 +65,25 @@ def test_repair_takes_the_mean_of_the_edge_neighbours():
     out = repair_pixels(img, m)
     assert out[2, 2] == 105 and out.dtype == np.uint16
     assert (out[~m] == img[~m]).all()
+
+
+def test_the_sequence_pattern_holds_the_defects_not_the_stars_nor_a_smooth_background():
+    from rigsim.imaging.cosmetics import sequence_fixed_pattern
+
+    rng = np.random.default_rng(5)
+    H, W, n = 128, 160, 12
+    hot = np.zeros((H, W), bool)
+    hot[7::17, 5::13] = True
+    gradient = np.linspace(0.0, 40.0, W)[None, :] * np.ones((H, 1))     # stray light fixed on the detector
+    frames = []
+    for k in range(n):                                                   # stars move 20 px per frame
+        uv = np.column_stack([rng.uniform(5, W - 5, 40), rng.uniform(5, H - 5, 40)])
+        stars = render_stars(uv, np.full(40, 3000.0), (H, W), 0.8)
+        frames.append(np.rint(100.0 + gradient + stars + 25.0 * hot + rng.normal(0.0, 1.5, (H, W))))
+    p = sequence_fixed_pattern(frames)
+    inner = np.zeros_like(hot)
+    inner[2:-2, 2:-2] = True
+    assert (p[hot & inner] > 20.0).all() and (np.abs(p[hot & inner] - 25.0) < 3.0).all()
+    assert np.count_nonzero(p[~hot]) <= 3                                # neither the gradient nor the stars
+    with pytest.raises(ValueError, match="at least 3 frames"):
+        sequence_fixed_pattern(frames[:2])

@@ -67,20 +67,23 @@ def repair_pixels(img, mask: np.ndarray) -> np.ndarray:
 
 
 def sequence_fixed_pattern(frames, *, k_sigma: float = 5.0) -> np.ndarray:
-    """The detector's defects (hot pixels, and any pixel with a fixed excess) from a sequence in
-    which the scene moves: the per-pixel median over the N frames, less its own median, kept where
-    it exceeds ``k_sigma`` times the noise of such a median (1.2533 σ/√N, σ the frames' robust
-    pixel noise, 1.4826 × MAD) and zero elsewhere, so that the noise of a median of few frames is
-    not subtracted from every pixel. Float32, DN. Each pixel must see sky, not a star, in more
-    than half of the frames."""
+    """The detector's defects (hot pixels, and any pixel with a fixed excess over its neighbours)
+    from a sequence in which the scene moves: the per-pixel median over the N frames, less that
+    median image's own 5×5 median (so a smooth fixed background such as stray light stays in the
+    frames), kept where it exceeds ``k_sigma`` times the noise of such a median and zero elsewhere,
+    so that the noise of a median of few frames is not subtracted from every pixel. That noise is
+    1.2533 σ/√N, σ the frames' pixel noise (1.4826 × the MAD of their excess over their own 5×5
+    median). Float32, DN. Each pixel must see sky, not a star, in more than half of the frames."""
     stack = np.stack([np.asarray(f, dtype=np.float32) for f in frames])
     n = stack.shape[0]
     if n < 3:
         raise ValueError(f"a fixed pattern from a sequence needs at least 3 frames, got {n}")
     med = np.median(stack, axis=0)
-    level = np.float32(np.median(med))
-    pattern = med - level
-    sigma = float(np.median([1.4826 * np.median(np.abs(f - np.median(f))) for f in stack]))
+    # the excess over the median image's own 5×5 median: a defect is local, while a smooth background
+    # fixed on the detector (stray light, a vignetted sky) is the extraction's background to estimate
+    pattern = med - cv2.medianBlur(med, 5)
+    # each frame's pixel noise, from its excess over its own 5×5 median (robust to stars and to gradients)
+    sigma = float(np.median([1.4826 * np.median(np.abs(f - cv2.medianBlur(f, 5))) for f in stack]))
     sigma = max(sigma, math.sqrt(1.0 / 12.0))  # at least the quantisation of a DN frame
     pattern[np.abs(pattern) <= k_sigma * 1.2533 * sigma / math.sqrt(n)] = 0.0
     return pattern
