@@ -156,6 +156,9 @@ def verdicts(res: RobustnessResult, rows: list[dict] | None = None) -> dict[str,
 
 
 def _plot(results: list[RobustnessResult], rows: list[list[dict]], path: Path) -> Path:
+    """One panel per recovered quantity: the error each effect adds (paired RMS) over the reference,
+    a bar per pipeline variant, with the marginal and must-handle lines; a last panel with the
+    identified stars lost."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -165,37 +168,44 @@ def _plot(results: list[RobustnessResult], rows: list[list[dict]], path: Path) -
 
     res0 = results[0]
     errs = [q for q in res0.quantities if q.kind == "error"]
-    n = len(errs)
-    cols = min(3, n)
-    nrows = math.ceil(n / cols)
-    fig, axs = plt.subplots(nrows, cols, figsize=(5.4 * cols, 3.7 * nrows), squeeze=False)
-    x = np.arange(len(res0.configs))
+    counts = [q for q in res0.quantities if q.kind == "count" and not q.lower_is_better][:1]
+    panels = errs + counts
+    cols = min(3, len(panels))
+    nrows = math.ceil(len(panels) / cols)
+    fig, axs = plt.subplots(nrows, cols, figsize=(5.0 * cols, 3.3 * nrows + 0.9), squeeze=False)
+    configs = [c for c in res0.configs if c != IDEAL]
+    x = np.arange(len(configs))
     w = 0.8 / len(results)
-    for ax, q in zip(axs.flat, errs):
+    handles = []
+    for ax, q in zip(axs.flat, panels):
         for j, (res, rr) in enumerate(zip(results, rows)):
             rs = {r["config"]: r for r in rr if r["quantity"] == q.key}
-            mean = [rs[c]["mean"] for c in res.configs]
-            sig = [rs[c]["sigma"] for c in res.configs]
-            colours = ["0.5"] + [{"must": "C3", "marginal": "C1", None: "C0"}[_level(rs[c]["added_over_reference"])]
-                                 for c in res.configs[1:]]
-            ax.bar(x + (j - (len(results) - 1) / 2) * w, mean, w * 0.95, yerr=sig, color=colours, capsize=2,
-                   hatch="//" if j else None, edgecolor="k" if j else None, linewidth=0.3,
-                   label=res.pipeline if len(results) > 1 else None)
-        ref = {r["config"]: r for r in rows[0] if r["quantity"] == q.key}[IDEAL]["reference"]
-        lo = 0.0 if q.key.endswith("rms_px") else -ref
-        ax.axhspan(lo, ref, color="0.88", zorder=0)
-        ax.axhline(0.0, color="k", lw=0.6)
-        ax.set_xticks(x, res0.configs, rotation=30, ha="right", fontsize=8)
-        ax.set_title(q.label + (" (band: budget)" if q.budget else " (band: ideal rms)"), fontsize=9)
-        ax.set_ylabel(f"error ({q.unit})")
-        if len(results) > 1:
-            ax.legend(fontsize=6, loc="best")
-    for ax in list(axs.flat)[n:]:
+            if q.kind == "error":
+                y = [rs[c]["added_over_reference"] for c in configs]
+            else:
+                y = [100.0 * -rs[c]["change"] / rs[IDEAL]["mean"] for c in configs]
+            h = ax.bar(x + (j - (len(results) - 1) / 2) * w, y, w * 0.95, color=f"C{j}",
+                       label=res.pipeline or "pipeline")
+            if len(handles) < len(results):
+                handles.append(h)
+        if q.kind == "error":
+            ax.axhline(ADDED_LIMIT, color="C1", lw=1, ls="--")
+            ax.axhline(MUST_LIMIT, color="C3", lw=1, ls="--")
+            ax.set_ylabel("added error / reference")
+            ax.set_title(f"{q.label} ({q.unit})" + ("" if q.budget else ": over the ideal rms"), fontsize=9)
+        else:
+            ax.axhline(100 * COUNT_LOSS_MARGINAL, color="C1", lw=1, ls="--")
+            ax.axhline(100 * COUNT_LOSS_LIMIT, color="C3", lw=1, ls="--")
+            ax.set_ylabel("lost (% of the ideal run's)")
+            ax.set_title(q.label, fontsize=9)
+        ax.set_xticks(x, configs, rotation=20, ha="right", fontsize=8)
+        ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]))
+    for ax in list(axs.flat)[len(panels):]:
         ax.axis("off")
-    fig.suptitle(f"{res0.rig_name}: bias ± σ over {res0.trials} trials per configuration "
-                 "(orange: marginal, red: the effect must be handled; hatched: " + ", ".join(r.pipeline for r in results[1:]) + ")"
-                 if len(results) > 1 else "(orange: marginal, red: the effect must be handled)", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(f"{res0.rig_name}: what each effect adds, {res0.trials} paired trials per configuration "
+                 "(dashed: marginal, must be handled)", fontsize=10)
+    fig.legend(handles=handles, loc="lower center", ncol=min(2, len(handles)), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.03 + 0.03 * math.ceil(len(handles) / 2), 1, 0.97))
     out = save_figure(fig, path, dpi=110)
     plt.close(fig)
     return out
@@ -241,7 +251,7 @@ def _markdown(results: list[RobustnessResult], rows: list[list[dict]], verdict: 
                                              "none": "no action needed at these values"}[d["level"]]
                          + "; ".join(d["reasons"]))
         lines.append("")
-    lines += ["## Recovered quantities", "", "![bias and σ per configuration](robustness.png)", ""]
+    lines += ["## Recovered quantities", "", "![what each effect adds, per pipeline](robustness.png)", ""]
     for r, rr in zip(results, rows):
         if len(results) > 1:
             lines += [f"### pipeline: {r.pipeline}", ""]
