@@ -241,3 +241,27 @@ def test_a_dead_aiming_worker_leaves_the_frame_unchanged():
         got = r.render(pose, seed=3)
     assert r._chunks._pool is None
     assert np.array_equal(ref.spot_photons, got.spot_photons) and np.array_equal(ref.spot.dn, got.spot.dn)
+
+
+@pytest.mark.render
+def test_the_pencil_film_binning_divides_any_camera():
+    """The binned pencil film must tile the camera: 4×4 where it divides both sides, else 2×2 or none
+    (a 732 × 562 camera, as a random rig drew, takes 2×2), and its frame renders with the spot."""
+    from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
+    from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
+
+    cam = RIG.aiming_camera.model_copy(update={"resolution_px": [732, 562]})
+    rig = RIG.model_copy(update={"aiming_camera": cam})
+    real = realization_from_rig(rig)
+    with pytest.raises(ValueError, match="must divide"):
+        ConcentricityRenderer(rig, real, 0, spp=1, film_binning=4)
+    r = ConcentricityRenderer(rig, real, 0, spp=1)
+    try:
+        assert r.pencil.spot_film_binning == 2
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fr = r.render(dict(diaphragm_geometry(rig, real, 0).layout.null_pose_rad), seed=1)
+        assert fr.spot.dn.shape == (562, 732) and fr.spot_photons.sum() > 0
+        assert fr.spot.dn.sum(dtype=float) > fr.hole.dn.sum(dtype=float)             # the spot is on the screen
+    finally:
+        r.close()

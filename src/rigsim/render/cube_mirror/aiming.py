@@ -64,7 +64,8 @@ class ConcentricityRenderer:
     :meth:`close`, with the renderer or at exit.
 
     ``spp`` is the pencil's light paths per camera pixel. They are traced onto a film binned
-    ``film_binning`` × ``film_binning`` (``spp·b²`` multijittered samples per film pixel, per chunk
+    ``film_binning`` × ``film_binning`` (default: the coarsest of 4, 2, 1 that divides the camera's
+    width and height; ``spp·b²`` multijittered samples per film pixel, per chunk
     rounded up to a count the sampler stratifies): the
     pencil is blurred by a disk of ~400 px radius next, so the coarser film costs nothing in the
     spot, and the larger stratified sample sets cut the spot centre's Monte-Carlo noise
@@ -75,7 +76,7 @@ class ConcentricityRenderer:
     def __init__(self, rig: CubeMirrorRig, real: Realization | None = None, face_index: int = 0, *, spp: int = 2,
                  divergence_full_angle_arcmin: float | None = None, grid_mm: float = 0.01,
                  spot_photons_per_px: float | None = None, hole_glow_ratio: float = 1.0,
-                 deterministic: bool = True, detector=None, workers: int = 1, film_binning: int = 4,
+                 deterministic: bool = True, detector=None, workers: int = 1, film_binning: int | None = None,
                  hole_spp: int | None = None):
         self.rig = rig
         self.real = real if real is not None else realization_from_rig(rig)
@@ -91,6 +92,9 @@ class ConcentricityRenderer:
         if spot_photons_per_px is None:
             spot_photons_per_px = 0.5 * det.full_well_e / det.quantum_efficiency
         self.spot_photons_per_px = float(spot_photons_per_px)
+        if film_binning is None:  # the coarsest of 4, 2, 1 that divides the camera's pixels
+            w, h = (int(x) for x in rig.aiming_camera.resolution_px)
+            film_binning = next(k for k in (4, 2, 1) if w % k == 0 and h % k == 0)
         b = int(film_binning)
         if b != film_binning or b < 1:
             raise ValueError(f"film_binning = {film_binning!r}: must be an integer >= 1")
