@@ -169,15 +169,19 @@ def frames_figure(rig, path, *, seed: int = 0, names=None, crop: int = 256):
     H, W = imgs[0].shape
     c = min(crop, H, W)
     win = (slice(0, c), slice(W - c, W))
+    from matplotlib.colors import PowerNorm
+
     lo = np.percentile(imgs[0][win], 1)
-    hi = max(np.percentile(imgs[1][win], 99.9), lo + 1)
+    hi = max(float(imgs[0][win].max()), lo + 1)  # the brightest star of the crop, square-root stretch
     fig, axs = plt.subplots(1, 2, figsize=(10, 5.2))
     for ax, im, title in zip(axs, imgs, ("ideal", "every effect on: " + ", ".join(n.replace("_", " ") for n in names))):
-        ax.imshow(im[win], cmap="gray", vmin=lo, vmax=hi, extent=(W - c - 0.5, W - 0.5, c - 0.5, -0.5))
+        ax.imshow(im[win], cmap="gray", norm=PowerNorm(0.5, vmin=lo, vmax=hi, clip=True),
+                  extent=(W - c - 0.5, W - 0.5, c - 0.5, -0.5))
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("u (px)")
         ax.set_ylabel("v (px)")
-    fig.suptitle(f"{rig.name}: frame 0, top-right {c}×{c} px, same grey scale (DN {lo:.0f}–{hi:.0f})", fontsize=10)
+    fig.suptitle(f"{rig.name}: frame 0, top-right {c}×{c} px (the stray light's side), same square-root grey "
+                 f"scale (DN {lo:.0f}–{hi:.0f})", fontsize=10)
     fig.tight_layout()
     out = save_figure(fig, path, dpi=110)
     plt.close(fig)
