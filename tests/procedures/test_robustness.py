@@ -133,3 +133,15 @@ def test_a_fixed_pattern_from_a_staring_sequence_is_refused(star_rig):
     slew = [StarObservation(k, 10.0 * k, dn, Rotation.from_euler("y", 0.1 * k, degrees=True).as_matrix())
             for k in range(5)]
     assert not sequence_pattern(slew, nominal).any()                   # 5 px per frame: allowed; a flat frame
+
+
+def _square_trial(config, seed):
+    return {"v": float(seed) ** 2 + len(config)}
+
+
+def test_run_configs_gives_the_same_results_in_worker_processes():
+    from rigsim.procedures.robustness import run_configs
+
+    one = run_configs(_square_trial, ("ideal", "fx"), [0, 1, 2], workers=1)
+    two = run_configs(_square_trial, ("ideal", "fx"), [0, 1, 2], workers=2)
+    assert one == two and one[("fx", 2)] == {"v": 6.0}

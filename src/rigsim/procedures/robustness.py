@@ -10,6 +10,7 @@ is in docs/effects.md.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,7 +79,11 @@ def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None) -> di
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
+    from rigsim.dataset.runner import _die_with_parent
+
+    # workers die with this process (a killed run must not leave them behind)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_die_with_parent,
+                             initargs=(os.getpid(),)) as ex:
         futs = {ex.submit(trial, c, s): (c, s) for c, s in jobs}
         for f in as_completed(futs):
             out[futs[f]] = f.result()
