@@ -28,7 +28,7 @@ QUANTITIES = (
     Quantity("frames_identified_count", "frames identified", "count", kind="count"),
 )
 
-_SKY = {}
+_SKY: dict = {}  # the star catalogue per [sky] table, loaded once per process
 
 
 def configs_for(names=None) -> tuple[str, ...]:
@@ -88,9 +88,10 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
     from rigsim.truth.star import StarSky
 
     r = _rig_with(rig, config, names)
-    if rig.name not in _SKY:
-        _SKY[rig.name] = StarSky(rig).sky
-    sky = StarSky(r, sky=_SKY[rig.name])
+    key = rig.sky.model_dump_json()  # the catalogue depends on the sky table (limit, epoch), not the rig's name
+    if key not in _SKY:
+        _SKY[key] = StarSky(rig).sky
+    sky = StarSky(r, sky=_SKY[key])
     pipes = {v: StarPipeline(nom, sky.sky) for v, nom in pipeline_variants(r).items()}
     truths, held, t_render = [], [], 0.0
     t0 = time.perf_counter()
