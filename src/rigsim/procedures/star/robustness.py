@@ -101,9 +101,14 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
         held.append(obs)
         t0 = time.perf_counter()
     n = len(held)
+    first = None  # the fixed pattern depends on the frames only: computed once for every variant using it
     for p in pipes.values():
         if p.nominal.calibration.fixed_pattern == "sequence":
-            p.set_sequence_pattern(held)
+            if first is None:
+                p.set_sequence_pattern(held)
+                first = p
+            else:
+                p.fixed_pattern, p.fixed_pattern_note = first.fixed_pattern, first.fixed_pattern_note
         for obs in held:
             p.add(obs)
     s = r.sensor
