@@ -113,8 +113,11 @@ def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_
 
 
 def test_run_robustness_refuses_what_it_cannot_do(short_star_rig, capsys):
-    assert main(["run", "robustness", "sun_sensor_2axis_diaphragm", "--trials", "2"]) == 2
-    assert "star-sensor rigs only" in capsys.readouterr().err
+    from rigsim.errors import CliError
+    from rigsim.procedures.robustness_commands import family_module
+
+    with pytest.raises(CliError, match="no effects are modelled for dict rigs"):
+        family_module({})
     assert main(["run", "robustness", str(short_star_rig), "--effects", "ghosts"]) == 2
     assert "--effects = 'ghosts'" in capsys.readouterr().err
 

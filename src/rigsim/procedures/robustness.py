@@ -23,6 +23,8 @@ __all__ = [
     "MUST_LIMIT",
     "Quantity",
     "RobustnessResult",
+    "configs_for",
+    "rig_with",
     "run_configs",
     "summarise",
     "verdicts",
@@ -63,6 +65,19 @@ class RobustnessResult:
     effects: dict = field(default_factory=dict)       # the parameters of every effect (as in the rig file)
     times: dict = field(default_factory=dict)
     pipeline: str = ""                                # the pipeline variant these values come from
+
+
+def configs_for(names) -> tuple[str, ...]:
+    """IDEAL, each named effect alone, and ALL when there is more than one."""
+    names = tuple(names)
+    return (IDEAL, *names, *((ALL,) if len(names) > 1 else ()))
+
+
+def rig_with(rig, config: str, names):
+    """``rig`` with the effects of ``config`` switched on and every other effect off: none for IDEAL,
+    all of ``names`` for ALL, else the one named."""
+    on = () if config == IDEAL else (tuple(names) if config == ALL else (config,))
+    return rig.model_copy(update={"effects": rig.effects.only(on)})
 
 
 def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None) -> dict:

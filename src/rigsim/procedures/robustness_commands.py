@@ -10,7 +10,7 @@ from pathlib import Path
 from rigsim.errors import CliError
 from rigsim.files.options import SEED, integer
 
-__all__ = ["add_cli", "cmd_run_robustness"]
+__all__ = ["FAMILY_MODULES", "add_cli", "cmd_run_robustness", "family_module"]
 
 EPILOG = """examples:
   rigsim run robustness star_sensor                       every effect alone and all together, 8 trials each
@@ -26,10 +26,10 @@ def add_cli(groups: dict) -> None:
         description="Run the rig's whole pipeline on rendered frames, ideal and with each effect of the rig file's "
                     "[effects] table switched on alone and all together (the same seeds for every configuration), "
                     "compare every recovered quantity with the truth and say which effects the pipeline must handle "
-                    "to keep its accuracy. Writes robustness.md, .json, .csv, .png and frames.png. Effects are "
-                    "modelled so far for the star-sensor family.")
+                    "to keep its accuracy. Writes robustness.md, .json, .csv, .png and frames.png.")
     p.add_argument("rig", nargs="?", default="star_sensor", help="rig file (path or default name)")
-    p.add_argument("--trials", type=integer(2, 10_000), default=8, help="runs per configuration (default 8)")
+    p.add_argument("--trials", type=integer(2, 10_000), default=None,
+                   help="runs per configuration (default: 8 for star sensors, 4 for the slower rigs)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the first run (runs use seed … seed+trials−1)")
     p.add_argument("--effects", default=None, metavar="A,B",
                    help="effects to study (default: every effect of the family)")
@@ -39,39 +39,58 @@ def add_cli(groups: dict) -> None:
     p.set_defaults(func=cmd_run_robustness)
 
 
+FAMILY_MODULES = {
+    "StarRig": "rigsim.procedures.star.robustness",
+    "CubeMirrorRig": "rigsim.procedures.cube_mirror.robustness",
+    "BoresightRig": "rigsim.procedures.boresight.robustness",
+}
+"""Rig class → the module of its family's robustness trials. Each module gives ``DESCRIPTION``,
+``DEFAULT_TRIALS``, ``effect_names(rig)``, ``run_robustness(rig, *, trials, seed, names, workers,
+progress)`` (a list of :class:`~rigsim.procedures.robustness.RobustnessResult`, the configured
+pipeline first) and ``frames_figure(rig, path, *, seed, names)``."""
+
+
+def family_module(rig):
+    """The robustness module of ``rig``'s family (CliError when it has none or no effects yet)."""
+    import importlib
+
+    name = FAMILY_MODULES.get(type(rig).__name__)
+    if name is None:
+        raise CliError(f"robustness: no effects are modelled for {type(rig).__name__} rigs")
+    mod = importlib.import_module(name)
+    if not mod.effect_names(rig):
+        raise CliError(f"robustness: rig {rig.name!r} has no effects modelled yet for its family")
+    return mod
+
+
 def cmd_run_robustness(args) -> int:
     from tqdm import tqdm
 
     from rigsim.files.atomic import output_folder
-    from rigsim.procedures.robustness import verdicts
-    from rigsim.rig.effects import STAR_EFFECTS
+    from rigsim.procedures.robustness import configs_for, verdicts, write_robustness_files
+    from rigsim.render.threads import cores
     from rigsim.rig.load import load_any_rig
-    from rigsim.rig.star import StarRig
 
     rig = load_any_rig(args.rig)
-    if not isinstance(rig, StarRig):
-        raise CliError(f"robustness: rig {args.rig!r} is a {type(rig).__name__}; effects are modelled so far for "
-                       "star-sensor rigs only (seed 004)")
-    names = STAR_EFFECTS
+    fam = family_module(rig)
+    known = fam.effect_names(rig)
+    names = known
     if args.effects is not None:
         names = tuple(n.strip() for n in args.effects.split(",") if n.strip())
-        bad = [n for n in names if n not in STAR_EFFECTS]
+        bad = [n for n in names if n not in known]
         if bad or not names or len(set(names)) != len(names):
-            raise CliError(f"--effects = {args.effects!r}: give distinct names from {', '.join(STAR_EFFECTS)}")
-    from rigsim.procedures.robustness import write_robustness_files
-    from rigsim.procedures.star.robustness import configs_for, frames_figure, run_star_robustness
-    from rigsim.render.threads import cores
-
+            raise CliError(f"--effects = {args.effects!r}: give distinct names from {', '.join(known)}")
+    trials = args.trials if args.trials is not None else fam.DEFAULT_TRIALS
     out = output_folder(Path(args.out) if args.out else Path("renders") / "robustness" / rig.name)
     workers = args.workers if args.workers is not None else min(2, cores())
     configs = configs_for(names)
-    print(f"robustness of the star pipeline, rig '{rig.name}': {', '.join(configs)}; {args.trials} trials each, "
+    print(f"robustness of {fam.DESCRIPTION}, rig '{rig.name}': {', '.join(configs)}; {trials} trials each, "
           f"{workers} process{'es' if workers > 1 else ''}")
     t0 = time.perf_counter()
-    with tqdm(total=len(configs) * args.trials, desc="runs", unit="run", disable=True if args.quiet else None,
+    with tqdm(total=len(configs) * trials, desc="runs", unit="run", disable=True if args.quiet else None,
               file=sys.stderr, dynamic_ncols=True) as bar:
-        res = run_star_robustness(rig, trials=args.trials, seed=args.seed, names=names, workers=workers, progress=bar)
-    frames = frames_figure(rig, out / "frames.png", seed=args.seed, names=names)
+        res = fam.run_robustness(rig, trials=trials, seed=args.seed, names=names, workers=workers, progress=bar)
+    frames = fam.frames_figure(rig, out / "frames.png", seed=args.seed, names=names)
     files = write_robustness_files(out, res, frames_png=frames)
     for r in res:
         print(f"pipeline {r.pipeline}:")

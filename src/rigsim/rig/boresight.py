@@ -27,6 +27,7 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from rigsim.detector.config import DetectorConfig
+from rigsim.rig.effects_boresight import BoresightEffects
 from rigsim.rig.model import RigModel
 
 __all__ = ["LineCamera", "Laser", "StudySettings", "OrbitScenario", "BoresightRig"]
@@ -132,6 +133,8 @@ class BoresightRig(_Model):
     detector: DetectorConfig = DetectorConfig()
     study: StudySettings = StudySettings()
     orbit: OrbitScenario = OrbitScenario()
+    effects: BoresightEffects = Field(default_factory=BoresightEffects,
+                                      description="what a real rig shows beyond the ideal frame (docs/effects.md)")
 
     @model_validator(mode="after")
     def _names(self):

@@ -24,6 +24,7 @@ from pydantic import Field, field_validator, model_validator
 
 from rigsim.detector.config import DetectorConfig
 from rigsim.optics.camera import PinholeBrown
+from rigsim.rig.effects_cube import CubeMirrorEffects, cube_effect_names
 from rigsim.rig.model import RigModel
 
 FaceName = Literal["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
@@ -269,6 +270,8 @@ class CubeMirrorRig(_Model):
     aiming_camera: AimingCamera | None = None
     autocollimator: Autocollimator | None = None
     plane_mirror: PlaneMirror | None = None
+    effects: CubeMirrorEffects = Field(default_factory=CubeMirrorEffects,
+                                       description="what a real rig shows beyond the ideal frame (docs/effects.md)")
 
     @model_validator(mode="after")
     def _devices(self):
@@ -283,6 +286,10 @@ class CubeMirrorRig(_Model):
             bad = set(pose) - labels
             if bad:
                 raise ValueError(f"procedure.nominal_poses_deg[{i}] names axes {sorted(bad)}; this turntable has {sorted(labels)}")
+        foreign = set(self.effects.enabled) - set(cube_effect_names(self.procedure.method))
+        if foreign:
+            raise ValueError(f"effects {sorted(foreign)} do not apply to procedure.method = {self.procedure.method!r}; "
+                             f"its effects are {', '.join(cube_effect_names(self.procedure.method)) or 'none'}")
         bad = set(self.procedure.sweep_axes) - labels
         if bad:
             raise ValueError(f"procedure.sweep_axes names {sorted(bad)}; this turntable has {sorted(labels)}")

@@ -8,10 +8,14 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, run_configs
+from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, configs_for, rig_with, run_configs
 from rigsim.rig.effects import STAR_EFFECTS
 
-__all__ = ["QUANTITIES", "configs_for", "frames_figure", "pipeline_variants", "run_star_robustness", "star_trial"]
+__all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "QUANTITIES", "effect_names", "frames_figure", "pipeline_variants",
+           "run_robustness", "star_trial"]
+
+DESCRIPTION = "the star pipeline (render → extract → identify → EKFs and batch least squares)"
+DEFAULT_TRIALS = 8
 
 QUANTITIES = (
     Quantity("lsq_f_px", "f, batch LSQ", "px"),
@@ -31,15 +35,9 @@ QUANTITIES = (
 _SKY: dict = {}  # the star catalogue per [sky] table, loaded once per process
 
 
-def configs_for(names=None) -> tuple[str, ...]:
-    """IDEAL, each named effect alone (default: all of them), and ALL when more than one."""
-    names = tuple(STAR_EFFECTS if names is None else names)
-    return (IDEAL, *names, *((ALL,) if len(names) > 1 else ()))
-
-
-def _rig_with(rig, config: str, names):
-    on = () if config == IDEAL else (tuple(names) if config == ALL else (config,))
-    return rig.model_copy(update={"effects": rig.effects.only(on)})
+def effect_names(rig) -> tuple[str, ...]:
+    """The effects a star-sensor rig can switch on."""
+    return STAR_EFFECTS
 
 
 def _describe(cal) -> str:
@@ -87,7 +85,7 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
     from rigsim.procedures.star.run import generate
     from rigsim.truth.star import StarSky
 
-    r = _rig_with(rig, config, names)
+    r = rig_with(rig, config, names)
     key = rig.sky.model_dump_json()  # the catalogue depends on the sky table (limit, epoch), not the rig's name
     if key not in _SKY:
         _SKY[key] = StarSky(rig).sky
@@ -128,7 +126,7 @@ class _Trial:
         return star_trial(self.rig, self.names, config, seed)
 
 
-def run_star_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
+def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
                         progress=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
     :class:`RobustnessResult` per pipeline variant, the configured pipeline first."""
@@ -167,7 +165,7 @@ def frames_figure(rig, path, *, seed: int = 0, names=None, crop: int = 256):
     true_seq = true_sequence(rig, commanded, rng)
     base = StarSky(rig)
     imgs = []
-    for r in (_rig_with(rig, IDEAL, names), _rig_with(rig, ALL, names)):
+    for r in (rig_with(rig, IDEAL, names), rig_with(rig, ALL, names)):
         sky = StarSky(r, sky=base.sky)
         fr = render_frame(sky, true_seq.R_cam_from_icrs[0], seed=frame_seed(seed, 0), fits_header=False,
                           omega_cam_rad_s=true_seq.omega_cam_rad_s[0], substeps=rig.sequence.smear_substeps)
