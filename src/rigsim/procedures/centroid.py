@@ -6,9 +6,10 @@ camera or from options; rigsim's own campaigns measure their frames with the sam
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,15 +17,22 @@ import numpy as np
 from rigsim.errors import CliError
 from rigsim.files import read_image, write_table
 from rigsim.files.options import integer, number
-from rigsim.imaging import Flag, NoiseModel
-from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame
+from rigsim.imaging import Flag, NoiseModel, estimate_background
+from rigsim.imaging.frame_spots import FRAME_METHODS, default_threshold_dn, measure_frame
 
-__all__ = ["CAMERAS", "DetectorSettings", "add_cli", "centroid_files", "detector_settings"]
+__all__ = ["CAMERAS", "DetectorSettings", "add_cli", "centroid_files", "detector_settings", "frame_background"]
 
 CAMERAS = {"sun-sensor": "sun_sensor", "aiming-camera": "aiming_camera", "autocollimator": "autocollimator",
            "star-sensor": "sensor"}
 """``--camera`` of a rig: the rig attribute that holds its detector (cube-mirror rigs: the first three;
 star rigs: ``star-sensor``; boresight rigs: the one shared detector)."""
+
+
+def frame_background(img: np.ndarray) -> tuple[float, float]:
+    """The frame's background level and noise (DN): the sigma-clipped median and rms of its pixels
+    (:func:`rigsim.imaging.estimate_background`; spots and lit areas are clipped away)."""
+    b = estimate_background(np.asarray(img, float))
+    return float(b.level), float(b.rms)
 
 
 @dataclass(frozen=True)
@@ -34,22 +42,42 @@ class DetectorSettings:
     noise: NoiseModel
     saturation_dn: float | None
     shape: tuple[int, int] | None  # (rows, cols), checked against every frame; None: any size
-    estimate_background: bool = False  # offset and noise from each frame (median, MAD) instead of ``noise``
+    estimate_background: bool = False  # offset and noise from each frame (frame_background) instead of ``noise``
 
     def describe(self) -> str:
         n = self.noise
         sat = f"saturation {self.saturation_dn:g} DN" if self.saturation_dn is not None else "no saturation level"
         if self.estimate_background:
-            return f"offset and noise measured per frame (median, MAD), gain {n.gain_dn_per_e:g} DN/e-, {sat}"
+            return f"offset and noise measured per frame (clipped median, rms), gain {n.gain_dn_per_e:g} DN/e-, {sat}"
         return f"offset {n.offset_dn:g} DN, gain {n.gain_dn_per_e:g} DN/e-, read noise {n.read_noise_e:g} e-, {sat}"
+
+    def mismatch(self, img: np.ndarray, threshold_dn: float | None = None) -> str | None:
+        """When the frame's own background (:func:`frame_background`) does not fit the detector model, a sentence saying how (None when it fits, and always with
+        ``estimate_background``): a background more than half the detection threshold above the
+        offset (the threshold counts from the offset: the background itself would be detected), or
+        below the offset by more than 5σ, or a spread more than 1.5× the model's at that level."""
+        if self.estimate_background:
+            return None
+        med, sd = frame_background(img)
+        n = self.noise
+        thr = default_threshold_dn(n) if threshold_dn is None else float(threshold_dn)
+        sd_dark = float(np.sqrt(n.variance(n.offset_dn)))
+        sd_at = float(np.sqrt(n.variance(max(med, n.offset_dn))))
+        said = f"background {med:.1f} DN with {sd:.2f} DN rms noise"
+        if med - n.offset_dn > 0.5 * thr:
+            return (f"{said}, {med - n.offset_dn:.1f} DN above the detector's offset ({n.offset_dn:g} DN); "
+                    f"spots are pixels more than {thr:.3g} DN above the offset")
+        if med < n.offset_dn - 5.0 * sd_dark - 1.0:
+            return f"{said}, below the detector's offset ({n.offset_dn:g} DN)"
+        if sd > 1.5 * sd_at + 0.5:
+            return f"{said}; the detector model expects {sd_at:.2f} DN there (threshold {thr:.3g} DN)"
+        return None
 
     def noise_for(self, img: np.ndarray) -> NoiseModel:
         """The noise model of one frame (measured on it when ``estimate_background``)."""
         if not self.estimate_background:
             return self.noise
-        a = np.asarray(img, float)
-        med = float(np.median(a))
-        sd = 1.4826 * float(np.median(np.abs(a - med)))
+        med, sd = frame_background(img)
         g = self.noise.gain_dn_per_e
         return NoiseModel(g, sd / g, med, self.noise.extra_variance_dn2)
 
@@ -59,7 +87,7 @@ def detector_settings(rig=None, camera: str | None = None, *, offset_dn=None, ga
     """The detector of ``rig``'s ``camera`` (one of :data:`CAMERAS`; default the rig's main camera),
     each value overridden by the keyword when given. Without a rig the keywords alone (gain 1 by
     default); with neither a rig nor an offset, each frame's offset and noise are measured on it
-    (median and MAD of its pixels: a frame mostly of dark background)."""
+    (:func:`frame_background`)."""
     det, shape = None, None
     if rig is not None:
         if hasattr(rig, "cameras"):  # boresight: one detector for every ROI
@@ -88,13 +116,22 @@ def flag_names(flags: int) -> str:
 
 
 def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str = "scurve",
-                   threshold_dn: float | None = None, max_spots: int | None = None, progress=None) -> dict[str, list]:
+                   threshold_dn: float | None = None, max_spots: int | None = None, progress=None,
+                   warn=None) -> dict[str, list]:
     """Every spot of every frame file, brightest first per frame: the table's columns
-    (frame, spot, u_px, v_px, sigma_u_px, sigma_v_px, flux_dn, flags, flag_names)."""
+    (frame, spot, u_px, v_px, sigma_u_px, sigma_v_px, flux_dn, flags, flag_names). ``warn(text)``
+    hears of the first frame whose background disagrees with the detector model
+    (:meth:`DetectorSettings.mismatch`)."""
     cols: dict[str, list] = {k: [] for k in ("frame", "spot", "u_px", "v_px", "sigma_u_px", "sigma_v_px", "flux_dn",
                                              "flags", "flag_names")}
+    warned = False
     for p in paths:
         img = read_image(p, shape=settings.shape)
+        if warn is not None and not warned:
+            text = settings.mismatch(img, threshold_dn)
+            if text is not None:
+                warn(f"{p}: {text}")
+                warned = True
         spots = measure_frame(img, settings.noise_for(img), method=method, threshold_dn=threshold_dn,
                               saturation_dn=settings.saturation_dn)
         n = len(spots) if max_spots is None else min(len(spots), max_spots)
@@ -124,6 +161,10 @@ def add_cli(groups: dict) -> None:
                    help="scurve: S-curve corrected first moment (sun disk); tcom, wcom, gauss: rigsim.imaging's")
     c.add_argument("--rig", default=None, help="rig file or default rig name: the camera's detector")
     c.add_argument("--camera", default=None, choices=sorted(CAMERAS), help="which camera of the rig (default its main one)")
+    c.add_argument("--background", default=None, choices=("model", "frame"),
+                   help="model: the offset and read noise of --rig or the options; frame: measured on each frame "
+                        "(sigma-clipped median and rms of its pixels; gain from --rig or --gain-dn-per-e). Default: model with "
+                        "--rig or --offset-dn, else frame")
     c.add_argument("--offset-dn", type=number(0, 1e6), default=None, help="black level (default the rig's, else 0)")
     c.add_argument("--gain-dn-per-e", type=number(1e-6, 1e3), default=None, help="system gain (default the rig's, else 1)")
     c.add_argument("--read-noise-e", type=number(0, 1e5), default=None, help="read noise (default the rig's, else 0)")
@@ -160,10 +201,19 @@ def cmd_centroid(args) -> int:
         raise CliError("--camera needs --rig")
     st = detector_settings(rig, args.camera, offset_dn=args.offset_dn, gain_dn_per_e=args.gain_dn_per_e,
                            read_noise_e=args.read_noise_e, saturation_dn=args.saturation_dn)
+    if args.background is not None:
+        if args.background == "frame" and (args.offset_dn is not None or args.read_noise_e is not None):
+            raise CliError("--background frame measures the offset and the noise on each frame: "
+                           "leave out --offset-dn and --read-noise-e")
+        st = replace(st, estimate_background=args.background == "frame")
     t0 = time.perf_counter()
+    warnings: list[str] = []
     with tqdm(total=len(args.frames), desc="centroid", unit="frame", disable=True if args.quiet else None) as pb:
         cols = centroid_files(args.frames, st, method=args.method, threshold_dn=args.threshold_dn,
-                              max_spots=args.max_spots, progress=pb.update)
+                              max_spots=args.max_spots, progress=pb.update, warn=warnings.append)
+    for w in warnings:
+        print(f"warning: {w}. Use --background frame, or describe the camera that took the frames "
+              "(--rig/--camera, --offset-dn, --read-noise-e)", file=sys.stderr)
     write_table(args.out, cols)
     n_frames_with = len(set(cols["frame"]))
     print(f"{len(cols['frame'])} spots in {n_frames_with} of {len(args.frames)} frames ({args.method}; {st.describe()}) "
