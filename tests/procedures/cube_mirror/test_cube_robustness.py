@@ -26,14 +26,20 @@ def test_each_method_studies_the_sun_sensor_and_its_own_instrument():
     assert set(auto) == set(SunSensorEffects.names()) | set(AutocollimatorEffects.names())
 
 
-def test_the_budget_is_the_documents_on_the_2axis_rig_only(diaphragm_rig):
+def test_the_budgets_are_the_documents(diaphragm_rig):
     from rigsim.procedures.cube_mirror.robustness import quantities
 
     q = {x.key: x for x in quantities(diaphragm_rig)}
-    assert q["cube_sun_x_arcsec"].budget == pytest.approx(3.69 / math.sqrt(3.0))
-    assert q["sun_fx_px"].budget is None and q["sweep_points_count"].kind == "count"
-    q3 = {x.key: x for x in quantities(load_any_rig("sun_sensor_3axis_autocollimator"))}
-    assert q3["cube_sun_x_arcsec"].budget is None and q3["null_measurement_rms"].unit == "arcsec"
+    a = 3.69 / math.sqrt(3.0)                      # seed 000: 3.69″ RSS
+    assert q["cube_sun_x_arcsec"].budget == q["sun_rot_z_arcsec"].budget == pytest.approx(a)
+    ss = diaphragm_rig.sun_sensor                  # the same angle on the sun sensor's detector
+    assert q["sun_u0_px"].budget == pytest.approx(a / 206264.806 * ss.focal_length_mm / (ss.pixel_pitch_um * 1e-3))
+    assert q["null_measurement_rms"].budget == diaphragm_rig.aiming_camera.null_sigma_px == 1.0   # Table 1: 1 px
+    assert q["sweep_points_count"].kind == "count"
+    rig3 = load_any_rig("sun_sensor_3axis_autocollimator")
+    q3 = {x.key: x for x in quantities(rig3)}
+    assert q3["cube_sun_x_arcsec"].budget == 6.0   # seed 001: the turntable's 0.1′
+    assert q3["null_measurement_rms"].unit == "arcsec" and q3["null_measurement_rms"].budget == 0.1
 
 
 def test_rig_with_switches_exactly_the_configured_effects(diaphragm_rig):
