@@ -43,9 +43,20 @@ def _frames(sun_dirs) -> np.ndarray:
     return np.stack([e1, np.cross(S, e1), S], axis=1)
 
 
-def tile_rotations(sun_dirs: np.ndarray) -> np.ndarray:
-    """(K, 3, 3) rotations camera → world with rows (e1, e2, s): each sun direction s goes to +z."""
-    return _frames(sun_dirs)
+def tile_rotations(sun_dirs: np.ndarray, axes: np.ndarray | None = None) -> np.ndarray:
+    """(K, 3, 3) rotations camera → world with rows (e1, e2, s): each sun direction s goes to +z.
+    ``axes``: per direction, a camera-frame direction across it that must go to world −x, the local
+    x (φ = 0) of the disk's texture (a non-uniform disk's gradient)."""
+    if axes is None:
+        return _frames(sun_dirs)
+    S = _frames(sun_dirs)[:, 2]
+    A = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
+    A = A - np.einsum("ki,ki->k", A, S)[:, None] * S
+    n = np.linalg.norm(A, axis=1)
+    if not np.all(np.isfinite(n) & (n > 1e-9)):
+        raise ValueError("axes must be finite directions across their sun directions")
+    e1 = -A / n[:, None]
+    return np.stack([e1, np.cross(S, e1), S], axis=1)
 
 
 def spot_tile_px(camera, sun_dirs: np.ndarray, full_angle_rad: float, *, margin_px: float = 1.0,
@@ -124,6 +135,13 @@ def _register() -> None:
         """The distorted pinhole, one window and one camera rotation per film tile."""
 
         def __init__(self, props):
+            # the cover glass (optics.cover_glass): ghost = "direct" (the direct image through the
+            # glass) or "ghost" (its ghost alone); thickness over focal length in px (per unit of
+            # 2 tan θ′), index, coating reflectance (< 0: Fresnel)
+            self.ghost = str(props["ghost"]) if "ghost" in props else ""
+            if self.ghost:
+                self.g_tu, self.g_tv = float(props["ghost_tu"]), float(props["ghost_tv"])
+                self.g_n, self.g_coat = float(props["ghost_n"]), float(props["ghost_coating"])
             self.tile_px = int(props["tile_px"])
             self.tiles_x = int(props["tiles_x"])
             self.n_tiles = int(props["n_tiles"])
@@ -151,13 +169,59 @@ def _register() -> None:
 
             u = fx - tx * t + tile(0) - 0.5
             v = fy - ty * t + tile(1) - 0.5
-            d, wt, valid = self._pixel_ray(u, v)
+            if self.ghost == "ghost":
+                d, wt, valid = self._ghost_ray(u, v)
+            elif self.ghost == "direct":
+                d, wt, valid = self._pixel_ray(u, v)
+                wt = wt * self._glass(d)[0]
+            else:
+                d, wt, valid = self._pixel_ray(u, v)
             valid &= tile(2) > 0.5
             world = mi.Vector3f(dr.fma(tile(3), d.x, dr.fma(tile(4), d.y, tile(5) * d.z)),
                                 dr.fma(tile(6), d.x, dr.fma(tile(7), d.y, tile(8) * d.z)),
                                 dr.fma(tile(9), d.x, dr.fma(tile(10), d.y, tile(11) * d.z)))
             ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), world, time, wav)
             return ray, wav_weight * dr.select(valid & active, wt, 0.0)
+
+        def _glass(self, d):
+            """(direct transmittance, ghost share, 2/√(n² − sin²θ)) of unit ray ``d`` through the glass."""
+            n = self.g_n
+            s2 = dr.fma(d.x, d.x, d.y * d.y)
+            k = 2.0 * dr.rsqrt(dr.maximum(n * n - s2, 1e-12))
+            if self.g_coat >= 0.0:
+                rs = rp = mi.Float(self.g_coat)
+            else:
+                c = d.z
+                ct = dr.sqrt(dr.maximum(1.0 - s2 / (n * n), 0.0))
+                a = (c - n * ct) / (c + n * ct)
+                b = (n * c - ct) / (n * c + ct)
+                rs, rp = a * a, b * b
+            ts, tp = 1.0 - rs, 1.0 - rp
+            return 0.5 * (ts * ts + tp * tp), 0.5 * (ts * ts * rs * rs + tp * tp * rp * rp), k
+
+        def _ghost_offset(self, u, v):
+            d, _, _ = self._pixel_ray(u, v)
+            _, _, k = self._glass(d)
+            return self.g_tu * k * d.x, self.g_tv * k * d.y
+
+        def _ghost_ray(self, u, v):
+            """Pixel (u, v) sees in the ghost what the direct image shows at p, p + offset(p) = (u, v)
+            (fixed point), weighted by the ghost's share and 1/|det ∂(p + offset)/∂p| (the ghost
+            image is stretched)."""
+            um, vm = mi.Float(u), mi.Float(v)
+            for _ in range(8):  # contraction ≤ 2t/(n f) per step
+                ou, ov = self._ghost_offset(um, vm)
+                um, vm = u - ou, v - ov
+            dg, wg, valid_g = self._pixel_ray(um, vm)
+            _, ghost, k = self._glass(dg)
+            ou, ov = self.g_tu * k * dg.x, self.g_tv * k * dg.y
+            eps = 0.05
+            au, av = self._ghost_offset(um + eps, vm)
+            bu, bv = self._ghost_offset(um, vm + eps)
+            j11, j21 = 1.0 + (au - ou) / eps, (av - ov) / eps
+            j12, j22 = (bu - ou) / eps, 1.0 + (bv - ov) / eps
+            det = dr.abs(j11 * j22 - j12 * j21)
+            return dg, wg * ghost / det, valid_g
 
     mi.register_sensor(TILED_PLUGIN, lambda props: TiledPinholeSensor(props))
     _registered.add(variant)
@@ -176,6 +240,11 @@ class SunSpotBatch:
         self.tile_px = int(tile_px)
         if self.tile_px < 4:
             raise ValueError(f"tile_px = {tile_px!r}: must be >= 4")
+        # the cover glass's ghost falls outside a spot's tight tile: render the whole readout window
+        # (tiles centred where the caller's would be: render() moves the origins)
+        self.requested_tile_px = self.tile_px
+        if renderer.ghost is not None:
+            self.tile_px = max(self.tile_px, renderer.window_px)
         self.n_tiles = max(1, min(int(tiles_per_launch), MAX_LAUNCH_SAMPLES // (self.tile_px**2 * renderer.spp)))
         self.tiles_x = math.ceil(math.sqrt(self.n_tiles))
         self.tiles_y = math.ceil(self.n_tiles / self.tiles_x)
@@ -183,12 +252,16 @@ class SunSpotBatch:
         self.batched = self.variant.startswith("llvm")
         r = renderer
         self._scene = self._build() if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
+        # the ghost alone, in a second launch (same tiles): no sample is shared between the two images
+        self._ghost_scene = self._build("ghost") if self.batched and r.ghost is not None else None
 
     @property
     def samples_per_launch(self) -> int:
         return self.tiles_x * self.tiles_y * self.tile_px**2 * self.renderer.spp
 
-    def _build(self) -> Scene:
+    def _build(self, glass: str = "direct") -> Scene:
+        """The tiled scene; with a cover glass, ``glass`` = "direct" (the direct image through it) or
+        "ghost" (the ghost alone)."""
         import mitsuba as mi
 
         _register()
@@ -202,23 +275,46 @@ class SunSpotBatch:
                      "rfilter": {"type": "box"}, "pixel_format": "luminance"},
             "sampler": {"type": r.sampler, "sample_count": r.spp},
         }
+        if r.ghost is not None:
+            g = r.ghost
+            sensor.update({"ghost": glass, "ghost_tu": g.thickness_mm / g.focal_length_mm * cam.fx,
+                           "ghost_tv": g.thickness_mm / g.focal_length_mm * cam.fy, "ghost_n": g.refractive_index,
+                           "ghost_coating": -1.0 if g.coating_reflectance is None else g.coating_reflectance})
         sun = {"type": "disk", "to_world": mi.ScalarTransform4f(r._disk_matrix(np.array([0.0, 0.0, 1.0]))),
-               "emitter": {"type": "area", "radiance": {"type": "uniform", "value": r._radiance()}}}
+               "emitter": r.emitter()}
 
         def set_tiles(state) -> dict:
             return {"sensor.tiles": mi.Float(state["tiles"])} if "tiles" in state else {}
 
         return Scene({"type": "path", "max_depth": 1}, [Element("sensor", sensor, set_tiles), Element("sun", sun)])
 
-    def render(self, sun_dirs, origins, seed: int = 0) -> np.ndarray:
+    def render(self, sun_dirs, origins, seed: int = 0, *, axes=None, scales=None) -> np.ndarray:
+        """``axes`` (K, 3): per direction, the camera-frame direction of a non-uniform disk's
+        gradient (needed when ``renderer.needs_axis``); ``scales`` (K,): the simulator's irradiance
+        at each pose relative to its mean (spatial non-uniformity), multiplied into each tile."""
         sun_dirs = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
-        origins = np.asarray(origins, dtype=np.int64).reshape(-1, 2)
+        origins = np.asarray(origins, dtype=np.int64).reshape(-1, 2) + (self.requested_tile_px // 2 - self.tile_px // 2)
+        K = len(sun_dirs)
+        if self.renderer.needs_axis and axes is None:
+            raise ValueError("the sun disk has a gradient (simulator_nonuniformity, angular): render needs its axes")
+        out = self._render(sun_dirs, origins, seed, axes)
+        if scales is not None:
+            out *= np.asarray(scales, dtype=np.float64).reshape(K, 1, 1)
+        return out
+
+    def _render(self, sun_dirs, origins, seed, axes) -> np.ndarray:
         K, t = len(sun_dirs), self.tile_px
         if not self.batched:
-            return np.array([self._scene.render({"sun_dir": _unit(s), "window_origin": tuple(int(x) for x in o)},
-                                                seed=mitsuba_seed(seed, k), spp=self.renderer.spp)
+            if self.renderer.ghost is not None:
+                raise ValueError("the cover glass's ghost needs an llvm variant of Mitsuba")
+
+            def state(k, s, o):
+                st = {"sun_dir": _unit(s), "window_origin": tuple(int(x) for x in o)}
+                return st if axes is None else {**st, "axis": np.asarray(axes[k], dtype=np.float64)}
+
+            return np.array([self._scene.render(state(k, s, o), seed=mitsuba_seed(seed, k), spp=self.renderer.spp)
                              for k, (s, o) in enumerate(zip(sun_dirs, origins))]).reshape(K, t, t)
-        rot = tile_rotations(sun_dirs)
+        rot = tile_rotations(sun_dirs, axes)
         out = np.empty((K, t, t))
         for launch, a in enumerate(range(0, K, self.n_tiles)):
             b = min(K, a + self.n_tiles)
@@ -226,8 +322,11 @@ class SunSpotBatch:
             data[:b - a, 0:2] = origins[a:b]
             data[:b - a, 2] = 1.0
             data[:b - a, 3:] = rot[a:b].reshape(-1, 9)
-            img = self._scene.render({"tiles": data.ravel().astype(np.float32)}, seed=mitsuba_seed(seed, launch),
-                                     spp=self.renderer.spp)
+            state = {"tiles": data.ravel().astype(np.float32)}
+            img = self._scene.render(state, seed=mitsuba_seed(seed, launch), spp=self.renderer.spp)
+            if self._ghost_scene is not None:
+                img = img + self._ghost_scene.render(state, seed=mitsuba_seed(seed, launch, 0x6057),
+                                                     spp=self.renderer.spp)
             grid = img.reshape(self.tiles_y, t, self.tiles_x, t).transpose(0, 2, 1, 3).reshape(-1, t, t)
             out[a:b] = grid[:b - a]
         return out
