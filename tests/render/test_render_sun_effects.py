@@ -69,7 +69,7 @@ def test_limb_darkening_moves_the_pixel_centroid_as_the_quadrature(ld_frames):
     the pixel-binned one does: the limb-darkened disk fills the pixels otherwise. Rendered shift
     (same seed) = exact pixel-binned quadrature shift, to 1.5e-3 px (3× the paired renders' measured
     scatter at 1024 spp, 5e-4 px); the shifts reach 5e-3 px, so the test fails with the effect off."""
-    s0, s1, frames = ld_frames
+    s0, _, frames = ld_frames
     exp, got = [], []
     for f0, f1 in frames:
         w0, w1 = f0.extra["window"], f1.extra["window"]
@@ -223,7 +223,7 @@ def test_ghost_in_the_rig_frame_and_the_sweep_tiles():
     assert np.allclose(g["offset_px"], GLASS.offset_px(s, CAM.fx, CAM.fy))
     assert g["ghost_ratio"] == pytest.approx(GLASS.ghost_ratio(CoverGlass.theta(s)))
     batch = SunSpotBatch(sc.renderer, 8, 2)
-    assert batch.tile_px == sc.renderer.window_px
+    assert batch.tile_px == 8 and batch.out_px == sc.renderer.window_px
     c, _ = CAM.project_valid(s[None])
     tiles = batch.render(np.array([s, s]), np.floor(c + 0.5).astype(int).repeat(2, 0) - 4, seed=1)
     W = sc.renderer.window_px

@@ -199,29 +199,48 @@ def _register() -> None:
             ts, tp = 1.0 - rs, 1.0 - rp
             return 0.5 * (ts * ts + tp * tp), 0.5 * (ts * ts * rs * rs + tp * tp * rp * rp), k
 
-        def _ghost_offset(self, u, v):
-            d, _, _ = self._pixel_ray(u, v)
-            _, _, k = self._glass(d)
-            return self.g_tu * k * d.x, self.g_tv * k * d.y
-
         def _ghost_ray(self, u, v):
-            """Pixel (u, v) sees in the ghost what the direct image shows at p, p + offset(p) = (u, v)
-            (fixed point), weighted by the ghost's share and 1/|det ∂(p + offset)/∂p| (the ghost
-            image is stretched)."""
-            um, vm = mi.Float(u), mi.Float(v)
-            for _ in range(8):  # contraction ≤ 2t/(n f) per step
-                ou, ov = self._ghost_offset(um, vm)
-                um, vm = u - ou, v - ov
-            dg, wg, valid_g = self._pixel_ray(um, vm)
-            _, ghost, k = self._glass(dg)
-            ou, ov = self.g_tu * k * dg.x, self.g_tv * k * dg.y
-            eps = 0.05
-            au, av = self._ghost_offset(um + eps, vm)
-            bu, bv = self._ghost_offset(um, vm + eps)
-            j11, j21 = 1.0 + (au - ou) / eps, (av - ov) / eps
-            j12, j22 = (bu - ou) / eps, 1.0 + (bv - ov) / eps
-            det = dr.abs(j11 * j22 - j12 * j21)
-            return dg, wg * ghost / det, valid_g
+            """Pixel (u, v) sees in the ghost what the direct image shows at p, p + offset(p) = (u, v):
+            Newton in the direct ray's undistorted coordinates x, G(x) = pixel(distort(x)) +
+            2 (t_u x, t_v y)/√(n² + (n² − 1)|x|²) = (u, v); weighted by the ghost's share and
+            det(∂p/∂x)/det(∂G/∂x) (the ghost image is stretched)."""
+            n2 = self.g_n * self.g_n
+            x, y = (u - self.cx) / self.fx, (v - self.cy) / self.fy
+            for _ in range(6):
+                xd, yd, a, b, d, r2 = self._distort(x, y)
+                q = dr.fma(n2 - 1.0, r2, n2)
+                iq = dr.rsqrt(q)
+                iq3 = iq * iq * iq
+                gu = dr.fma(self.fx, xd, self.cx) + 2.0 * self.g_tu * x * iq - u
+                gv = dr.fma(self.fy, yd, self.cy) + 2.0 * self.g_tv * y * iq - v
+                j11 = self.fx * a + 2.0 * self.g_tu * (q - (n2 - 1.0) * x * x) * iq3
+                j12 = self.fx * b - 2.0 * self.g_tu * (n2 - 1.0) * x * y * iq3
+                j21 = self.fy * b - 2.0 * self.g_tv * (n2 - 1.0) * x * y * iq3
+                j22 = self.fy * d + 2.0 * self.g_tv * (q - (n2 - 1.0) * y * y) * iq3
+                inv = dr.rcp(j11 * j22 - j12 * j21)
+                x = x - (j22 * gu - j12 * gv) * inv
+                y = y - (j11 * gv - j21 * gu) * inv
+            xd, yd, a, b, d, r2 = self._distort(x, y)
+            q = dr.fma(n2 - 1.0, r2, n2)
+            iq = dr.rsqrt(q)
+            iq3 = iq * iq * iq
+            resid = (dr.abs(dr.fma(self.fx, xd, self.cx) + 2.0 * self.g_tu * x * iq - u)
+                     + dr.abs(dr.fma(self.fy, yd, self.cy) + 2.0 * self.g_tv * y * iq - v))
+            j11 = self.fx * a + 2.0 * self.g_tu * (q - (n2 - 1.0) * x * x) * iq3
+            j12 = self.fx * b - 2.0 * self.g_tu * (n2 - 1.0) * x * y * iq3
+            j21 = self.fy * b - 2.0 * self.g_tv * (n2 - 1.0) * x * y * iq3
+            j22 = self.fy * d + 2.0 * self.g_tv * (q - (n2 - 1.0) * y * y) * iq3
+            det_g = j11 * j22 - j12 * j21
+            det_p = self.fx * self.fy * (a * d - b * b)
+            dg = dr.normalize(mi.Vector3f(x, y, 1.0))
+            _, ghost, _ = self._glass(dg)
+            if self.response == "flux":
+                ct2 = dg.z * dg.z
+                w = ct2 * ct2 * self.fx * self.fy / det_g  # cos⁴θ / det(distortion) × det_p / det_g
+            else:
+                w = det_p / det_g
+            valid = (r2 < self.r2_max) & (det_g > 0) & (det_p > 0) & (resid < 1e-3) & self._on_detector(u, v)
+            return dg, w * ghost, valid
 
     mi.register_sensor(TILED_PLUGIN, lambda props: TiledPinholeSensor(props))
     _registered.add(variant)
@@ -235,25 +254,27 @@ class SunSpotBatch:
     pixel (i, j) is detector pixel ``origins[k] + (i, j)``. The scalar fallback variant renders
     window by window with the renderer itself."""
 
-    def __init__(self, renderer, tile_px: int, tiles_per_launch: int):
+    def __init__(self, renderer, tile_px: int, tiles_per_launch: int, *, glass: str = "direct"):
         self.renderer = renderer
         self.tile_px = int(tile_px)
         if self.tile_px < 4:
             raise ValueError(f"tile_px = {tile_px!r}: must be >= 4")
-        # the cover glass's ghost falls outside a spot's tight tile: render the whole readout window
-        # (tiles centred where the caller's would be: render() moves the origins)
-        self.requested_tile_px = self.tile_px
-        if renderer.ghost is not None:
-            self.tile_px = max(self.tile_px, renderer.window_px)
+        # with the cover glass: this batch draws the direct image through it ("direct") or the ghost
+        # alone ("ghost", in its own launch: no sample shared). The ghost lies outside a spot's tight
+        # tile: a direct batch returns whole readout windows and adds the ghost, drawn by a ghost
+        # batch in window-sized tiles, to the spots whose ghost reaches their window.
+        self.glass = glass
+        self.out_px = max(self.tile_px, renderer.window_px) if renderer.ghost is not None else self.tile_px
+        self._ghost_batches: dict[int, SunSpotBatch] = {}
         self.n_tiles = max(1, min(int(tiles_per_launch), MAX_LAUNCH_SAMPLES // (self.tile_px**2 * renderer.spp)))
         self.tiles_x = math.ceil(math.sqrt(self.n_tiles))
         self.tiles_y = math.ceil(self.n_tiles / self.tiles_x)
         self.variant = ensure_variant()
         self.batched = self.variant.startswith("llvm")
         r = renderer
-        self._scene = self._build() if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
-        # the ghost alone, in a second launch (same tiles): no sample is shared between the two images
-        self._ghost_scene = self._build("ghost") if self.batched and r.ghost is not None else None
+        if r.ghost is not None and not self.batched:
+            raise ValueError("the cover glass's ghost needs an llvm variant of Mitsuba")
+        self._scene = self._build(glass) if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
 
     @property
     def samples_per_launch(self) -> int:
@@ -291,23 +312,43 @@ class SunSpotBatch:
     def render(self, sun_dirs, origins, seed: int = 0, *, axes=None, scales=None) -> np.ndarray:
         """``axes`` (K, 3): per direction, the camera-frame direction of a non-uniform disk's
         gradient (needed when ``renderer.needs_axis``); ``scales`` (K,): the simulator's irradiance
-        at each pose relative to its mean (spatial non-uniformity), multiplied into each tile."""
+        at each pose relative to its mean (spatial non-uniformity), multiplied into each tile.
+        Returns (K, out_px, out_px): with the cover glass's ghost, whole readout windows centred
+        where the tiles are."""
         sun_dirs = np.asarray(sun_dirs, dtype=np.float64).reshape(-1, 3)
-        origins = np.asarray(origins, dtype=np.int64).reshape(-1, 2) + (self.requested_tile_px // 2 - self.tile_px // 2)
+        origins = np.asarray(origins, dtype=np.int64).reshape(-1, 2)
         K = len(sun_dirs)
         if self.renderer.needs_axis and axes is None:
             raise ValueError("the sun disk has a gradient (simulator_nonuniformity, angular): render needs its axes")
         out = self._render(sun_dirs, origins, seed, axes)
+        if self.renderer.ghost is not None and self.glass == "direct":
+            out = self._add_ghosts(out, sun_dirs, origins, seed, axes)
         if scales is not None:
             out *= np.asarray(scales, dtype=np.float64).reshape(K, 1, 1)
         return out
 
+    def _add_ghosts(self, out, sun_dirs, origins, seed, axes) -> np.ndarray:
+        """The direct tiles in readout windows, plus the ghost of each spot whose ghost reaches its
+        window (offset within the window's half width plus the tile's)."""
+        t, W = self.tile_px, self.out_px
+        a = W // 2 - t // 2
+        big = np.zeros((len(out), W, W))
+        big[:, a:a + t, a:a + t] = out
+        cam = self.renderer.camera
+        off = self.renderer.ghost.offset_px(sun_dirs, cam.fx, cam.fy)
+        need = np.flatnonzero(np.all(np.abs(off) < W / 2 + t / 2 + 1, axis=1))
+        if len(need):
+            n = len(need)
+            if n not in self._ghost_batches:
+                self._ghost_batches[n] = SunSpotBatch(self.renderer, W, n, glass="ghost")
+            big[need] += self._ghost_batches[n]._render(
+                sun_dirs[need], origins[need] - a, mitsuba_seed(seed, 0x6057),
+                None if axes is None else np.asarray(axes)[need])
+        return big
+
     def _render(self, sun_dirs, origins, seed, axes) -> np.ndarray:
         K, t = len(sun_dirs), self.tile_px
         if not self.batched:
-            if self.renderer.ghost is not None:
-                raise ValueError("the cover glass's ghost needs an llvm variant of Mitsuba")
-
             def state(k, s, o):
                 st = {"sun_dir": _unit(s), "window_origin": tuple(int(x) for x in o)}
                 return st if axes is None else {**st, "axis": np.asarray(axes[k], dtype=np.float64)}
@@ -322,11 +363,8 @@ class SunSpotBatch:
             data[:b - a, 0:2] = origins[a:b]
             data[:b - a, 2] = 1.0
             data[:b - a, 3:] = rot[a:b].reshape(-1, 9)
-            state = {"tiles": data.ravel().astype(np.float32)}
-            img = self._scene.render(state, seed=mitsuba_seed(seed, launch), spp=self.renderer.spp)
-            if self._ghost_scene is not None:
-                img = img + self._ghost_scene.render(state, seed=mitsuba_seed(seed, launch, 0x6057),
-                                                     spp=self.renderer.spp)
+            img = self._scene.render({"tiles": data.ravel().astype(np.float32)}, seed=mitsuba_seed(seed, launch),
+                                     spp=self.renderer.spp)
             grid = img.reshape(self.tiles_y, t, self.tiles_x, t).transpose(0, 2, 1, 3).reshape(-1, t, t)
             out[a:b] = grid[:b - a]
         return out
