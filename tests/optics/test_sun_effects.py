@@ -142,7 +142,7 @@ def test_glass_spots_quadrature():
 def test_effects_tables_in_the_scenes_are_off_and_checked():
     for name in ("sun_sensor_2axis_diaphragm", "sun_sensor_3axis_autocollimator"):
         rig = load_rig(name)
-        for eff in ("limb_darkening", "simulator_nonuniformity", "cover_glass_ghost"):
+        for eff in ("limb_darkening", "simulator_nonuniformity", "cover_glass_ghost", "vignetting"):
             assert eff in rig.effects.names() and not getattr(rig.effects, eff).enabled
     data = load_rig("sun_sensor_2axis_diaphragm").model_dump(mode="json")
     data["effects"]["limb_darkening"]["u"] = 1.5
@@ -152,3 +152,39 @@ def test_effects_tables_in_the_scenes_are_off_and_checked():
     data["effects"]["simulator_nonuniformity"]["kind"] = "diagonal"
     with pytest.raises(Exception, match="kind"):
         parse_rig(data)
+
+
+def test_thick_pinhole_throughput_is_the_overlap_of_two_circles():
+    """V(θ) against the overlap of the entrance and exit circles counted on a grid (a second
+    method), V(0) = 1, V = 0 once t tan θ ≥ D; d ln V/dθ against a finite difference."""
+    from rigsim.optics.pinhole import ThickPinhole
+
+    ph = ThickPinhole(0.1, 0.025)
+    g = (np.arange(2000) + 0.5) / 2000 * 0.1 - 0.05
+    X, Y = np.meshgrid(g, g)
+    inside = X**2 + Y**2 < 0.05**2
+    for deg in (0.0, 20.0, 45.0, 60.0, 75.0):
+        c = 0.025 * math.tan(math.radians(deg))
+        grid = np.sum(inside & ((X - c) ** 2 + Y**2 < 0.05**2)) / np.sum(inside)
+        assert float(ph.throughput(math.radians(deg))) == pytest.approx(grid, abs=2e-3)
+    assert ph.throughput(0.0) == 1.0 and ph.throughput(math.atan(4.0)) == 0.0
+    th, h = math.radians(50.0), 1e-6
+    fd = (math.log(ph.throughput(th + h)) - math.log(ph.throughput(th - h))) / (2 * h)
+    assert ph.dlnv_dtheta(th) == pytest.approx(fd, rel=1e-6)
+
+
+def test_vignetting_shift_closed_form():
+    """The vignetted disk's centroid moves towards the axis by f sec²θ · (d ln V/dθ) (a/2)²/4 (the
+    second moment of a uniform disk along one axis), through an undistorted pinhole."""
+    from rigsim.optics.pinhole import ThickPinhole
+
+    ph = ThickPinhole(0.1, 0.025)
+    cam = PinholeBrown(fx=272.7, fy=272.7, cx=515.3, cy=508.7)
+    for deg in (30.0, 50.0, 58.0):
+        th = math.radians(deg)
+        s = np.array([math.sin(th) * 0.8, math.sin(th) * 0.6, math.cos(th)])
+        a = spot_truth(cam, s, A, n=1_000_000)
+        b = spot_truth(cam, s, A, n=1_000_000, direction_weight=ph.direction_weight)
+        exp = cam.fx / math.cos(th) ** 2 * ph.dlnv_dtheta(th) * (A / 2) ** 2 / 4 * np.array([0.8, 0.6])
+        assert np.allclose(np.subtract(b["mean_uv"], a["mean_uv"]), exp, rtol=0.03, atol=2e-5)
+        assert b["relative_flux"] / a["relative_flux"] == pytest.approx(ph.throughput(th), rel=1e-4)

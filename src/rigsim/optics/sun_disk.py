@@ -81,7 +81,7 @@ def spot_outline(camera: PinholeBrown, sun_dir, full_angle_rad: float, n: int = 
 
 
 def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
-               response: str = "flux", radiance=None, radiance_axis=None) -> dict:
+               response: str = "flux", radiance=None, radiance_axis=None, direction_weight=None) -> dict:
     """Exact (quadrature) description of the spot image of a uniform disk. Pure numpy.
 
     Returns pixel positions (u, v) in the OpenCV convention:
@@ -97,6 +97,8 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
     ``radiance``: a non-uniform disk, a callable L(r, cos φ) of the position on the disk (r = tan ρ
     / tan(a/2), φ the azimuth from ``radiance_axis``, a camera-frame vector across the disk), e.g.
     :class:`rigsim.optics.sun_radiance.DiskRadiance`; each point's weight is multiplied by L.
+    ``direction_weight``: a callable of the directions (3, n) rows (x, y, z in the camera frame)
+    multiplying each point's weight (e.g. a thick pinhole's vignetting).
     """
     s = _unit(sun_dir)
     e1, e2 = _basis(s)
@@ -123,6 +125,8 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
         raise ValueError(f"response = {response!r}: must be 'flux' or 'radiance'")
     if radiance is not None:
         w = w * _disk_weight(radiance, radiance_axis, s, e1, e2, float(full_angle_rad), int(n))
+    if direction_weight is not None:
+        w = w * direction_weight(d)
     wsum = w.sum()
     mean = (w[:, None] * uv).sum(axis=0) / wsum
     np.floor(uv + 0.5, out=uv)  # each point binned into the pixel that holds it

@@ -11,7 +11,7 @@ from pydantic import Field
 
 from rigsim.rig.effects import Effect, EffectsTable
 
-__all__ = ["CoverGlassGhost", "LimbDarkening", "SimulatorNonuniformity", "SunSensorEffects"]
+__all__ = ["CoverGlassGhost", "LimbDarkening", "SimulatorNonuniformity", "SunSensorEffects", "Vignetting"]
 
 
 class LimbDarkening(Effect):
@@ -49,9 +49,18 @@ class CoverGlassGhost(Effect):
                                                           "omit for the bare surface's Fresnel reflectance")
 
 
+class Vignetting(Effect):
+    """The pinhole's mask has a thickness: oblique light passes the overlap of its entrance and exit
+    circles, V(θ) = (2/π)(acos k − k√(1 − k²)), k = t tan θ / D, on top of the thin pinhole's cos⁴."""
+
+    pinhole_diameter_mm: float = Field(0.1, gt=0.0, le=5.0, description="pinhole diameter D")
+    mask_thickness_mm: float = Field(0.025, ge=0.0, le=5.0, description="mask thickness t")
+
+
 class SunSensorEffects(EffectsTable):
     """Effects of the sun sensor (both cube-mirror rigs): the sun and its simulator, the cover glass, the pinhole."""
 
     limb_darkening: LimbDarkening = Field(default_factory=LimbDarkening)
     simulator_nonuniformity: SimulatorNonuniformity = Field(default_factory=SimulatorNonuniformity)
     cover_glass_ghost: CoverGlassGhost = Field(default_factory=CoverGlassGhost)
+    vignetting: Vignetting = Field(default_factory=Vignetting)

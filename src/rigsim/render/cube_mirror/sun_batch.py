@@ -139,6 +139,8 @@ def _register() -> None:
             # glass) or "ghost" (its ghost alone); thickness over focal length in px (per unit of
             # 2 tan θ′), index, coating reflectance (< 0: Fresnel)
             self.ghost = str(props["ghost"]) if "ghost" in props else ""
+            # a thick pinhole (optics.pinhole): mask thickness over diameter, < 0 for none
+            self.vignette = float(props["vignette_ratio"]) if "vignette_ratio" in props else -1.0
             if self.ghost:
                 self.g_tu, self.g_tv = float(props["ghost_tu"]), float(props["ghost_tv"])
                 self.g_n, self.g_coat = float(props["ghost_n"]), float(props["ghost_coating"])
@@ -176,6 +178,9 @@ def _register() -> None:
                 wt = wt * self._glass(d)[0]
             else:
                 d, wt, valid = self._pixel_ray(u, v)
+            if self.vignette >= 0.0:
+                k = dr.minimum(self.vignette * dr.sqrt(dr.fma(d.x, d.x, d.y * d.y)) / d.z, 1.0)
+                wt = wt * (2.0 / dr.pi) * (dr.acos(k) - k * dr.sqrt(dr.maximum(1.0 - k * k, 0.0)))
             valid &= tile(2) > 0.5
             world = mi.Vector3f(dr.fma(tile(3), d.x, dr.fma(tile(4), d.y, tile(5) * d.z)),
                                 dr.fma(tile(6), d.x, dr.fma(tile(7), d.y, tile(8) * d.z)),
@@ -272,8 +277,8 @@ class SunSpotBatch:
         self.variant = ensure_variant()
         self.batched = self.variant.startswith("llvm")
         r = renderer
-        if r.ghost is not None and not self.batched:
-            raise ValueError("the cover glass's ghost needs an llvm variant of Mitsuba")
+        if r.tiled_only and not self.batched:
+            raise ValueError("the cover glass's ghost and the pinhole's vignetting need an llvm variant of Mitsuba")
         self._scene = self._build(glass) if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
 
     @property
@@ -301,6 +306,8 @@ class SunSpotBatch:
             sensor.update({"ghost": glass, "ghost_tu": g.thickness_mm / g.focal_length_mm * cam.fx,
                            "ghost_tv": g.thickness_mm / g.focal_length_mm * cam.fy, "ghost_n": g.refractive_index,
                            "ghost_coating": -1.0 if g.coating_reflectance is None else g.coating_reflectance})
+        if r.pinhole is not None:
+            sensor["vignette_ratio"] = r.pinhole.ratio
         sun = {"type": "disk", "to_world": mi.ScalarTransform4f(r._disk_matrix(np.array([0.0, 0.0, 1.0]))),
                "emitter": r.emitter()}
 

@@ -20,6 +20,7 @@ import numpy as np
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.cover_glass import CoverGlass
+from rigsim.optics.pinhole import ThickPinhole
 from rigsim.optics.sun_disk import (
     SUN_FULL_ANGLE_RAD,
     _basis,
@@ -92,7 +93,8 @@ class SunSpotRenderer:
     def __init__(self, camera: PinholeBrown, *, full_angle_rad: float = SUN_FULL_ANGLE_RAD,
                  window_px: int = 32, spp: int = 1024, spot_photons: float = 1.0e6,
                  sampler: str = "ldsampler", response: str = "flux", distance_mm: float = 1000.0,
-                 radiance: DiskRadiance | None = None, ghost: CoverGlass | None = None):
+                 radiance: DiskRadiance | None = None, ghost: CoverGlass | None = None,
+                 pinhole: ThickPinhole | None = None):
         if not (0.0 < full_angle_rad < math.radians(20.0)):
             raise ValueError(f"full_angle_rad = {full_angle_rad!r}: must be in (0, 0.349) rad")
         if int(window_px) != window_px or not (4 <= window_px <= 4096):
@@ -113,6 +115,7 @@ class SunSpotRenderer:
         # effects (docs/effects-sun.md): a non-uniform disk (texture on the emitter), the cover glass's ghost
         self.radiance = radiance if radiance is not None and not radiance.uniform else None
         self.ghost = ghost
+        self.pinhole = pinhole  # a thick pinhole's vignetting
         self._ghost_batch = None
         self.variant = ensure_variant()
         register_sensors()
@@ -128,6 +131,12 @@ class SunSpotRenderer:
     def _radiance(self) -> float:
         omega = 2.0 * math.pi * (1.0 - math.cos(self.full_angle_rad / 2.0))
         return self.spot_photons / (self.camera.fx * self.camera.fy * omega)
+
+    @property
+    def tiled_only(self) -> bool:
+        """Whether only the tiled sensor draws this renderer's effects (the cover glass's ghost, the
+        thick pinhole's vignetting): the per-frame windows are then drawn by a one-tile batch."""
+        return self.ghost is not None or self.pinhole is not None
 
     @property
     def needs_axis(self) -> bool:
@@ -195,9 +204,9 @@ class SunSpotRenderer:
         same spp per pixel; the window's other pixels are 0, as they are in expectation (nothing
         but the disk emits). Same expectation, fewer light paths; only the random numbers differ.
         ``axis``: the camera-frame direction of a non-uniform disk's gradient (:attr:`needs_axis`).
-        With the cover glass's ghost the window is rendered by the tiled sensor (one tile), the
-        only sensor that draws the ghost; ``tight`` is then ignored (the ghost lies outside the
-        spot's tile)."""
+        With the cover glass's ghost or the pinhole's vignetting (:attr:`tiled_only`) the window is
+        rendered by the tiled sensor (one tile), the only sensor that draws them; ``tight`` is then
+        ignored."""
         s = _unit(sun_dir_cam)
         if self.needs_axis and axis is None:
             raise ValueError("the sun disk has a gradient (simulator_nonuniformity, angular): render needs its axis")
@@ -221,10 +230,10 @@ class SunSpotRenderer:
         if flags["spot_exceeds_window"]:
             warnings.warn(f"the spot ({flags['spot_extent_px']} px) does not fit the "
                           f"{W} px window; flux is lost", GeometryWarning, stacklevel=2)
-        t = self._tile_px(s) if tight and self.ghost is None else W
+        t = self._tile_px(s) if tight and not self.tiled_only else W
         state = {"sun_dir": s, "window_origin": origin} if axis is None else {
             "sun_dir": s, "window_origin": origin, "axis": np.asarray(axis, dtype=np.float64)}
-        if self.ghost is not None:
+        if self.tiled_only:
             if self._ghost_batch is None:
                 from rigsim.render.cube_mirror.sun_batch import SunSpotBatch
 
@@ -294,15 +303,25 @@ class SunSpotRenderer:
 
     def effects_truth(self, sun_dir_cam, n: int = 2_000_000, axis=None) -> dict:
         """What the effects change in the spot, by quadrature: the non-uniform disk's centroid and its
-        shift from the uniform disk's (``{}`` when the disk is uniform)."""
+        shift from the uniform disk's; the vignetted spot's throughput, centroid and shift."""
+        out = {}
+        if self.pinhole is not None:
+            base = self.truth(sun_dir_cam, n)
+            t = spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n, response=self.response,
+                           direction_weight=self.pinhole.direction_weight)
+            if base.get("valid") and t.get("valid"):
+                out["vignetting"] = {
+                    "throughput": t["relative_flux"] / base["relative_flux"], "mean_uv": t["mean_uv"],
+                    "pixel_centroid_uv": t["pixel_centroid_uv"],
+                    "shift_px": np.subtract(t["mean_uv"], base["mean_uv"]).tolist()}
         if self.radiance is None:
-            return {}
+            return out
         base = self.truth(sun_dir_cam, n)
         t = spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n, response=self.response,
                        radiance=self.radiance, radiance_axis=axis)
         if not (base.get("valid") and t.get("valid")):
-            return {}
-        return {"disk_radiance": {
+            return out
+        return {**out, "disk_radiance": {
             "u": self.radiance.u, "g": self.radiance.g, "axis_cam": None if axis is None else list(map(float, axis)),
             "mean_uv": t["mean_uv"], "pixel_centroid_uv": t["pixel_centroid_uv"],
             "shift_px": (np.subtract(t["mean_uv"], base["mean_uv"])).tolist()}}
@@ -323,6 +342,7 @@ class SunSpotRenderer:
             "camera": self.camera.as_dict(),
             **({} if self.radiance is None else {"disk_radiance": {"u": self.radiance.u, "g": self.radiance.g}}),
             **({} if self.ghost is None else {"cover_glass": self.ghost.as_dict()}),
+            **({} if self.pinhole is None else {"thick_pinhole": self.pinhole.as_dict()}),
         }
 
 
@@ -371,8 +391,11 @@ class SunSensorScene:
         ghost = eff.cover_glass_ghost
         ghost = CoverGlass(ghost.thickness_mm, ghost.refractive_index, rig.sun_sensor.focal_length_mm,
                            ghost.coating_reflectance) if ghost.enabled else None
+        vig = eff.vignetting
+        pinhole = ThickPinhole(vig.pinhole_diameter_mm, vig.mask_thickness_mm) if vig.enabled else None
         self.renderer = SunSpotRenderer(self.camera, full_angle_rad=self.full_angle_rad, window_px=window_px,
-                                        spp=spp, spot_photons=self.spot_photons, radiance=radiance, ghost=ghost)
+                                        spp=spp, spot_photons=self.spot_photons, radiance=radiance, ghost=ghost,
+                                        pinhole=pinhole)
 
     def sun_dir_cam(self, pose_rad: dict) -> np.ndarray:
         R = self.real.turntable.R_rot_from_mount(pose_rad)
