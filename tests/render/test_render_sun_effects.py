@@ -268,8 +268,11 @@ def test_vignetting_through_the_rig_and_the_sweep():
     v = f.truth["effects"]["vignetting"]
     ratio = f.extra["window"].image.sum() / f0.extra["window"].image.sum()
     assert ratio == pytest.approx(v["throughput"], rel=2e-3) and v["throughput"] < 0.6
-    s = f.extra["window"].sun_dir_cam
-    c, _ = CAM.project_valid(s[None])
-    o = np.floor(c + 0.5).astype(int) - 6
-    tiles = SunSpotBatch(sc.renderer, 12, 1).render(s[None], o, seed=4)
-    assert tiles[0].sum() == pytest.approx(f.extra["window"].image.sum(), rel=3e-3)
+    S = np.array([sc.sun_dir_cam(q) for q in POSES])
+    c, _ = CAM.project_valid(S)
+    tiles = SunSpotBatch(sc.renderer, 12, len(POSES)).render(S, np.floor(c + 0.5).astype(int) - 6, seed=4)
+    ideal = SunSpotBatch(sc0.renderer, 12, len(POSES)).render(S, np.floor(c + 0.5).astype(int) - 6, seed=4)
+    assert tiles[3].sum() == pytest.approx(f.extra["window"].image.sum(), rel=3e-3)
+    for k, s in enumerate(S):  # every tile of a launch, not only the first
+        assert tiles[k].sum() / ideal[k].sum() == pytest.approx(
+            sc.renderer.effects_truth(s, 400_000)["vignetting"]["throughput"], rel=2e-3)

@@ -179,8 +179,8 @@ def _register() -> None:
             else:
                 d, wt, valid = self._pixel_ray(u, v)
             if self.vignette >= 0.0:
-                k = dr.minimum(self.vignette * dr.sqrt(dr.fma(d.x, d.x, d.y * d.y)) / d.z, 1.0)
-                wt = wt * (2.0 / dr.pi) * (dr.acos(k) - k * dr.sqrt(dr.maximum(1.0 - k * k, 0.0)))
+                c = dr.minimum(self.vignette * dr.sqrt(dr.fma(d.x, d.x, d.y * d.y)) / d.z, 1.0)  # (k: the tile)
+                wt = wt * (2.0 / dr.pi) * (dr.acos(c) - c * dr.sqrt(dr.maximum(1.0 - c * c, 0.0)))
             valid &= tile(2) > 0.5
             world = mi.Vector3f(dr.fma(tile(3), d.x, dr.fma(tile(4), d.y, tile(5) * d.z)),
                                 dr.fma(tile(6), d.x, dr.fma(tile(7), d.y, tile(8) * d.z)),
