@@ -289,12 +289,21 @@ class SunSpotRenderer:
         frame = np.zeros((self.camera.height, self.camera.width))
         return win.paste_into(frame), win
 
-    def render_full(self, sun_dir_cam, seed: int = 0, spp: int = 16) -> np.ndarray:
-        """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks."""
+    def render_full(self, sun_dir_cam, seed: int = 0, spp: int = 16, axis=None) -> np.ndarray:
+        """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks. The
+        disk's radiance is drawn (``axis`` as in :meth:`render`); the ghost and the vignetting,
+        drawn by the tiled sensor only, are refused."""
         _check_spp(spp, self.sampler)
+        if self.tiled_only:
+            raise ValueError("render_full draws neither the cover glass's ghost nor the pinhole's vignetting")
+        if self.needs_axis and axis is None:
+            raise ValueError("the sun disk has a gradient (simulator_nonuniformity, angular): render needs its axis")
         if self._full is None or self._full[1] != spp:
             self._full = (self._build(self.camera.width, self.camera.height, spp), spp)
-        return self._full[0].render({"sun_dir": _unit(sun_dir_cam), "window_origin": (0, 0)}, seed=int(seed), spp=spp)
+        state = {"sun_dir": _unit(sun_dir_cam), "window_origin": (0, 0)}
+        if axis is not None:
+            state["axis"] = np.asarray(axis, dtype=np.float64)
+        return self._full[0].render(state, seed=int(seed), spp=spp)
 
     def truth(self, sun_dir_cam, n: int = 2_000_000) -> dict:
         """The uniform disk's spot (the geometric truth the pipelines are compared with)."""
