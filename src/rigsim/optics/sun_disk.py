@@ -81,7 +81,7 @@ def spot_outline(camera: PinholeBrown, sun_dir, full_angle_rad: float, n: int = 
 
 
 def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
-               response: str = "flux") -> dict:
+               response: str = "flux", radiance=None, radiance_axis=None, direction_weight=None) -> dict:
     """Exact (quadrature) description of the spot image of a uniform disk. Pure numpy.
 
     Returns pixel positions (u, v) in the OpenCV convention:
@@ -93,6 +93,12 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
       binned into the pixel that contains it) -- what a perfect renderer's window centroid is;
     * ``disk_bias_px`` = mean - centre, ``pixel_bias_px`` = pixel_centroid - mean;
     * ``relative_flux``: flux relative to the same disk on axis (= <cos theta> for ``flux``).
+
+    ``radiance``: a non-uniform disk, a callable L(r, cos φ) of the position on the disk (r = tan ρ
+    / tan(a/2), φ the azimuth from ``radiance_axis``, a camera-frame vector across the disk), e.g.
+    :class:`rigsim.optics.sun_radiance.DiskRadiance`; each point's weight is multiplied by L.
+    ``direction_weight``: a callable of the directions (3, n) rows (x, y, z in the camera frame)
+    multiplying each point's weight (e.g. a thick pinhole's vignetting).
     """
     s = _unit(sun_dir)
     e1, e2 = _basis(s)
@@ -117,6 +123,10 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
         w = (a * dd - b * c) / z ** 3
     else:
         raise ValueError(f"response = {response!r}: must be 'flux' or 'radiance'")
+    if radiance is not None:
+        w = w * _disk_weight(radiance, radiance_axis, s, e1, e2, float(full_angle_rad), int(n))
+    if direction_weight is not None:
+        w = w * direction_weight(d)
     wsum = w.sum()
     mean = (w[:, None] * uv).sum(axis=0) / wsum
     np.floor(uv + 0.5, out=uv)  # each point binned into the pixel that holds it
@@ -131,6 +141,22 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
         "relative_flux": float(wsum / n),
         "quadrature_points": int(n),
     }
+
+
+def _disk_weight(radiance, axis, s, e1, e2, full_angle_rad: float, n: int) -> np.ndarray:
+    """L(r, cos φ) at the quadrature points of :func:`spot_truth` (sun's frame s, e1, e2)."""
+    p = _disk_pattern_rows(full_angle_rad, n)  # rows: along s, e1, e2
+    sin_rho = np.hypot(p[1], p[2])
+    r = sin_rho / p[0] / math.tan(full_angle_rad / 2.0)
+    if axis is None:
+        cos_az = np.zeros_like(r)
+    else:
+        a = np.asarray(axis, dtype=np.float64).reshape(3)
+        a = a - (a @ s) * s
+        a /= np.linalg.norm(a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos_az = np.where(sin_rho > 0, (p[1] * (a @ e1) + p[2] * (a @ e2)) / sin_rho, 0.0)
+    return radiance(np.minimum(r, 1.0), cos_az)
 
 
 def window_centroid(image: np.ndarray, origin_uv=(0, 0)) -> np.ndarray:

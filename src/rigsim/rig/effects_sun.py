@@ -5,10 +5,62 @@ docs/effects.md gives every default value and its source.
 
 from __future__ import annotations
 
-from rigsim.rig.effects import EffectsTable
+from typing import Literal
 
-__all__ = ["SunSensorEffects"]
+from pydantic import Field
+
+from rigsim.rig.effects import Effect, EffectsTable
+
+__all__ = ["CoverGlassGhost", "LimbDarkening", "SimulatorNonuniformity", "SunSensorEffects", "Vignetting"]
+
+
+class LimbDarkening(Effect):
+    """The sun disk's radiance falls towards the limb: I(μ)/I(1) = 1 − u(1 − μ), μ the cosine of the
+    emission angle on the solar surface; the disk's mean radiance (its flux) is kept."""
+
+    u: float = Field(0.6, ge=0.0, le=1.0, description="linear limb-darkening coefficient")
+
+
+class SimulatorNonuniformity(Effect):
+    """The simulator's non-uniformity as a linear gradient of ±``nonuniformity`` across its beam:
+    ``angular`` (across the 32′ disk: the field stop's non-uniformity, imaged to infinity by the
+    collimator; it moves the spot's centroid) or ``spatial`` (across the exit aperture: it scales
+    the spot's brightness with where the pinhole sits in the beam)."""
+
+    kind: Literal["angular", "spatial"] = "angular"
+    nonuniformity: float = Field(0.02, ge=0.0, le=0.5,
+                                 description="(max − min)/(max + min) of the radiance (angular) or irradiance (spatial)")
+    direction_deg: float = Field(0.0, ge=-360.0, le=360.0,
+                                 description="direction of the gradient across the beam, from the rot frame's "
+                                             "axis nearest to perpendicular to the beam towards beam × that axis")
+    pinhole_in_mount_mm: list[float] = Field([0.0, 0.0, 20.0], min_length=3, max_length=3,
+                                             description="spatial: the pinhole's place in the mount frame")
+
+
+class CoverGlassGhost(Effect):
+    """The detector's cover glass, a plane-parallel window between the pinhole and the detector: the
+    light reflected at its inner then its outer surface makes a fainter second spot, displaced
+    outwards by 2 t tan θ′ (θ′ the angle in the glass)."""
+
+    thickness_mm: float = Field(0.5, gt=0.0, le=5.0, description="window thickness")
+    refractive_index: float = Field(1.458, ge=1.0, le=4.0, description="index of the window (fused silica: 1.458)")
+    coating_reflectance: float | None = Field(None, ge=0.0, le=0.5,
+                                              description="reflectance per surface of an AR coating (angle-independent); "
+                                                          "omit for the bare surface's Fresnel reflectance")
+
+
+class Vignetting(Effect):
+    """The pinhole's mask has a thickness: oblique light passes the overlap of its entrance and exit
+    circles, V(θ) = (2/π)(acos k − k√(1 − k²)), k = t tan θ / D, on top of the thin pinhole's cos⁴."""
+
+    pinhole_diameter_mm: float = Field(0.1, gt=0.0, le=5.0, description="pinhole diameter D")
+    mask_thickness_mm: float = Field(0.025, ge=0.0, le=5.0, description="mask thickness t")
 
 
 class SunSensorEffects(EffectsTable):
     """Effects of the sun sensor (both cube-mirror rigs): the sun and its simulator, the cover glass, the pinhole."""
+
+    limb_darkening: LimbDarkening = Field(default_factory=LimbDarkening)
+    simulator_nonuniformity: SimulatorNonuniformity = Field(default_factory=SimulatorNonuniformity)
+    cover_glass_ghost: CoverGlassGhost = Field(default_factory=CoverGlassGhost)
+    vignetting: Vignetting = Field(default_factory=Vignetting)

@@ -116,7 +116,9 @@ def render_sweep(
     for g, (tile, idx) in enumerate(tile_groups(sizes)):  # a launch per tile size: small spots, small tiles
         batch = SunSpotBatch(renderer, tile, len(idx))
         sel = field_idx[idx]
-        imgs = batch.render(S[sel], np.floor(c[sel] + 0.5).astype(np.int64) - tile // 2, seed=mitsuba_seed(render_seed, g))
+        extra = scene.batch_inputs([{k: float(v[i]) for k, v in poses.items()} for i in sel])  # effects' inputs
+        imgs = batch.render(S[sel], np.floor(c[sel] + 0.5).astype(np.int64) - tile // 2, seed=mitsuba_seed(render_seed, g),
+                            **extra)
         for j, img in zip(idx, imgs):
             tiles[j] = img
     if progress and n > len(field_idx):

@@ -19,6 +19,8 @@ import numpy as np
 
 from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
+from rigsim.optics.cover_glass import CoverGlass
+from rigsim.optics.pinhole import ThickPinhole
 from rigsim.optics.sun_disk import (
     SUN_FULL_ANGLE_RAD,
     _basis,
@@ -28,6 +30,7 @@ from rigsim.optics.sun_disk import (
     sun_window_px,
     window_centroid,
 )
+from rigsim.optics.sun_radiance import DiskRadiance
 from rigsim.render.backend import ensure_variant
 from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
@@ -89,7 +92,9 @@ class SunSpotRenderer:
 
     def __init__(self, camera: PinholeBrown, *, full_angle_rad: float = SUN_FULL_ANGLE_RAD,
                  window_px: int = 32, spp: int = 1024, spot_photons: float = 1.0e6,
-                 sampler: str = "ldsampler", response: str = "flux", distance_mm: float = 1000.0):
+                 sampler: str = "ldsampler", response: str = "flux", distance_mm: float = 1000.0,
+                 radiance: DiskRadiance | None = None, ghost: CoverGlass | None = None,
+                 pinhole: ThickPinhole | None = None):
         if not (0.0 < full_angle_rad < math.radians(20.0)):
             raise ValueError(f"full_angle_rad = {full_angle_rad!r}: must be in (0, 0.349) rad")
         if int(window_px) != window_px or not (4 <= window_px <= 4096):
@@ -107,6 +112,11 @@ class SunSpotRenderer:
         self.sampler = sampler
         self.response = response
         self.distance_mm = float(distance_mm)
+        # effects (docs/effects-sun.md): a non-uniform disk (texture on the emitter), the cover glass's ghost
+        self.radiance = radiance if radiance is not None and not radiance.uniform else None
+        self.ghost = ghost
+        self.pinhole = pinhole  # a thick pinhole's vignetting
+        self._ghost_batch = None
         self.variant = ensure_variant()
         register_sensors()
         on_axis = 2.0 * math.tan(full_angle_rad / 2.0) * max(camera.fx, camera.fy)
@@ -122,24 +132,54 @@ class SunSpotRenderer:
         omega = 2.0 * math.pi * (1.0 - math.cos(self.full_angle_rad / 2.0))
         return self.spot_photons / (self.camera.fx * self.camera.fy * omega)
 
+    @property
+    def tiled_only(self) -> bool:
+        """Whether only the tiled sensor draws this renderer's effects (the cover glass's ghost, the
+        thick pinhole's vignetting): the per-frame windows are then drawn by a one-tile batch."""
+        return self.ghost is not None or self.pinhole is not None
+
+    @property
+    def needs_axis(self) -> bool:
+        """Whether a frame needs the direction of the disk's gradient (``axis``)."""
+        return self.radiance is not None and self.radiance.g != 0.0
+
+    def emitter(self) -> dict:
+        """The disk's area emitter: uniform, or a nearest-filtered (r, φ) texture of the exact cell
+        means of :class:`~rigsim.optics.sun_radiance.DiskRadiance` (Mitsuba's disk: uv = (r, φ/2π))."""
+        if self.radiance is None:
+            return {"type": "area", "radiance": {"type": "uniform", "value": self._radiance()}}
+        import mitsuba as mi
+
+        tex = self.radiance.texture() * self._radiance()
+        return {"type": "area", "radiance": {
+            "type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(tex[:, :, None], dtype=np.float32)),
+            "raw": True, "filter_type": "nearest", "wrap_mode": "clamp"}}
+
     def _build(self, w: int, h: int, spp: int) -> Scene:
         """Elements: the camera's window (moved by ``window_origin``) and the sun disk (placed by
         ``sun_dir``, the unit vector to the sun in the camera frame)."""
         import mitsuba as mi
 
         def place_disk(state) -> dict:
-            return {"sun.to_world": mi.Transform4f(self._disk_matrix(state["sun_dir"]))} if "sun_dir" in state else {}
+            if "sun_dir" not in state:
+                return {}
+            return {"sun.to_world": mi.Transform4f(self._disk_matrix(state["sun_dir"], state.get("axis")))}
 
         sun = Element("sun", {"type": "disk",
                               "to_world": mi.ScalarTransform4f(self._disk_matrix(np.array([0.0, 0.0, 1.0]))),
-                              "emitter": {"type": "area", "radiance": {"type": "uniform", "value": self._radiance()}}},
+                              "emitter": self.emitter()},
                       place_disk)
         sensor = PinholeSensor(self.camera, width=w, height=h, spp=spp, sampler=self.sampler, response=self.response)
         return Scene({"type": "path", "max_depth": 1}, [sensor, sun])
 
-    def _disk_matrix(self, s: np.ndarray) -> np.ndarray:
-        """Disk (local z-normal, unit radius) -> world: centred at D s, facing the pinhole."""
-        e1, e2 = _basis(s)
+    def _disk_matrix(self, s: np.ndarray, axis=None) -> np.ndarray:
+        """Disk (local z-normal, unit radius) -> world: centred at D s, facing the pinhole; ``axis``
+        (a non-uniform disk's gradient direction) becomes the disk's local x (φ = 0 of its texture)."""
+        if axis is None:
+            e1, e2 = _basis(s)
+        else:
+            e2 = _across(s, axis)
+            e1 = np.cross(s, e2)  # local y = e2 × s: right-handed with the normal -s
         rho = self.distance_mm * math.tan(self.full_angle_rad / 2.0)
         M = np.eye(4)
         # columns: local x, y, z (normal); z must point back to the camera (-s), right-handed
@@ -155,15 +195,21 @@ class SunSpotRenderer:
                 int(math.floor(center_uv[1] + 0.5)) - half)
 
     # -- rendering ----------------------------------------------------------------------------
-    def render(self, sun_dir_cam, seed: int = 0, *, tight: bool = False) -> SpotWindow:
+    def render(self, sun_dir_cam, seed: int = 0, *, tight: bool = False, axis=None) -> SpotWindow:
         """Render the crop window around the predicted spot. Geometry problems become flags
         (and a :class:`GeometryWarning`); a spot outside the model/detector is not rendered.
 
         ``tight``: Mitsuba renders only the smallest even tile holding the spot
         (:func:`~rigsim.render.cube_mirror.sun_batch.spot_tile_px`, centred as the window), at the
         same spp per pixel; the window's other pixels are 0, as they are in expectation (nothing
-        but the disk emits). Same expectation, fewer light paths; only the random numbers differ."""
+        but the disk emits). Same expectation, fewer light paths; only the random numbers differ.
+        ``axis``: the camera-frame direction of a non-uniform disk's gradient (:attr:`needs_axis`).
+        With the cover glass's ghost or the pinhole's vignetting (:attr:`tiled_only`) the window is
+        rendered by the tiled sensor (one tile), the only sensor that draws them; ``tight`` is then
+        ignored."""
         s = _unit(sun_dir_cam)
+        if self.needs_axis and axis is None:
+            raise ValueError("the sun disk has a gradient (simulator_nonuniformity, angular): render needs its axis")
         t0 = time.perf_counter()
         c_uv, c_ok = self.camera.project_valid(s[None, :])
         center = c_uv[0] if c_ok[0] else None
@@ -184,14 +230,23 @@ class SunSpotRenderer:
         if flags["spot_exceeds_window"]:
             warnings.warn(f"the spot ({flags['spot_extent_px']} px) does not fit the "
                           f"{W} px window; flux is lost", GeometryWarning, stacklevel=2)
-        t = self._tile_px(s) if tight else W
-        if not 4 <= t < W:  # the whole window (a spot overflowing it is flagged above)
-            arr = self._scene.render({"sun_dir": s, "window_origin": origin}, seed=int(seed), spp=self.spp)
+        t = self._tile_px(s) if tight and not self.tiled_only else W
+        state = {"sun_dir": s, "window_origin": origin} if axis is None else {
+            "sun_dir": s, "window_origin": origin, "axis": np.asarray(axis, dtype=np.float64)}
+        if self.tiled_only:
+            if self._ghost_batch is None:
+                from rigsim.render.cube_mirror.sun_batch import SunSpotBatch
+
+                self._ghost_batch = SunSpotBatch(self, W, 1)
+            arr = self._ghost_batch.render(s[None, :], np.array([origin]), seed=int(seed),
+                                           axes=None if axis is None else np.asarray(axis)[None, :])[0]
+        elif not 4 <= t < W:  # the whole window (a spot overflowing it is flagged above)
+            arr = self._scene.render(state, seed=int(seed), spp=self.spp)
         else:
             a = W // 2 - t // 2
             arr = np.zeros((W, W))
             arr[a:a + t, a:a + t] = self._tile_scene(t).render(
-                {"sun_dir": s, "window_origin": (origin[0] + a, origin[1] + a)}, seed=int(seed), spp=self.spp)
+                {**state, "window_origin": (origin[0] + a, origin[1] + a)}, seed=int(seed), spp=self.spp)
             settings["tile_px"] = t  # what Mitsuba rendered, centred in the window
         return SpotWindow(arr, origin, s, center, flags, self.spp, int(seed), self.variant,
                           time.perf_counter() - t0, settings)
@@ -234,16 +289,51 @@ class SunSpotRenderer:
         frame = np.zeros((self.camera.height, self.camera.width))
         return win.paste_into(frame), win
 
-    def render_full(self, sun_dir_cam, seed: int = 0, spp: int = 16) -> np.ndarray:
-        """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks."""
+    def render_full(self, sun_dir_cam, seed: int = 0, spp: int = 16, axis=None) -> np.ndarray:
+        """Render the whole detector with Mitsuba (no crop window): for comparison/benchmarks. The
+        disk's radiance is drawn (``axis`` as in :meth:`render`); the ghost and the vignetting,
+        drawn by the tiled sensor only, are refused."""
         _check_spp(spp, self.sampler)
+        if self.tiled_only:
+            raise ValueError("render_full draws neither the cover glass's ghost nor the pinhole's vignetting")
+        if self.needs_axis and axis is None:
+            raise ValueError("the sun disk has a gradient (simulator_nonuniformity, angular): render needs its axis")
         if self._full is None or self._full[1] != spp:
             self._full = (self._build(self.camera.width, self.camera.height, spp), spp)
-        return self._full[0].render({"sun_dir": _unit(sun_dir_cam), "window_origin": (0, 0)}, seed=int(seed), spp=spp)
+        state = {"sun_dir": _unit(sun_dir_cam), "window_origin": (0, 0)}
+        if axis is not None:
+            state["axis"] = np.asarray(axis, dtype=np.float64)
+        return self._full[0].render(state, seed=int(seed), spp=spp)
 
     def truth(self, sun_dir_cam, n: int = 2_000_000) -> dict:
+        """The uniform disk's spot (the geometric truth the pipelines are compared with)."""
         return spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n,
                           response=self.response)
+
+    def effects_truth(self, sun_dir_cam, n: int = 2_000_000, axis=None) -> dict:
+        """What the effects change in the spot, by quadrature: the non-uniform disk's centroid and its
+        shift from the uniform disk's; the vignetted spot's throughput, centroid and shift."""
+        out = {}
+        if self.pinhole is not None:
+            base = self.truth(sun_dir_cam, n)
+            t = spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n, response=self.response,
+                           direction_weight=self.pinhole.direction_weight)
+            if base.get("valid") and t.get("valid"):
+                out["vignetting"] = {
+                    "throughput": t["relative_flux"] / base["relative_flux"], "mean_uv": t["mean_uv"],
+                    "pixel_centroid_uv": t["pixel_centroid_uv"],
+                    "shift_px": np.subtract(t["mean_uv"], base["mean_uv"]).tolist()}
+        if self.radiance is None:
+            return out
+        base = self.truth(sun_dir_cam, n)
+        t = spot_truth(self.camera, sun_dir_cam, self.full_angle_rad, n=n, response=self.response,
+                       radiance=self.radiance, radiance_axis=axis)
+        if not (base.get("valid") and t.get("valid")):
+            return out
+        return {**out, "disk_radiance": {
+            "u": self.radiance.u, "g": self.radiance.g, "axis_cam": None if axis is None else list(map(float, axis)),
+            "mean_uv": t["mean_uv"], "pixel_centroid_uv": t["pixel_centroid_uv"],
+            "shift_px": (np.subtract(t["mean_uv"], base["mean_uv"])).tolist()}}
 
     def settings(self) -> dict:
         """Every render setting, for frame sidecars."""
@@ -259,7 +349,20 @@ class SunSpotRenderer:
             "source_distance_mm": self.distance_mm,
             "spot_photons": self.spot_photons,
             "camera": self.camera.as_dict(),
+            **({} if self.radiance is None else {"disk_radiance": {"u": self.radiance.u, "g": self.radiance.g}}),
+            **({} if self.ghost is None else {"cover_glass": self.ghost.as_dict()}),
+            **({} if self.pinhole is None else {"thick_pinhole": self.pinhole.as_dict()}),
         }
+
+
+def _across(s: np.ndarray, axis) -> np.ndarray:
+    """``axis`` made perpendicular to the unit vector ``s``, unit."""
+    a = np.asarray(axis, dtype=np.float64).reshape(3)
+    a = a - (a @ s) * s
+    n = np.linalg.norm(a)
+    if not (np.isfinite(n) and n > 1e-9):
+        raise ValueError(f"axis {a!r} must be a finite direction across the sun direction")
+    return a / n
 
 # ------------------------------------------------------------------------------------------ (from sun_sensor.py)
 def default_spot_photons(rig: CubeMirrorRig) -> float:
@@ -289,13 +392,63 @@ class SunSensorScene:
         self.spot_photons = float(spot_photons) if spot_photons is not None else default_spot_photons(rig)
         if window_px is None:  # from the geometry: the largest spot on this detector plus a margin
             window_px = sun_window_px(self.camera, self.full_angle_rad)
+        eff = rig.effects
+        radiance = DiskRadiance(
+            u=eff.limb_darkening.u if eff.limb_darkening.enabled else 0.0,
+            g=eff.simulator_nonuniformity.nonuniformity
+            if eff.simulator_nonuniformity.enabled and eff.simulator_nonuniformity.kind == "angular" else 0.0)
+        ghost = eff.cover_glass_ghost
+        ghost = CoverGlass(ghost.thickness_mm, ghost.refractive_index, rig.sun_sensor.focal_length_mm,
+                           ghost.coating_reflectance) if ghost.enabled else None
+        vig = eff.vignetting
+        pinhole = ThickPinhole(vig.pinhole_diameter_mm, vig.mask_thickness_mm) if vig.enabled else None
         self.renderer = SunSpotRenderer(self.camera, full_angle_rad=self.full_angle_rad, window_px=window_px,
-                                        spp=spp, spot_photons=self.spot_photons)
+                                        spp=spp, spot_photons=self.spot_photons, radiance=radiance, ghost=ghost,
+                                        pinhole=pinhole)
 
     def sun_dir_cam(self, pose_rad: dict) -> np.ndarray:
         R = self.real.turntable.R_rot_from_mount(pose_rad)
         s = self.real.R_sun_from_mount @ (R.T @ self.real.d_sun_rot)
         return s / np.linalg.norm(s)
+
+    # -- the simulator's non-uniformity: fixed in the simulator's beam, seen from the turning sensor
+    def _gradient_rot(self) -> np.ndarray:
+        """The gradient's direction across the beam, in the rot frame (``direction_deg`` from the
+        rot axis most nearly across the beam, towards beam × that axis)."""
+        d = self.real.d_sun_rot / np.linalg.norm(self.real.d_sun_rot)
+        a = np.eye(3)[int(np.argmin(np.abs(d)))]
+        a = a - (a @ d) * d
+        a /= np.linalg.norm(a)
+        t = math.radians(self.rig.effects.simulator_nonuniformity.direction_deg)
+        return math.cos(t) * a + math.sin(t) * np.cross(d, a)
+
+    def gradient_axis_cam(self, pose_rad: dict) -> np.ndarray | None:
+        """The angular gradient's direction in the camera frame at a pose (None without it)."""
+        if not self.renderer.needs_axis:
+            return None
+        R = self.real.turntable.R_rot_from_mount(pose_rad)
+        return self.real.R_sun_from_mount @ (R.T @ self._gradient_rot())
+
+    def irradiance_scale(self, pose_rad: dict) -> float:
+        """The simulator's irradiance at the pinhole relative to the beam's mean (spatial
+        non-uniformity: 1 + g (p·ĝ)/(aperture/2), p the pinhole across the beam, turntable centre at
+        the mount's origin); 1 without it."""
+        nu = self.rig.effects.simulator_nonuniformity
+        if not (nu.enabled and nu.kind == "spatial"):
+            return 1.0
+        p = self.real.turntable.R_rot_from_mount(pose_rad) @ np.asarray(nu.pinhole_in_mount_mm, dtype=np.float64)
+        return 1.0 + nu.nonuniformity * float(p @ self._gradient_rot()) / (self.rig.sun_simulator.aperture_mm / 2.0)
+
+    def batch_inputs(self, poses_rad: list[dict]) -> dict:
+        """What :meth:`SunSpotBatch.render` needs besides the sun directions for these poses:
+        ``axes`` and ``scales`` when an effect needs them, else nothing."""
+        out = {}
+        if self.renderer.needs_axis:
+            out["axes"] = np.array([self.gradient_axis_cam(p) for p in poses_rad]).reshape(-1, 3)
+        nu = self.rig.effects.simulator_nonuniformity
+        if nu.enabled and nu.kind == "spatial":
+            out["scales"] = np.array([self.irradiance_scale(p) for p in poses_rad])
+        return out
 
     def render(self, pose_rad: dict, seed: int = 0, *, noiseless: bool = False, truth_points: int = 400_000,
                full_frame: bool = True, tight: bool = False) -> Frame:
@@ -305,7 +458,11 @@ class SunSensorScene:
         frame's ``extra["window"]`` is the rendered :class:`SpotWindow`."""
         t0 = time.perf_counter()
         s = self.sun_dir_cam(pose_rad)
-        win = self.renderer.render(s, seed=seed, tight=tight)
+        win = self.renderer.render(s, seed=seed, tight=tight, axis=self.gradient_axis_cam(pose_rad))
+        scale = self.irradiance_scale(pose_rad)
+        if scale != 1.0:
+            win.image *= scale
+            win.settings["irradiance_scale"] = scale
         return self.frame(pose_rad, win, seed=seed, noiseless=noiseless, truth_points=truth_points,
                           full_frame=full_frame, t0=t0)
 
@@ -324,6 +481,7 @@ class SunSensorScene:
             shape = (ss.resolution_px[1], ss.resolution_px[0])
             photons, origin = detector_part(win.image, win.origin_uv, shape)
         truth = self.renderer.truth(s, n=truth_points) if not (win.flags.get("spot_off_detector") or win.flags.get("spot_outside_model")) else {"valid": False}
+        effects = self._effects_truth(pose_rad, s, truth_points) if truth.get("valid") else {}
         return digitise(
             photons, ss.detector, seed=seed, noiseless=noiseless, origin_uv=origin, detector_shape=shape,
             truth={
@@ -332,11 +490,27 @@ class SunSensorScene:
                 "spot": truth,
                 "camera_true": self.camera.as_dict(),
                 "R_sun_from_mount": self.real.R_sun_from_mount.tolist(),
+                **({"effects": effects} if effects else {}),
             },
             render={**win.settings, "noiseless": noiseless, "window_origin_uv": list(win.origin_uv)},
             geometry_flags=dict(win.flags),
             pose={k: math.degrees(v) for k, v in pose_rad.items()},
             extra={"window": win}, seconds=time.perf_counter() - t0)
+
+
+    def _effects_truth(self, pose_rad: dict, s: np.ndarray, n: int) -> dict:
+        """The sidecar's truth of the enabled sun-sensor effects (the geometric spot stays the truth)."""
+        out = dict(self.renderer.effects_truth(s, n, axis=self.gradient_axis_cam(pose_rad)))
+        g = self.renderer.ghost
+        if g is not None:
+            th = float(CoverGlass.theta(s))
+            out["cover_glass_ghost"] = {
+                "theta_deg": math.degrees(th), "direct_transmittance": float(g.direct(th)),
+                "ghost_ratio": float(g.ghost_ratio(th)),
+                "offset_px": g.offset_px(s, self.camera.fx, self.camera.fy).tolist()}
+        if self.irradiance_scale(pose_rad) != 1.0:
+            out["irradiance_scale"] = self.irradiance_scale(pose_rad)
+        return out
 
 
 def detector_part(image: np.ndarray, origin_uv, shape: tuple[int, int]) -> tuple[np.ndarray, tuple[int, int]]:
