@@ -54,15 +54,26 @@ class ReticleDrawing:
     def image_fraction(self, centre_uv, pitch_mm: float, window: tuple[int, int, int, int], oversample: int = 8) -> np.ndarray:
         """The nominal drawing imaged on the detector (point-inverted about ``centre_uv``, the
         image of the reticle centre), as the fraction of each pixel of ``window`` (u0, v0, w, h)
-        covered by the lines (no blur)."""
+        covered by the lines (no blur). The bars' coverage is exact; the ring's is sampled
+        ``oversample``² times per pixel."""
         u0, v0, w, h = window
-        s = (np.arange(oversample) + 0.5) / oversample - 0.5
-        u = u0 + np.arange(w)[:, None] + s[None, :]
-        v = v0 + np.arange(h)[:, None] + s[None, :]
-        x = -(u.ravel() - centre_uv[0]) * pitch_mm
-        y = -(v.ravel() - centre_uv[1]) * pitch_mm
-        m = self.inside(x[None, :], y[:, None])
-        return m.reshape(h, oversample, w, oversample).mean(axis=(1, 3))
+        u = u0 + np.arange(w, dtype=float)
+        v = v0 + np.arange(h, dtype=float)
+        out = np.zeros((h, w))
+        for cx, cy, hw, hh in self.rects:  # image of x ∈ [cx − hw, cx + hw] is u ∈ centre − (x/pitch)
+            a, b = centre_uv[0] - (cx + hw) / pitch_mm, centre_uv[0] - (cx - hw) / pitch_mm
+            c, d = centre_uv[1] - (cy + hh) / pitch_mm, centre_uv[1] - (cy - hh) / pitch_mm
+            fu = np.clip(np.minimum(u + 0.5, b) - np.maximum(u - 0.5, a), 0.0, 1.0)
+            fv = np.clip(np.minimum(v + 0.5, d) - np.maximum(v - 0.5, c), 0.0, 1.0)
+            out += fv[:, None] * fu[None, :]
+        if self.ring is not None:
+            s = (np.arange(oversample) + 0.5) / oversample - 0.5
+            x = -((u[:, None] + s[None, :]).ravel() - centre_uv[0]) * pitch_mm
+            y = -((v[:, None] + s[None, :]).ravel() - centre_uv[1]) * pitch_mm
+            r = np.hypot(x[None, :], y[:, None])
+            m = (r >= self.ring[0]) & (r <= self.ring[1])
+            out += m.reshape(h, oversample, w, oversample).mean(axis=(1, 3))
+        return out
 
     def as_props(self) -> str:
         """The drawing as one string property of the Mitsuba emitter."""
