@@ -21,7 +21,8 @@ Model choices (docs/autocollimation.md):
   reading = true + bias + error); the axes that are not adjusted are set and read exactly;
 * the reading error is what the instrument makes of the rendered frame: Mitsuba's Monte-Carlo
   noise, the detector (shot, read, fixed-pattern noise, quantisation), the centroid (thresholded
-  centre of mass on a DN frame, no truth) and the instrument's calibration (exact for a large
+  centre of mass on a DN frame, no truth; a projected cross-hair, recognised on the frame by its
+  size, by two line fits: :func:`rigsim.imaging.reticle.measure_reticle`) and the instrument's calibration (exact for a large
   flat mirror, 0.09 % high on a 25 mm cube face away from null);
 * ``rendered=False`` is the surrogate for Monte-Carlo budgets: reading = the exact reading
   (closed form from the true normal and the true axis, the instrument's convention)
@@ -45,6 +46,7 @@ import numpy as np
 from rigsim.errors import SearchError
 from rigsim.estimation.null_search import reading_model
 from rigsim.frames import ARCSEC_PER_RAD, RAD_PER_ARCSEC
+from rigsim.imaging.reticle import measure_reticle
 from rigsim.imaging.spot import SpotMeasurement, measure_spot
 from rigsim.optics.autocollimator import a_frame_basis, exact_reading_rad, normal_from_reading
 from rigsim.procedures.cube_mirror.null_files import autocollimator_roi_px, read_autocollimator
@@ -197,6 +199,7 @@ def step_a_align(rig: CubeMirrorRig, real: Realization, rng: np.random.Generator
                     warnings.simplefilter("always")
                     frame = r.render_frame(pose, seed=fi["seed"], noiseless=noiseless)
                 sm = measure_spot(frame.dn, ac.detector, roi_px=roi_px)
+                sm = measure_reticle(frame.dn, sm, roi_px) or sm  # a cross-hair: its centre, not its centroid
                 fi.update(_frame_info(frame, sm, wl))
                 if not sm.ok:
                     raise SearchError(
@@ -323,6 +326,10 @@ class FaceReadingMeasurer:
             warnings.simplefilter("always")
             frame = self.renderer.render_frame(pose, seed=seed, noiseless=self.noiseless)
         m, _sig, sm = read_autocollimator(self.rig, frame.dn, self.optics, "face")  # the `rigsim autocollimator read` stage
+        rm = measure_reticle(frame.dn, sm, self.roi_px)
+        if rm is not None:  # the instrument projects a cross-hair: its centre from two line fits
+            sm = rm
+            m = self.optics.reading(rm.uv) * ARCSEC_PER_RAD if rm.ok else np.full(2, np.nan)
         info.update(_frame_info(frame, sm, wl))
         if self.on_frame is not None:
             self.on_frame("autocollimator", frame.dn, {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},

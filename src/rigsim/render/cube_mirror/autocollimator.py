@@ -58,6 +58,7 @@ from rigsim.optics.autocollimator import (
 )
 from rigsim.optics.autocollimator import diffraction_half_px as _kernel_half_px
 from rigsim.optics.meshes import lens_mesh, stop_mesh
+from rigsim.optics.reticle import ReticleDrawing, reticle_drawing
 from rigsim.render.backend import ensure_variant
 from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise, write_frame
@@ -94,6 +95,66 @@ gets about half the full well (the diffraction blur lowers the peak ~2.5×); the
 own from ``peak_fraction`` (diffraction included) unless told."""
 
 MAIN_PATH_DEPTH = 7  # Mitsuba counts the emitter vertex: reticle, flat, convex, mirror, convex, flat, detector
+
+
+# ------------------------------------------------------------------------------ effects
+def fresnel_normal(n: float) -> float:
+    """Reflectance of a bare dielectric surface of index ``n`` (in air) at normal incidence."""
+    return ((n - 1.0) / (n + 1.0)) ** 2
+
+
+@dataclass(frozen=True)
+class AutocollimatorEffectSettings:
+    """What the rig's enabled ``[effects]`` change in the autocollimator's scene (all None/off:
+    the ideal scene, built exactly as without effects)."""
+
+    reticle: ReticleDrawing | None = None
+    face_bsdf: str | None = None          # None: perfect conductor; "dielectric"; "conductor"
+    face_index: float = 1.5168
+    face_reflectance: float = 1.0         # the coated face's (conductor)
+    lens_ghost_scale: float | None = None  # None: no lens ghosts from the effects; else specular_reflectance
+
+    @property
+    def extra_depth(self) -> int:
+        # the uncoated cube's opposite face (in, reflect, out) and the double-pass lens ghosts
+        # (mirror, lens surface, mirror) each add two vertices to the longest path kept
+        return 2 * (self.face_bsdf == "dielectric") + 2 * (self.lens_ghost_scale is not None)
+
+    def as_dict(self) -> dict:
+        d = {}
+        if self.reticle is not None:
+            d["reticle"] = self.reticle.as_dict()
+        if self.face_bsdf is not None:
+            d["face_reflectance"] = ({"bsdf": "dielectric", "glass_index": self.face_index,
+                                      "front_reflectance_normal": fresnel_normal(self.face_index)}
+                                     if self.face_bsdf == "dielectric"
+                                     else {"bsdf": "conductor", "reflectance": self.face_reflectance})
+        if self.lens_ghost_scale is not None:
+            d["ghosts"] = {"specular_reflectance_scale": self.lens_ghost_scale}
+        return d
+
+
+def effect_settings(rig: CubeMirrorRig, target: str, lens_n: float) -> AutocollimatorEffectSettings:
+    """The scene changes of ``rig.effects`` (the TRUE rig's) for ``target`` (the face reflectance
+    applies to the cube's faces only, not to the plane mirror of step A)."""
+    eff = getattr(rig, "effects", None)
+    if eff is None or not hasattr(eff, "reticle"):
+        return AutocollimatorEffectSettings()
+    kw: dict = {}
+    if eff.reticle.enabled:
+        r = eff.reticle
+        kw["reticle"] = reticle_drawing(r.pattern, r.line_width_um * 1e-3, r.arm_length_mm, r.ring_radius_mm)
+    if eff.face_reflectance.enabled and target == "face":
+        f = eff.face_reflectance
+        if f.coating == "uncoated":
+            kw.update(face_bsdf="dielectric", face_index=float(f.glass_index))
+        else:
+            kw.update(face_bsdf="conductor", face_reflectance=float(
+                f.protected_al_reflectance if f.coating == "protected_al" else f.enhanced_al_reflectance))
+    if eff.ghosts.enabled:
+        g = eff.ghosts.surface_reflectance
+        kw["lens_ghost_scale"] = 1.0 if g is None else float(g) / fresnel_normal(lens_n)
+    return AutocollimatorEffectSettings(**kw)
 
 
 # ------------------------------------------------------------------------------ scene
@@ -139,8 +200,12 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
                          lens_ghosts: bool = False, max_depth: int | None = None,
                          mirror_reflectance: float = 1.0,
                          plane_mirror_centre_mount_mm=(0.0, 0.0, 0.0),
-                         world_origin: str = "objective") -> AutocollimatorScene:
+                         world_origin: str = "objective",
+                         effects: AutocollimatorEffectSettings | None = None) -> AutocollimatorScene:
     """Build the scene (see the module docstring) and return it with its interpretation.
+
+    ``effects`` (default: from ``rig.effects``, :func:`effect_settings`) switches the reticle
+    emitter, the face's BSDF and the lens ghosts (docs/effects-autocollimator.md).
 
     ``window_px`` defaults to :func:`~rigsim.optics.autocollimator.render_window_px` of the
     target's geometric spot at ``pose_rad`` (32 px for the default rig).
@@ -165,6 +230,9 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     layout = layout or autocollimator_layout(rig, real, target, face, objective_vertex_z_mm=optics.objective.z_vertex,
                                              plane_mirror_centre_mount_mm=plane_mirror_centre_mount_mm)
     obj = optics.objective
+    fx = effects if effects is not None else effect_settings(rig, layout.target, obj.n)
+    if fx.reticle is not None and world_origin != "objective":
+        raise ValueError("the reticle effect needs world_origin = 'objective'")
     T = mi.ScalarTransform4f
     mirror = mirror_target(rig, real, layout, pose_rad, mirror_reflectance)
     if window_px is None:
@@ -193,11 +261,18 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     omega = 2.0 * math.pi * (1.0 - math.cos(optics.cone_half_angle_rad))
     intensity = source_photons / omega
     lens_bsdf = {"type": "dielectric", "int_ior": float(obj.n), "ext_ior": 1.0}
-    if not lens_ghosts:
+    if fx.lens_ghost_scale is not None:
+        if fx.lens_ghost_scale != 1.0:
+            lens_bsdf["specular_reflectance"] = fx.lens_ghost_scale
+    elif not lens_ghosts:
         lens_bsdf["specular_reflectance"] = 0.0
     mirror_bsdf = {"type": "conductor", "material": "none"}
     if mirror_reflectance != 1.0:
         mirror_bsdf["specular_reflectance"] = float(mirror_reflectance)
+    if fx.face_bsdf == "dielectric":
+        mirror_bsdf = {"type": "dielectric", "int_ior": fx.face_index, "ext_ior": 1.0}
+    elif fx.face_bsdf == "conductor":
+        mirror_bsdf["specular_reflectance"] = float(mirror_reflectance) * fx.face_reflectance
     W, H = optics.width, optics.height
     det = np.eye(4)
     det[0, 0] = 0.5 * W * optics.pitch_mm
@@ -208,7 +283,7 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     reticle = np.eye(4)
     reticle[2, 3] = optics.z_source
     cone_deg = math.degrees(optics.cone_half_angle_rad)
-    depth = MAIN_PATH_DEPTH if max_depth is None else int(max_depth)
+    depth = MAIN_PATH_DEPTH + fx.extra_depth if max_depth is None else int(max_depth)
     d = {
         "type": "scene",
         "integrator": {"type": "ptracer", "max_depth": depth, "rr_depth": depth + 100, "hide_emitters": True},
@@ -242,6 +317,13 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     }
     if world_origin == "mirror":
         d["stop"]["to_world"] = placed(np.eye(4))
+    if fx.reticle is not None:
+        from rigsim.render.cube_mirror.reticle_emitter import RETICLE_PLUGIN, register_reticle_emitter
+
+        register_reticle_emitter()
+        d["reticle"] = {"type": RETICLE_PLUGIN, "flux": float(source_photons), "z_mm": float(optics.z_source),
+                        "z_stop_mm": float(obj.z_stop), "cutoff_rad": float(optics.cone_half_angle_rad),
+                        "drawing": fx.reticle.as_props()}
     # a Lambertian detector of reflectance 1 shows radiance E/π: photons per pixel = π·L·pitch²
     return AutocollimatorScene(d, optics, layout, mirror, window, math.pi * optics.pitch_mm ** 2,
                                float(source_photons), anchor, files, shift)
@@ -349,7 +431,11 @@ class AutocollimatorRenderer:
         m_ref = mirror_target(rig, self.real, self.layout, self.layout.reference_pose_rad, self.mirror_reflectance)
         self.kernel_extent = self.optics.spot_extent(m_ref, k_sigma=1.0, peak_over_noise=peak_over_noise(
             rig.autocollimator.detector, peak_fraction))
-        self.window_px = int(render_window_px(self.kernel_extent.geometric_px) if window_px is None else window_px)
+        self.effects = effect_settings(rig, self.layout.target, self.optics.objective.n)
+        image_px = self.kernel_extent.geometric_px
+        if self.effects.reticle is not None:  # the window holds the reticle's whole image
+            image_px += 2.0 * self.effects.reticle.half_extent_mm / self.optics.pitch_mm
+        self.window_px = int(render_window_px(image_px) if window_px is None else window_px)
         self.lens_ghosts = bool(lens_ghosts)
         self.world_origin = world_origin
         self.diffraction = bool(diffraction)
@@ -365,7 +451,7 @@ class AutocollimatorRenderer:
                                   spp=spp, mesh_dir=mesh_dir, window_px=self.window_px, optics=self.optics,
                                   layout=self.layout, source_photons=self.source_photons, sampler=sampler,
                                   lens_ghosts=lens_ghosts, max_depth=max_depth, mirror_reflectance=mirror_reflectance,
-                                  world_origin=world_origin)
+                                  world_origin=world_origin, effects=self.effects)
         self.scene_info = sc
         # the render loop's elements: per frame the mirror's vertices follow the turntable pose and
         # the camera moves to the window (rigsim.render.scene)
@@ -415,6 +501,9 @@ class AutocollimatorRenderer:
 
             img = fftconvolve(img, self.optics.diffraction_kernel(m, half_px=self.diffraction_half_px))
         peak = img.max()
+        if self.effects.reticle is not None:
+            # the reticle's lines: the returned flux spread uniformly over their image (magnification 1)
+            peak = sp.flux_photons * self.optics.pitch_mm ** 2 / float(self.effects.reticle.areas.sum())
         cfg = self.rig.autocollimator.detector
         return float(peak_fraction * cfg.full_well_e / cfg.quantum_efficiency / peak)
 
@@ -519,6 +608,9 @@ class AutocollimatorRenderer:
             "convention": "A frame: +z_A optical axis towards the mirror, u along +x_A, v along +y_A; "
                           "reading (θx, θy) = (atan2(n_x, -n_z), atan2(n_y, -n_z)) of the mirror normal n",
         })
+        fx = self.effects.as_dict()
+        if fx:  # the truth of the enabled effects (absent when none is on: ideal sidecars unchanged)
+            d["effects"] = fx
         return d
 
     def settings(self, spp: int | None = None, source_photons: float | None = None) -> dict:
