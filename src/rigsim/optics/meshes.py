@@ -157,3 +157,23 @@ def stop_mesh(obj: PlanoConvexObjective, outer_radius_mm: float | None = None, n
         tri.append((j, n_seg + j, n_seg + j1))
         tri.append((j, n_seg + j1, j1))
     return trimesh.Trimesh(np.vstack([inner, outer]), np.array(tri), process=False)
+
+
+def tilt_cube_faces(mesh: trimesh.Trimesh, edge_mm: float, tilts_arcsec: dict) -> trimesh.Trimesh:
+    """A copy of the cube ``mesh`` (:func:`cube_mesh`, unmerged vertices) with each face named in
+    ``tilts_arcsec`` (``{"-Z": [rx, ry, rz]}``, a rotation vector in the cube frame, arcsec) turned
+    about its ideal centre: its outward normal becomes Rot(tilt)·n0. Same vertices and faces order."""
+    from scipy.spatial.transform import Rotation
+
+    from rigsim.optics.cube import FACE_NORMALS
+
+    v = np.array(mesh.vertices, float)
+    fn = np.array(trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False).face_normals, float)
+    for face, rv in tilts_arcsec.items():
+        n0 = np.asarray(FACE_NORMALS[face], float)
+        rot = Rotation.from_rotvec(np.radians(np.asarray(rv, float) / 3600.0)).as_matrix()
+        tri = np.where(fn @ n0 > 0.999)[0]
+        idx = np.unique(np.asarray(mesh.faces)[tri].ravel())
+        c = 0.5 * edge_mm * n0
+        v[idx] = (v[idx] - c) @ rot.T + c
+    return trimesh.Trimesh(vertices=v, faces=np.array(mesh.faces), process=False)
