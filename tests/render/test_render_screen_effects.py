@@ -86,3 +86,81 @@ def test_cube_ghost_pulls_the_spot_by_its_power_weighted_share():
     assert r.photons_per_radiance == pytest.approx(
         r.spot_photons_per_px / D.spot_radiance(r.screen_reflectance, 1.0)
         / slab_reflectance(normal_reflectance(1.5168), 1), rel=1e-12)
+
+
+# -- the screen's grain and the room light (aiming camera, divergent beam) ---------------------------
+FULL = load_rig("sun_sensor_2axis_diaphragm")
+
+
+@pytest.fixture(scope="module")
+def aiming_pair():
+    """The campaign's aiming-camera renderer, ideal and with the grain and the room light on."""
+    from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
+
+    rig = FULL.model_copy(update={"effects": FULL.effects.only(["screen_material", "ambient_light"])})
+    real = realization_from_rig(FULL)
+    return ConcentricityRenderer(FULL, real, 0, spp=2), ConcentricityRenderer(rig, real, 0, spp=2)
+
+
+def _footprint_mm(g):
+    c = np.array([g.camera.cx, g.camera.cy])
+    d = g.uv_to_screen(np.array([c + [0.5, 0], c - [0.5, 0], c + [0, 0.5], c - [0, 0.5]]))
+    return np.linalg.norm(d[0] - d[1]), np.linalg.norm(d[2] - d[3])
+
+
+def test_screen_grain_has_the_stated_contrast_and_grain_size(aiming_pair):
+    """The albedo per pixel: mean 1, rms = contrast·√(f(a_u)·f(a_v)) (the Gaussian field averaged over
+    the pixel's footprint, closed form) to 2 %, and the correlation at a lag of 5 pixels (75 µm along
+    t) exp(−lag²/4σ²) (σ = 40 µm) to 0.03."""
+    from rigsim.optics.screen_surface import pixel_average_factor
+
+    ideal, eff = aiming_pair
+    assert ideal.surface_maps() == (None, None)
+    albedo, _ = eff.surface_maps()
+    m = eff.rig.effects.screen_material
+    au, av = _footprint_mm(eff.geometry)
+    expected = m.contrast * np.sqrt(pixel_average_factor(au, m.grain_um) * pixel_average_factor(av, m.grain_um))
+    z = albedo - albedo.mean()
+    print(f"albedo mean {albedo.mean():.5f}, rms {z.std():.5f} (closed form {expected:.5f})")
+    assert albedo.mean() == pytest.approx(1.0, abs=2e-3)
+    assert z.std() == pytest.approx(expected, rel=0.02)
+    lag = 5
+    rho = (z[lag:] * z[:-lag]).mean() / z.var()
+    lag_mm = lag * av
+    print(f"correlation at {1e3 * lag_mm:.0f} µm: {rho:.3f} (field {np.exp(-lag_mm**2 / (4e-6 * m.grain_um**2)):.3f})")
+    assert rho == pytest.approx(np.exp(-lag_mm ** 2 / (4e-6 * m.grain_um ** 2)), abs=0.03)
+
+
+def test_grain_and_room_light_in_the_rendered_frames(aiming_pair):
+    """Same seeds: the spot's photons are the ideal ones times the albedo (exactly), and the hole frame
+    gains the room light: ρE/π against the spot plateau's ρE_plateau/π, E_plateau = E_beam·(r/R)², checked
+    on the rendered spot's plateau (to 1 %), with the stated gradient."""
+    from rigsim.optics.screen_surface import ambient_illuminance
+
+    ideal, eff = aiming_pair
+    g = ideal.truth_geometry
+    pose = dict(g.layout.null_pose_rad)
+    pose["X"] += from_arcsec(40.0)  # the spot's core clear of the hole
+    a = ideal.render(pose, seed=11, noiseless=True, warn=False)
+    b = eff.render(pose, seed=11, noiseless=True, warn=False)
+    albedo, ambient = eff.surface_maps()
+    assert np.array_equal(b.spot_photons, a.spot_photons * albedo)
+    added = b.hole_photons - a.hole_photons
+    assert np.allclose(added, ambient, rtol=1e-12, atol=0)
+    amb = eff.rig.effects.ambient_light
+    r, R = g.hole_radius_mm, eff.R_div_mm
+    # the spot's rendered plateau: its core, where the blur disk covers the whole pencil
+    st, _ = _screen_grid(g)
+    core = _disk(st, g.trace(pose).offset_mm, 0.5 * (R - r)) & (eff.hole_coverage == 0)
+    plateau = np.median(a.spot_photons[core])
+    far = (eff.hole_coverage == 0) & (np.hypot(st[..., 0], st[..., 1]) > 2.0)
+    E = ambient_illuminance(st, amb.illuminance_lux, amb.gradient_per_100mm, amb.direction_deg)
+    closed = plateau * E / (amb.beam_illuminance_lux * (r / R) ** 2) * albedo
+    print(f"plateau {plateau:.1f} photons, room light {np.median(added[far]):.1f} photons per pixel")
+    assert np.allclose(added[far], closed[far], rtol=0.01)
+    # the gradient: 20 % per 100 mm towards +X'
+    i, j0, j1 = g.camera.height // 2, 50, g.camera.width - 50
+    ds = st[i, j1, 0] - st[i, j0, 0]
+    assert (added[i, j1] / albedo[i, j1]) / (added[i, j0] / albedo[i, j0]) == pytest.approx(
+        (1 + amb.gradient_per_100mm * st[i, j1, 0] / 100) / (1 + amb.gradient_per_100mm * st[i, j0, 0] / 100), rel=1e-9)
+    assert abs(ds) > 5.0
