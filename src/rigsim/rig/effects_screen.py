@@ -11,7 +11,7 @@ from pydantic import Field
 
 from rigsim.rig.effects import Effect, EffectsTable
 
-__all__ = ["AmbientLight", "CubeGhosts", "ScreenEffects", "ScreenMaterial"]
+__all__ = ["AmbientLight", "CubeGhosts", "ScreenEffects", "ScreenMaterial", "SurfaceFigure"]
 
 _Face = Literal["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
 _Tilt3 = Annotated[list[Annotated[float, Field(ge=-3600.0, le=3600.0)]], Field(min_length=3, max_length=3)]
@@ -48,9 +48,23 @@ class AmbientLight(Effect):
                                         description="the sun simulator beam's illuminance (normal to the beam)")
 
 
+class SurfaceFigure(Effect):
+    """The measured faces' flatness error: a power term and an astigmatism term, each given as its
+    peak-to-valley over the face's inscribed circle (the clear aperture of diameter D = the edge).
+    Power PV s is a sphere of radius D²/(8s) (positive: convex, the face's centre stands out)."""
+
+    power_pv_waves: float = Field(0.1, ge=-1000.0, le=1000.0, description="power term, PV (signed: + convex)")
+    astigmatism_pv_waves: float = Field(0.05, ge=0.0, le=1000.0, description="astigmatism term, PV")
+    astigmatism_angle_deg: float = Field(0.0, ge=-360.0, le=360.0,
+                                         description="axis of the astigmatism from the face's first in-plane cube axis")
+    wavelength_nm: float = Field(632.8, gt=100.0, le=20000.0, description="the wavelength the PV values count in")
+    grid: int = Field(32, ge=2, le=512, description="the figured face's mesh: grid × grid cells")
+
+
 class ScreenEffects(EffectsTable):
     """Effects of the diaphragm screen and the aiming camera (the 2-axis cube-mirror rig)."""
 
     cube_ghosts: CubeGhosts = Field(default_factory=CubeGhosts)
     screen_material: ScreenMaterial = Field(default_factory=ScreenMaterial)
     ambient_light: AmbientLight = Field(default_factory=AmbientLight)
+    surface_figure: SurfaceFigure = Field(default_factory=SurfaceFigure)
