@@ -130,6 +130,7 @@ class ConcentricityRenderer:
         self.hole_coverage = rasterise_screen_disk(g, (0.0, 0.0), r)
         self._hole_cache: dict[int, np.ndarray] = {}
         self._surface = None  # the screen_material / ambient_light maps, made on first use
+        self.exposure_scale = 1.0  # < 1 with [effects.ambient_light] (surface_maps)
 
     # -- the screen's surface effects ([effects.screen_material], [effects.ambient_light]) ---------
     def surface_maps(self) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -141,6 +142,9 @@ class ConcentricityRenderer:
             return None, None
         if self._surface is None:
             self._surface = _surface_maps(self, mat, amb)
+            if amb.enabled:  # the operator shortens the exposure so that spot + room light peak where the spot did
+                peak = float(np.max(self._surface[1]))
+                self.exposure_scale = self.spot_photons_per_px / (self.spot_photons_per_px + peak)
         return self._surface
 
     # -- the screen-plane convolution --------------------------------------------------------
@@ -251,8 +255,10 @@ class ConcentricityRenderer:
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
         pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
         spot = self.diverge(pencil, self.pencil.spot_film_binning) * self._gain
-        albedo, _ = self.surface_maps()
-        return spot if albedo is None else spot * albedo
+        albedo, ambient = self.surface_maps()
+        if albedo is not None:
+            spot = spot * albedo
+        return spot if ambient is None else spot * self.exposure_scale
 
     def close(self) -> None:
         """Stop the worker processes (``workers > 1``); they also stop with the renderer or at exit."""
@@ -279,8 +285,8 @@ class ConcentricityRenderer:
                     warnings.warn(msg.format(face=self.geometry.face), GeometryWarning, stacklevel=2)
         hole = self.hole_photons(hole_seed)
         _, ambient = self.surface_maps()
-        if ambient is not None:  # room light on the screen: in both frames
-            hole = hole + ambient
+        if ambient is not None:  # room light on the screen, in both frames; the exposure shortened for it
+            hole = (hole + ambient) * self.exposure_scale
         sec["hole_render"] = time.perf_counter() - t0
         rendered = bool(spot) and not (flags.get("spot_not_returned") or flags.get("beam_misses_face"))
         render = {**self.settings(), "noiseless": bool(noiseless), "spot_rendered": rendered}

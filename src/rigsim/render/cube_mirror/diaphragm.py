@@ -360,6 +360,8 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
                        f"{name}_emitter": {"type": "directionalarea",
                                    "radiance": {"type": "uniform", "value": float(beam_irradiance * wk)}},
                        "bsdf": {"type": "null"}}
+    if ghosts.enabled:  # the glow is as bright as the spot the cube actually returns (paper: about equal)
+        L_spot *= cube_reflectance(rig)
     if content in ("hole", "both") and hole_glow_ratio > 0:
         d["hole_glow"] = {"type": "disk", "to_world": T(_disk_matrix(geom.hole_scene, -_EZ, geom.hole_radius_mm)),
                           "hole_glow_emitter": {"type": "area", "radiance": {"type": "uniform",
