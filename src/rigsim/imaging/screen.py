@@ -9,8 +9,17 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["plane_to_uv", "uv_to_plane", "pixel_area_mm2", "screen_centroid", "screen_circle_fit",
-           "masked_screen_centroid", "hole_spot_offset"]
+__all__ = [
+    "BACKGROUNDS",
+    "border_plane",
+    "hole_spot_offset",
+    "masked_screen_centroid",
+    "pixel_area_mm2",
+    "plane_to_uv",
+    "screen_centroid",
+    "screen_circle_fit",
+    "uv_to_plane",
+]
 
 
 def _H(H) -> np.ndarray:
@@ -74,10 +83,11 @@ def screen_circle_fit(img, H, *, level: float | None = None, mask=None):
     return fit_circle_points(uv_to_plane(H, ep.uv))
 
 
-def masked_screen_centroid(img: np.ndarray, H, level: float) -> tuple[np.ndarray, int]:
+def masked_screen_centroid(img: np.ndarray, H, level: float, *, weights: str = "value") -> tuple[np.ndarray, int]:
     """Centroid on the plane (mm) of the pixels whose smoothed value exceeds ``level`` times the
     smoothed image's robust peak (its 99.95th percentile); weights = value × plane area of the
-    pixel. Returns (centre, number of pixels); NaN when fewer than 10 pixels pass."""
+    pixel (``weights="area"``: the plane area alone, the centre of the region that passes). Returns
+    (centre, number of pixels); NaN when fewer than 10 pixels pass."""
     import cv2
 
     a = np.asarray(img, np.float64)
@@ -89,22 +99,55 @@ def masked_screen_centroid(img: np.ndarray, H, level: float) -> tuple[np.ndarray
     if len(uu) < 10:
         return np.array([np.nan, np.nan]), len(uu)
     uv = np.stack([uu, vv], axis=1).astype(float)
-    w = np.clip(a[vv, uu], 0.0, None) * pixel_area_mm2(H, uv)
+    w = pixel_area_mm2(H, uv) if weights == "area" else np.clip(a[vv, uu], 0.0, None) * pixel_area_mm2(H, uv)
     st = uv_to_plane(H, uv)
     return (w[:, None] * st).sum(axis=0) / w.sum(), len(uu)
 
 
+BACKGROUNDS = ("none", "plane")
+
+
+def border_plane(img: np.ndarray, border: float = 0.05) -> np.ndarray:
+    """The least-squares quadratic surface in (u, v) through the frame's border strip (``border`` of
+    its width and height on each side), over the whole frame: the room light's level and gradient
+    (a linear gradient on the screen is slightly curved in the obliquely viewing camera) where
+    neither the hole nor the returned spot reaches."""
+    a = np.asarray(img, float)
+    Hh, Ww = a.shape
+    bw, bh = max(1, int(border * Ww)), max(1, int(border * Hh))
+    m = np.zeros(a.shape, bool)
+    m[:bh], m[-bh:], m[:, :bw], m[:, -bw:] = True, True, True, True
+    vv, uu = np.nonzero(m)
+    x, y = (uu - 0.5 * Ww) / Ww, (vv - 0.5 * Hh) / Hh
+    A = np.column_stack([np.ones(len(uu)), x, y, x * x, x * y, y * y])
+    coef, *_ = np.linalg.lstsq(A, a[vv, uu], rcond=None)
+    U, V = np.meshgrid((np.arange(Ww) - 0.5 * Ww) / Ww, (np.arange(Hh) - 0.5 * Hh) / Hh)
+    return coef[0] + coef[1] * U + coef[2] * V + coef[3] * U * U + coef[4] * U * V + coef[5] * V * V
+
+
 def hole_spot_offset(hole_dn: np.ndarray, spot_dn: np.ndarray, H, *, object_pixel_mm: float, offset_dn: float,
-                     hole_level: float = 0.5, spot_level: float = 0.1) -> dict:
+                     hole_level: float = 0.5, spot_level: float = 0.1, background: str = "none") -> dict:
     """Centres of the hole and of the returned spot on the screen (mm) and their offset in the
     aiming camera's object pixels (spot − hole; x, y = the plane's s, t axes).
 
     The hole is fitted on the hole frame (the spot blocked); the spot on spot − hole frame (the
     hole's glow, present in both frames, cancels). ``object_pixel_mm``: the size of one camera pixel
-    on the screen, the unit of the offset (seed 000's Table 1 counts in it)."""
+    on the screen, the unit of the offset (seed 000's Table 1 counts in it).
+
+    ``background``: ``"none"`` (the frames' dark offset only) or ``"plane"``: the hole frame's
+    room-light level and gradient (:func:`border_plane`) are subtracted before its fit, so that a
+    lit screen does not pass the hole's threshold, and the hole is fitted on its contrast's magnitude
+    (a hole glowing less than the lit screen around it is a dark disk), its centre the centre of the
+    region above ``hole_level`` of it (the contrast inside follows the light's gradient). Room light is in both
+    frames: it cancels in spot − hole."""
+    if background not in BACKGROUNDS:
+        raise ValueError(f"background = {background!r}: must be one of {BACKGROUNDS}")
     hole = np.asarray(hole_dn, float) - offset_dn
+    if background == "plane":  # the hole's contrast against the lit screen, glowing or dark
+        hole = np.abs(hole - border_plane(hole))
     spot = np.asarray(spot_dn, float) - np.asarray(hole_dn, float)
-    hc, nh = masked_screen_centroid(hole, H, hole_level)
+    # under room light the hole's contrast follows the light's gradient: fit the region, not its values
+    hc, nh = masked_screen_centroid(hole, H, hole_level, weights="area" if background == "plane" else "value")
     sc, ns = masked_screen_centroid(spot, H, spot_level)
     return {"hole_mm": hc, "spot_mm": sc, "offset_mm": sc - hc, "offset_px": (sc - hc) / object_pixel_mm,
             "hole_pixels": nh, "spot_pixels": ns}

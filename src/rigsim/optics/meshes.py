@@ -157,3 +157,86 @@ def stop_mesh(obj: PlanoConvexObjective, outer_radius_mm: float | None = None, n
         tri.append((j, n_seg + j, n_seg + j1))
         tri.append((j, n_seg + j1, j1))
     return trimesh.Trimesh(np.vstack([inner, outer]), np.array(tri), process=False)
+
+
+def tilt_cube_faces(mesh: trimesh.Trimesh, edge_mm: float, tilts_arcsec: dict) -> trimesh.Trimesh:
+    """A copy of the cube ``mesh`` (:func:`cube_mesh`, unmerged vertices) with each face named in
+    ``tilts_arcsec`` (``{"-Z": [rx, ry, rz]}``, a rotation vector in the cube frame, arcsec) turned
+    about its ideal centre: its outward normal becomes Rot(tilt)·n0. Same vertices and faces order."""
+    from scipy.spatial.transform import Rotation
+
+    from rigsim.optics.cube import FACE_NORMALS
+
+    v = np.array(mesh.vertices, float)
+    fn = np.array(trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False).face_normals, float)
+    for face, rv in tilts_arcsec.items():
+        n0 = np.asarray(FACE_NORMALS[face], float)
+        rot = Rotation.from_rotvec(np.radians(np.asarray(rv, float) / 3600.0)).as_matrix()
+        tri = np.where(fn @ n0 > 0.999)[0]
+        idx = np.unique(np.asarray(mesh.faces)[tri].ravel())
+        c = 0.5 * edge_mm * n0
+        v[idx] = (v[idx] - c) @ rot.T + c
+    return trimesh.Trimesh(vertices=v, faces=np.array(mesh.faces), process=False)
+
+
+def face_basis(n: np.ndarray, n0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """In-plane axes (e1, e2) of a cube face of normal ``n`` (≈ the ideal ``n0``): e1 follows the first
+    cube axis ⟂ n0 (x for ±Y, ±Z; y for ±X), e2 = n × e1."""
+    n0 = np.asarray(n0, float)
+    a = np.array([1.0, 0.0, 0.0]) if abs(n0[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
+    e1 = a - (a @ n) * n
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+def figured_cube_mesh(mesh: trimesh.Trimesh, edge_mm: float, figures: dict, grid: int = 32) -> trimesh.Trimesh:
+    """The cube ``mesh`` (flat faces, unmerged vertices) with analytic vertex normals, each face named in
+    ``figures`` replaced by a ``grid`` × ``grid`` patch of the surface h(x, y) = −c(x² + y²) − a(x'² − y'²)
+    (height along the face's normal; x, y in its plane from its centre; x', y' turned by the
+    astigmatism's angle): ``figures = {face: (c, a, angle_rad)}`` (1/mm). The patch's vertex normals are
+    the surface's analytic normals; the flat faces' are their plane normals (float64). Render with
+    ``face_normals = False``."""
+    from rigsim.optics.cube import FACE_NORMALS
+
+    v = np.array(mesh.vertices, float)
+    f = np.array(mesh.faces)
+    tri_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    tri_n /= np.linalg.norm(tri_n, axis=1, keepdims=True)
+    keep = np.ones(len(f), bool)
+    for face in figures:
+        keep &= ~(tri_n @ np.asarray(FACE_NORMALS[face], float) > 0.999)
+    V = [v[f[keep]].reshape(-1, 3)]
+    N = [np.repeat(tri_n[keep], 3, axis=0)]
+    F = [np.arange(3 * keep.sum()).reshape(-1, 3)]
+    h = 0.5 * edge_mm
+    x = np.linspace(-h, h, grid + 1)
+    X, Y = (g.ravel() for g in np.meshgrid(x, x))
+    j = np.arange(grid)
+    i00 = (j[:, None] * (grid + 1) + j[None, :]).ravel()
+    quads = np.stack([i00, i00 + 1, i00 + grid + 2, i00 + grid + 1], axis=1)
+    for face, (c, a, ang) in figures.items():
+        n0 = np.asarray(FACE_NORMALS[face], float)
+        tri = np.where(tri_n @ n0 > 0.999)[0]
+        pts = v[np.unique(f[tri].ravel())]
+        n = tri_n[tri[0]]
+        centre = pts.mean(axis=0)
+        e1, e2 = face_basis(n, n0)
+        ca, sa = math.cos(ang), math.sin(ang)
+        xp, yp = ca * X + sa * Y, -sa * X + ca * Y
+        hgt = -c * (X * X + Y * Y) - a * (xp * xp - yp * yp)
+        # ∂h/∂x, ∂h/∂y (chain rule through the turned axes)
+        hx = -2 * c * X - 2 * a * (xp * ca + yp * sa)
+        hy = -2 * c * Y - 2 * a * (xp * sa - yp * ca)
+        P = centre + X[:, None] * e1 + Y[:, None] * e2 + hgt[:, None] * n
+        Nn = n[None, :] - hx[:, None] * e1 - hy[:, None] * e2
+        Nn /= np.linalg.norm(Nn, axis=1, keepdims=True)
+        base = sum(len(p) for p in V)
+        t = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+        # wind so that the geometric normal is outward
+        g0 = np.cross(P[t[0, 1]] - P[t[0, 0]], P[t[0, 2]] - P[t[0, 0]])
+        if g0 @ n < 0:
+            t = t[:, ::-1]
+        V.append(P)
+        N.append(Nn)
+        F.append(t + base)
+    return trimesh.Trimesh(np.vstack(V), np.vstack(F), vertex_normals=np.vstack(N), process=False)

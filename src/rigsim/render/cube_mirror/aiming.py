@@ -129,6 +129,23 @@ class ConcentricityRenderer:
         self._setup_grid(float(grid_mm))
         self.hole_coverage = rasterise_screen_disk(g, (0.0, 0.0), r)
         self._hole_cache: dict[int, np.ndarray] = {}
+        self._surface = None  # the screen_material / ambient_light maps, made on first use
+        self.exposure_scale = 1.0  # < 1 with [effects.ambient_light] (surface_maps)
+
+    # -- the screen's surface effects ([effects.screen_material], [effects.ambient_light]) ---------
+    def surface_maps(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(relative albedo per camera pixel, room-light photons per camera pixel), each None when its
+        effect is off. Fixed for the rig (the screen and the camera do not move): made once."""
+        eff = self.rig.effects
+        mat, amb = eff.screen_material, eff.ambient_light
+        if not (mat.enabled or amb.enabled):
+            return None, None
+        if self._surface is None:
+            self._surface = _surface_maps(self, mat, amb)
+            if amb.enabled:  # the operator shortens the exposure so that spot + room light peak where the spot did
+                peak = float(np.max(self._surface[1]))
+                self.exposure_scale = self.spot_photons_per_px / (self.spot_photons_per_px + peak)
+        return self._surface
 
     # -- the screen-plane convolution --------------------------------------------------------
     def _setup_grid(self, gs: float) -> None:
@@ -237,7 +254,11 @@ class ConcentricityRenderer:
 
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
         pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
-        return self.diverge(pencil, self.pencil.spot_film_binning) * self._gain
+        spot = self.diverge(pencil, self.pencil.spot_film_binning) * self._gain
+        albedo, ambient = self.surface_maps()
+        if albedo is not None:
+            spot = spot * albedo
+        return spot if ambient is None else spot * self.exposure_scale
 
     def close(self) -> None:
         """Stop the worker processes (``workers > 1``); they also stop with the renderer or at exit."""
@@ -263,6 +284,9 @@ class ConcentricityRenderer:
                 if flags.get(k) and k != "beam_source_in_view":
                     warnings.warn(msg.format(face=self.geometry.face), GeometryWarning, stacklevel=2)
         hole = self.hole_photons(hole_seed)
+        _, ambient = self.surface_maps()
+        if ambient is not None:  # room light on the screen, in both frames; the exposure shortened for it
+            hole = (hole + ambient) * self.exposure_scale
         sec["hole_render"] = time.perf_counter() - t0
         rendered = bool(spot) and not (flags.get("spot_not_returned") or flags.get("beam_misses_face"))
         render = {**self.settings(), "noiseless": bool(noiseless), "spot_rendered": rendered}
@@ -300,6 +324,35 @@ class ConcentricityRenderer:
                   "pencil_chunks": chunk_count(self.pencil.spp), "spp_per_camera_pixel": self.spp,
                   "hole_spp": self.hole_spp})
         return s
+
+
+def _surface_maps(cr: ConcentricityRenderer, mat, amb) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The albedo grain sampled per camera pixel (a fixed screen-plane field, averaged over 4 × 4
+    sub-samples of each pixel's footprint) and the room light's photons per pixel: ρ·E/π relative to
+    the spot plateau's ρ·E_plateau/π, where E_plateau = E_beam · (cube reflectance) · (r/R)²."""
+    from rigsim.optics.screen_surface import ambient_illuminance, grain_field, pixel_albedo
+    from rigsim.render.cube_mirror.diaphragm import cube_reflectance
+
+    g = cr.geometry
+    W, H = g.camera.width, g.camera.height
+    albedo = None
+    if mat.enabled:
+        corners = g.uv_to_screen(np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]]))
+        step = min(0.01, 1e-3 * mat.grain_um / 6.0)
+        lo = corners.min(axis=0) - 2 * step
+        shape = tuple(math.ceil(x) + 3 for x in ((corners.max(axis=0) - lo) / step)[::-1])
+        albedo = pixel_albedo(grain_field(shape, step, mat.grain_um, mat.contrast, mat.seed), lo, step,
+                              g.uv_to_screen, W, H)
+    ambient = None
+    if amb.enabled:
+        uu, vv = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+        st = g.uv_to_screen(np.stack([uu, vv], axis=-1).reshape(-1, 2)).reshape(H, W, 2)
+        e_plateau = amb.beam_illuminance_lux * cube_reflectance(cr.rig) / cr._gain
+        ambient = cr.spot_photons_per_px / e_plateau * ambient_illuminance(
+            st, amb.illuminance_lux, amb.gradient_per_100mm, amb.direction_deg) * (1.0 - cr.hole_coverage)
+        if albedo is not None:
+            ambient = ambient * albedo
+    return albedo, ambient
 
 
 def _multijitter_count(n: int) -> int:

@@ -62,7 +62,8 @@ import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
 from rigsim.files.atomic import output_folder
-from rigsim.optics.meshes import screen_with_hole_mesh
+from rigsim.optics.cube_ghosts import normal_reflectance, slab_reflectance
+from rigsim.optics.meshes import figured_cube_mesh, screen_with_hole_mesh, tilt_cube_faces
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.scene import Scene
 from rigsim.rig.cube_mirror import CubeMirrorRig
@@ -145,6 +146,101 @@ def cube_to_scene_matrix(geom: DiaphragmGeometry, pose_rad: dict) -> np.ndarray:
     return M
 
 
+def scene_cube_mesh(rig: CubeMirrorRig, real: Realization):
+    """The cube mesh the renderers use: the true cube (measured faces at their true normals), and
+    with ``[effects.cube_ghosts]`` on, the faces opposite them at their true tilts too."""
+    m = true_cube_mesh(rig, real)
+    g = rig.effects.cube_ghosts
+    if g.enabled:
+        m = tilt_cube_faces(m, rig.cube.edge_mm, g.back_face_tilt_arcsec)
+    fig = rig.effects.surface_figure
+    if fig.enabled:
+        m = figured_cube_mesh(m, rig.cube.edge_mm, {f: figure_coefficients(rig) for f in rig.procedure.faces},
+                              grid=fig.grid)
+    return m
+
+
+def figure_coefficients(rig: CubeMirrorRig) -> tuple[float, float, float]:
+    """(c, a, angle) of ``[effects.surface_figure]``'s h = −c(x² + y²) − a(x'² − y'²) (1/mm, rad): power
+    PV s over the inscribed circle (radius ρ = edge/2) gives c = s/ρ² (sphere radius 1/(2c) = D²/(8s)),
+    astigmatism PV p gives a = p/(2ρ²)."""
+    fig = rig.effects.surface_figure
+    rho2 = (0.5 * rig.cube.edge_mm) ** 2
+    lam = 1e-6 * fig.wavelength_nm
+    return (fig.power_pv_waves * lam / rho2, fig.astigmatism_pv_waves * lam / (2.0 * rho2),
+            math.radians(fig.astigmatism_angle_deg))
+
+
+def cube_reflectance(rig: CubeMirrorRig) -> float:
+    """Power the cube returns at normal incidence: 1 (ideal mirror), or with ``[effects.cube_ghosts]``
+    the bare glass cube's direct and internal reflections (:func:`slab_reflectance`). The renderers
+    divide by it: the aiming camera's exposure is set on what comes back."""
+    g = rig.effects.cube_ghosts
+    if not g.enabled:
+        return 1.0
+    return slab_reflectance(normal_reflectance(g.refractive_index), g.internal_reflections)
+
+
+def ghost_spot(geom: DiaphragmGeometry, pose_rad: dict, order: int) -> tuple[np.ndarray, float]:
+    """Exact trace (Snell, Fresnel) of the beam's central ray through the glass cube of
+    ``[effects.cube_ghosts]`` at ``pose_rad``: where its ``order``-th ghost (0: the direct reflection)
+    lands on the screen, (s, t) mm from the hole, and the share of the beam's power it carries."""
+    from scipy.spatial.transform import Rotation
+
+    from rigsim.optics.cube import FACE_NORMALS
+    from rigsim.optics.cube_ghosts import ghost_ray
+
+    rig, real = geom.rig, geom.real
+    g = rig.effects.cube_ghosts
+    M = cube_to_scene_matrix(geom, pose_rad)
+    R, t = M[:3, :3], M[:3, 3]
+    face = geom.face
+    n0 = np.asarray(FACE_NORMALS[face], float)
+    back = {"+": "-", "-": "+"}[face[0]] + face[1]
+    half = 0.5 * rig.cube.edge_mm
+    nf = R @ _unit(real.R_cube_from_mount @ real.face_normals_mount[face])
+    tb = np.radians(np.asarray(g.back_face_tilt_arcsec.get(back, [0.0, 0.0, 0.0]), float) / 3600.0)
+    nb = R @ (Rotation.from_rotvec(tb).as_matrix() @ -n0)
+    d = -geom.d_sun_rot
+    p, dout, power = ghost_ray(geom.hole_scene - 100.0 * d, d, (R @ (half * n0) + t, nf),
+                               (R @ (-half * n0) + t, nb), g.refractive_index, order)
+    s = (geom.hole_scene[2] - p[2]) / dout[2]
+    return (p + s * dout)[:2] - geom.hole_scene[:2], power
+
+
+def figured_spot(geom: DiaphragmGeometry, pose_rad: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Exact trace of the beam's central ray off the ``[effects.surface_figure]`` face (its analytic
+    normal where the ray meets it) to the screen: (s, t) mm from the hole; and the closed-form semi-axes
+    (mm) of the returned pencil: r·(1 + 2L·κ±) with κ± = 2(c ± a) the principal curvatures, L the
+    face → screen path (power alone: r·(1 + 2L/R), R = D²/(8s))."""
+    from rigsim.optics.cube import FACE_NORMALS
+    from rigsim.optics.meshes import face_basis
+
+    rig, real = geom.rig, geom.real
+    c, a, ang = figure_coefficients(rig)
+    M = cube_to_scene_matrix(geom, pose_rad)
+    R, t = M[:3, :3], M[:3, 3]
+    n0 = np.asarray(FACE_NORMALS[geom.face], float)
+    n_c = _unit(real.R_cube_from_mount @ real.face_normals_mount[geom.face])
+    e1, e2 = face_basis(n_c, n0)
+    centre = R @ (0.5 * rig.cube.edge_mm * n0) + t
+    n, e1, e2 = R @ n_c, R @ e1, R @ e2
+    d = -geom.d_sun_rot
+    o = geom.hole_scene
+    p = o + float((centre - o) @ n) / float(d @ n) * d
+    x, y = (p - centre) @ e1, (p - centre) @ e2
+    ca, sa = math.cos(ang), math.sin(ang)
+    xp, yp = ca * x + sa * y, -sa * x + ca * y
+    hx = -2 * c * x - 2 * a * (xp * ca + yp * sa)
+    hy = -2 * c * y - 2 * a * (xp * sa - yp * ca)
+    nl = _unit(n - hx * e1 - hy * e2)
+    dr = d - 2.0 * (d @ nl) * nl
+    L = (o[2] - p[2]) / dr[2]
+    hit = p + L * dr
+    r = geom.hole_radius_mm
+    return hit[:2] - o[:2], np.array([r * (1 + 2 * L * 2 * (c + a)), r * (1 + 2 * L * 2 * (c - a))])
+
+
 def spot_radiance(screen_reflectance: float, beam_irradiance: float) -> float:
     """Radiance of the screen where the (collimated, normally incident) beam lands: ρE/π."""
     return screen_reflectance * beam_irradiance / math.pi
@@ -219,6 +315,7 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
     S = np.eye(4)
     S[:3, 3] = geom.hole_scene  # local x, y = lab X', Y'; z = Z'; the mesh's front normal is −Z'
     L_spot = spot_radiance(screen_reflectance, beam_irradiance)
+    ghosts = rig.effects.cube_ghosts
     n_beam = 1 if geom.beam == "collimated" else 2 * ((int(divergence_directions) + 1) // 2)
     if max_depth is None:
         # emitter → mirror → screen (connected to the sensor there): 3 vertices; every null beam
@@ -226,6 +323,8 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
         # leaves, and in 'diffuse' mode the returning light crosses all n_beam disks); deeper
         # paths (screen → cube → screen, ~1e-4 of the spot, spread over centimetres) are not rendered
         max_depth = 3 + (n_beam - 1) + (n_beam if geom.return_into_hole == "diffuse" else 0)
+        if ghosts.enabled:  # each internal reflection adds two vertices (back face, front face)
+            max_depth += 2 * ghosts.internal_reflections
     d = {
         "type": "scene",
         "integrator": {"type": "ptracer", "max_depth": int(max_depth), "rr_depth": int(max_depth) + 1,
@@ -235,10 +334,18 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
                    "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": float(screen_reflectance)}}},
     }
     if content in ("spot", "both"):
-        cube_path = mesh_ply(true_cube_mesh(rig, real), f"cube_true_{rig.cube.edge_mm:g}mm", mesh_dir)
-        d["cube"] = {"type": "ply", "filename": str(cube_path), "face_normals": True,
-                     "to_world": T(cube_to_scene_matrix(geom, pose_rad)),
-                     "bsdf": {"type": "conductor", "material": "none"}}
+        figured = rig.effects.surface_figure.enabled
+        if ghosts.enabled or figured:
+            cube_path = mesh_ply(scene_cube_mesh(rig, real), f"cube_effects_{rig.cube.edge_mm:g}mm", mesh_dir)
+        else:
+            cube_path = mesh_ply(true_cube_mesh(rig, real), f"cube_true_{rig.cube.edge_mm:g}mm", mesh_dir)
+        if ghosts.enabled:  # a bare glass cube prism: Fresnel reflection, ghosts from the opposite face
+            cube_bsdf = {"type": "dielectric", "int_ior": float(ghosts.refractive_index), "ext_ior": 1.0}
+        else:
+            cube_bsdf = {"type": "conductor", "material": "none"}
+        # a figured face reflects along its analytic vertex normals (the flat faces' carry their planes')
+        d["cube"] = {"type": "ply", "filename": str(cube_path), "face_normals": not figured,
+                     "to_world": T(cube_to_scene_matrix(geom, pose_rad)), "bsdf": cube_bsdf}
         dirs, w = geom.beam_directions(n_beam)
         for k, (dk, wk) in enumerate(zip(dirs, w)):
             if geom.return_into_hole == "absorb":
@@ -253,6 +360,8 @@ def build_diaphragm_scene_dict(rig: CubeMirrorRig, real: Realization | None, pos
                        f"{name}_emitter": {"type": "directionalarea",
                                    "radiance": {"type": "uniform", "value": float(beam_irradiance * wk)}},
                        "bsdf": {"type": "null"}}
+    if ghosts.enabled:  # the glow is as bright as the spot the cube actually returns (paper: about equal)
+        L_spot *= cube_reflectance(rig)
     if content in ("hole", "both") and hole_glow_ratio > 0:
         d["hole_glow"] = {"type": "disk", "to_world": T(_disk_matrix(geom.hole_scene, -_EZ, geom.hole_radius_mm)),
                           "hole_glow_emitter": {"type": "area", "radiance": {"type": "uniform",
@@ -380,9 +489,13 @@ class DiaphragmRenderer:
                           hole_glow_ratio=self.hole_glow_ratio, sampler=sampler, geometry=self.geometry)
         # photons per pixel per unit rendered radiance
         self.photons_per_radiance = self.spot_photons_per_px / spot_radiance(self.screen_reflectance, 1.0)
+        if rig.effects.cube_ghosts.enabled:
+            self.photons_per_radiance /= cube_reflectance(rig)
         t0 = time.perf_counter()
         pose0 = dict(self.geometry.layout.null_pose_rad)
-        self._cube_local = np.array(true_cube_mesh(rig, self.real).vertices, float)
+        cube = scene_cube_mesh(rig, self.real)
+        self._cube_local = np.array(cube.vertices, float)
+        self._cube_normals = np.array(cube.vertex_normals, float) if rig.effects.surface_figure.enabled else None
         # the render loop's elements: per frame only the cube moves (its vertices follow the pose)
         self.spot_film_binning = int(spot_film_binning)
         self._spot_scene = Scene.from_dict(self.scene_dict(pose0, "spot", film_binning=self.spot_film_binning),
@@ -411,7 +524,10 @@ class DiaphragmRenderer:
 
         M = cube_to_scene_matrix(self.geometry, state["pose"])
         v = self._cube_local @ M[:3, :3].T + M[:3, 3]
-        return {"cube.vertex_positions": mi.Float(v.astype(np.float32).ravel())}
+        out = {"cube.vertex_positions": mi.Float(v.astype(np.float32).ravel())}
+        if self._cube_normals is not None:  # [effects.surface_figure]: the normals turn with the cube
+            out["cube.vertex_normals"] = mi.Float((self._cube_normals @ M[:3, :3].T).astype(np.float32).ravel())
+        return out
 
     def set_pose(self, pose_rad: dict) -> float:
         """Move the cube to turntable pose ``pose_rad`` (mi.traverse). Returns seconds taken."""
