@@ -11,8 +11,9 @@ from rigsim.rig.effects_sun import SunSensorEffects
 __all__ = ["CubeMirrorEffects", "cube_effect_names"]
 
 
-class CubeMirrorEffects(SunSensorEffects, ScreenEffects, AutocollimatorEffects):
-    """Every cube-mirror effect; :func:`cube_effect_names` says which apply to a method."""
+class CubeMirrorEffects(AutocollimatorEffects, ScreenEffects, SunSensorEffects):
+    """Every cube-mirror effect (the sun sensor's first, in the rig file's order: pydantic collects
+    the fields of the bases last to first); :func:`cube_effect_names` says which apply to a method."""
 
 
 def cube_effect_names(method: str) -> tuple[str, ...]:

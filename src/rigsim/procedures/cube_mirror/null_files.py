@@ -30,12 +30,13 @@ FREE_AXES = ("X", "Y")
 
 def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray) -> dict:
     """Hole and spot centres on the screen (mm) and their offset (mm and aiming-camera px, spot −
-    hole) from a hole frame (the spot blocked) and a spot frame, with the nominal screen homography."""
+    hole) from a hole frame (the spot blocked) and a spot frame, with the nominal screen homography
+    and the aiming camera's ``hole_background`` fit."""
     ac = rig.aiming_camera
     if rig.procedure.method != "diaphragm" or ac is None:
         raise InputError(f"rig {rig.name!r} has no diaphragm screen and aiming camera (seed 000's method)")
     return hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
-                            offset_dn=ac.detector.offset_dn)
+                            offset_dn=ac.detector.offset_dn, background=ac.hole_background)
 
 
 def null_step(rig: CubeMirrorRig, reading_rad: Mapping[str, float], offset_px, axis_order: str | None = None) -> dict:

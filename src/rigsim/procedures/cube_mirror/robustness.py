@@ -15,8 +15,8 @@ from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, configs_for, rig_with, run_configs
 from rigsim.rig.effects_cube import cube_effect_names
 
-__all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "angle_budget_arcsec", "campaign_trial", "effect_names", "frames_figure", "quantities",
-           "run_robustness"]
+__all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "angle_budget_arcsec", "campaign_trial", "effect_names", "frames_figure",
+           "pipeline_variants", "quantities", "run_robustness"]
 
 DESCRIPTION = "the cube-mirror campaign (sweep → sun-sensor least squares, null searches → TRIAD → R(cube←sun))"
 DEFAULT_TRIALS = 4
@@ -58,27 +58,59 @@ def quantities(rig) -> tuple[Quantity, ...]:
           Quantity("sun_centroid_rms_px", "sweep centroid − exact geometric centre (rms)", "px", budget=px),
           Quantity("null_measurement_rms", f"null measurement − exact, near the null (rms, {null_unit})", null_unit,
                    budget=null_budget),
-          Quantity("sweep_points_count", "sweep frames used by the fit", "count", kind="count")]
+          Quantity("sweep_points_count", "sweep frames used by the fit", "count", kind="count"),
+          Quantity("converged_count", "campaigns whose null searches converged", "count", kind="count")]
     return tuple(q)
 
 
+def pipeline_variants(rig) -> dict[str, object]:
+    """The pipelines a configuration's campaigns run (name → rig): as the rig configures them, and on
+    the 2-axis rig with the aiming camera's hole fit switched (``hole_background`` none ↔ plane).
+    Each variant is a campaign of its own: the null search goes where its measurements lead it."""
+    out = {f"as configured{_describe(rig)}": rig}
+    if rig.procedure.method == "diaphragm":
+        ac = rig.aiming_camera
+        other = "plane" if ac.hole_background == "none" else "none"
+        alt = rig.model_copy(update={"aiming_camera": ac.model_copy(update={"hole_background": other})})
+        out[_describe(alt).strip(" ()")] = alt
+    return out
+
+
+def _describe(rig) -> str:
+    if rig.procedure.method != "diaphragm":
+        return ""
+    return f" (hole background: {rig.aiming_camera.hole_background})"
+
+
 def campaign_trial(rig, names, config: str, seed: int) -> dict:
-    """One rendered campaign of ``rig`` with ``config`` (IDEAL, an effect name or ALL of ``names``)
-    at ``seed``: {"as configured": the errors and counts of :func:`quantities`}, the mean render time
-    per frame (ms, ``_render_ms_per_frame``). A search that does not converge scores NaN errors."""
+    """The rendered campaigns of ``rig`` with ``config`` (IDEAL, an effect name or ALL of ``names``)
+    at ``seed``, one per :func:`pipeline_variants`: {variant: the errors and counts of
+    :func:`quantities`} and the mean render time per frame (ms, ``_render_ms_per_frame``). A search
+    that does not converge scores NaN errors and ``converged_count`` 0."""
+    out: dict = {}
+    frames, wall = 0, 0.0
+    for variant, v_rig in pipeline_variants(rig).items():
+        values, n, t = _one_campaign(rig_with(v_rig, config, names), seed, quantities(rig))
+        out[variant] = values
+        frames, wall = frames + n, wall + t
+    out["_render_ms_per_frame"] = 1e3 * wall / max(1, frames)
+    return out
+
+
+def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float]:
     from rigsim.errors import SearchError
     from rigsim.procedures.cube_mirror.rendered_campaign import run_rendered_campaign
     from rigsim.truth.cube_mirror.realization import realization_from_rig
 
-    r = rig_with(rig, config, names)
     real = realization_from_rig(r)
     t0 = time.perf_counter()
     counter = _Counter()
     try:
         camp = run_rendered_campaign(r, real, seed=int(seed), progress=counter)
     except SearchError:
-        out = {q.key: math.nan for q in quantities(rig)}
-        return {"as configured": out, "_render_ms_per_frame": 1e3 * (time.perf_counter() - t0) / max(1, counter.n)}
+        out = {q.key: math.nan for q in qs}
+        out["converged_count"] = 0.0
+        return out, counter.n, time.perf_counter() - t0
     wall = time.perf_counter() - t0
     res, cal = camp.result, camp.calibration
     ss = r.sun_sensor
@@ -89,8 +121,8 @@ def campaign_trial(rig, names, config: str, seed: int) -> dict:
             "sun_v0_px": cal.camera.cy - ss.principal_point_px[1],
             "sun_centroid_rms_px": camp.measured_noise["sun_centroid_rms_px"],
             "null_measurement_rms": camp.measured_noise["null_measurement_rms"],
-            "sweep_points_count": float(cal.n_points)}
-    return {"as configured": out, "_render_ms_per_frame": 1e3 * wall / max(1, counter.n)}
+            "sweep_points_count": float(cal.n_points), "converged_count": 1.0}
+    return out, counter.n, wall
 
 
 class _Counter:
@@ -119,7 +151,7 @@ class _Trial:
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
                    progress=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
-    :class:`RobustnessResult` (the campaign as configured)."""
+    :class:`RobustnessResult` per :func:`pipeline_variants`, the configured pipeline first."""
     names = tuple(effect_names(rig) if names is None else names)
     configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
@@ -128,11 +160,13 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
     effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
     qs = quantities(rig)
-    values = {c: {q.key: np.array([raw[(c, s)]["as configured"][q.key] for s in seeds]) for q in qs}
-              for c in configs}
     family = "cube-mirror (" + rig.procedure.method + ")"
-    return [RobustnessResult(family, rig.name, int(seed), int(trials), qs, configs, values, render, effects,
-                             {"wall": time.perf_counter() - t0}, pipeline="as configured")]
+    results = []
+    for v in pipeline_variants(rig):
+        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds]) for q in qs} for c in configs}
+        results.append(RobustnessResult(family, rig.name, int(seed), int(trials), qs, configs, values, render, effects,
+                                        {"wall": time.perf_counter() - t0}, pipeline=v))
+    return results
 
 
 # ------------------------------------------------------------------ the frames figure
