@@ -39,7 +39,9 @@ import numpy as np
 from rigsim.errors import GeometryWarning
 from rigsim.optics.gaussian_beam import beam_radius_mm, gaussian_irradiance, sample_gaussian_disk
 from rigsim.optics.line_camera import CameraGeometry, facet_normals_ota, loop_trace
+from rigsim.optics.objective_aberrations import centroid_shift_mm, tangential_variance_mm2
 from rigsim.optics.prism_glass import GlassFacet, glass_facet
+from rigsim.render.aberrated_lens import ABERRATED_LENS_PLUGIN, register_aberrated_lens
 from rigsim.render.backend import ensure_variant
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.plugins import LENS_PLUGIN, MIRROR_PLUGIN, register_plugins
@@ -151,6 +153,9 @@ class LoopRenderer:
         eff = rig.effects
         self.beam = eff.gaussian_beam if eff.gaussian_beam.enabled else None
         self.glass_cfg = eff.prism_glass if eff.prism_glass.enabled else None
+        self.aberr = eff.objective_aberrations if eff.objective_aberrations.enabled else None
+        if self.aberr is not None:
+            register_aberrated_lens()
         if self.beam is not None:   # the irradiance in the plane conjugate to the CMOS, w(z) from the waist
             b = self.beam
             self.beam_radius_mm = beam_radius_mm(b.waist_radius_um * 1e-3, b.wavelength_nm, b.m_squared, b.waist_offset_mm)
@@ -219,6 +224,9 @@ class LoopRenderer:
 
         W = self.window_px
         rb = self.core_radius_mm
+        lens_bsdf = {"type": LENS_PLUGIN, "focal_length": g.F, "centre": self.C_W.tolist()}
+        if self.aberr is not None:   # the objective's Seidel wavefront at this CMOS's field point
+            lens_bsdf.update(self._aberration_props(), type=ABERRATED_LENS_PLUGIN)
         max_depth = MAX_DEPTH if self.glass0 is None else MAX_DEPTH_GLASS
         if self.beam is None:
             laser = {"type": "disk", "to_world": M(np.diag([rb, rb, 1.0]), self.laser_W), "bsdf": {"type": "null"},
@@ -244,7 +252,7 @@ class LoopRenderer:
                        "sampler": {"type": self.sampler, "sample_count": self.spp}},
             "laser": laser,
             "lens": {"type": "rectangle", "to_world": M(np.diag([LENS_PATCH_HALF_MM] * 2 + [1.0]), np.zeros(3)),
-                     "bsdf": {"type": LENS_PLUGIN, "focal_length": g.F, "centre": self.C_W.tolist()}},
+                     "bsdf": lens_bsdf},
             "facet": {"type": "rectangle", "to_world": M(np.diag([FACET_HALF_MM, -FACET_HALF_MM, -1.0]), self.facet_point_W),
                       "bsdf": {"type": MIRROR_PLUGIN, "normal": self.f0.tolist()}},
             "detector": {"type": "rectangle", "to_world": M(Rdet, self.det_centre_W),
@@ -253,6 +261,29 @@ class LoopRenderer:
                 "type": "rectangle", "to_world": mi.ScalarTransform4f(self._front_matrix(None).tolist()),
                 "bsdf": {"type": "dielectric", "int_ior": self.glass0.n, "ext_ior": 1.0}}}),
         }
+
+    def _aberration_props(self) -> dict:
+        """The aberrated lens's properties: W131, W222 in mm, the pupil radius, the fill and the field's
+        tangential direction (from the optical axis towards this CMOS's field point, in the lens plane)."""
+        a = self.aberr
+        lam = a.wavelength_nm * 1e-6
+        e = self.geom.emitter_mm[self.j]
+        t = np.array([e[0], e[1], 0.0]) / math.hypot(e[0], e[1])
+        return {"coma_mm": a.coma_waves * lam, "astig_mm": a.astigmatism_waves * lam,
+                "pupil_radius_mm": 0.5 * a.aperture_diameter_mm, "fill": a.beam_fill, "tangential": t.tolist()}
+
+    def aberration_truth(self) -> dict:
+        """Closed forms of the aberrated spot (:mod:`rigsim.optics.objective_aberrations`): its centroid
+        shift (u, v) px and the variance astigmatism adds along the tangential direction, px²."""
+        p = self._aberration_props()
+        g = self.geom
+        fa = g.F / p["pupil_radius_mm"]
+        shift = centroid_shift_mm(coma_mm=p["coma_mm"], f_over_a=fa, fill=p["fill"]) * np.array(p["tangential"][:2])
+        return {"centroid_shift_px": [float(shift @ self.u_axis[:2] / g.pitch_mm), float(shift @ self.v_axis[:2] / g.pitch_mm)],
+                "tangential_uv": [float(np.array(p["tangential"][:2]) @ self.u_axis[:2]),
+                                  float(np.array(p["tangential"][:2]) @ self.v_axis[:2])],
+                "astigmatism_tangential_variance_px2":
+                    tangential_variance_mm2(astig_mm=p["astig_mm"], f_over_a=fa, fill=p["fill"]) / g.pitch_mm**2}
 
     def _front_matrix(self, E_ota) -> np.ndarray:
         """float32 to_world of the glass's entrance face (a rectangle whose normal is the face's,
@@ -385,6 +416,10 @@ class LoopRenderer:
                "pixel_centroid_uv": binned.tolist(), "window_origin_uv": [int(u0), int(v0)],
                "fraction_in_window": float(inside.mean()), "flags": flags,
                "facet_normal_ota_f32": p["N"].tolist(), "lens_focal_length_mm_f32": p["f_lens"]}
+        if self.aberr is not None:
+            ab = self.aberration_truth()
+            ab["aberrated_centroid_uv"] = (binned + np.array(ab["centroid_shift_px"])).tolist()
+            out["objective_aberrations"] = ab
         if self.beam is not None:
             out["gaussian_beam"] = {"radius_mm": self.beam_radius_mm, "second_moment_px2": (self.beam_radius_mm / g.pitch_mm) ** 2 / 4}
         if self.glass0 is not None:   # every path's centre and power share, and the centroid of all of them
@@ -500,6 +535,9 @@ class LoopRenderer:
         extra = {}
         if self.beam is not None:
             extra["gaussian_beam"] = {"w_at_conjugate_mm": self.beam_radius_mm, **self.beam.model_dump(exclude={"enabled"})}
+        if self.aberr is not None:
+            extra["objective_aberrations"] = {"model": "Seidel wavefront (coma, astigmatism) ×2 on the return crossing",
+                                              **self.aberr.model_dump(exclude={"enabled"})}
         if self.glass0 is not None:
             extra["prism_glass"] = {"integrator_max_depth": MAX_DEPTH_GLASS, "entrance_face": "dielectric rectangle",
                                     **self.glass_cfg.model_dump(exclude={"enabled"})}

@@ -9,7 +9,7 @@ from pydantic import Field
 
 from rigsim.rig.effects import Effect, EffectsTable
 
-__all__ = ["BORESIGHT_EFFECTS", "BoresightEffects", "GaussianBeam", "PrismGlass"]
+__all__ = ["BORESIGHT_EFFECTS", "BoresightEffects", "GaussianBeam", "ObjectiveAberrations", "PrismGlass"]
 
 
 class GaussianBeam(Effect):
@@ -36,11 +36,23 @@ class PrismGlass(Effect):
                                      description="direction of the wedge's tilt about the beam (0: ghost along u)")
 
 
+class ObjectiveAberrations(Effect):
+    """The camera objective's Seidel coma and astigmatism at the CMOS's field point (a wavefront
+    model, not a mirror trace), doubled by the loop's two passes: an asymmetric spot."""
+
+    coma_waves: float = Field(0.25, ge=-5.0, le=5.0, description="W131 at the CMOS field point, waves")
+    astigmatism_waves: float = Field(0.25, ge=-5.0, le=5.0, description="W222 at the CMOS field point, waves")
+    wavelength_nm: float = Field(632.8, ge=200.0, le=2000.0, description="wavelength the coefficients are given at")
+    aperture_diameter_mm: float = Field(600.0, ge=10.0, le=5000.0, description="objective's entrance pupil diameter")
+    beam_fill: float = Field(1.0, gt=0.0, le=1.0, description="relative radius of the pupil the laser fills")
+
+
 class BoresightEffects(EffectsTable):
     """Effects of the boresight rig: the lasers, the central prism, the camera objectives."""
 
     gaussian_beam: GaussianBeam = Field(default_factory=GaussianBeam)
     prism_glass: PrismGlass = Field(default_factory=PrismGlass)
+    objective_aberrations: ObjectiveAberrations = Field(default_factory=ObjectiveAberrations)
 
 
 BORESIGHT_EFFECTS = BoresightEffects.names()
