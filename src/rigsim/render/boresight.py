@@ -26,6 +26,12 @@ plane, chosen so that the lens centre C is exactly representable; the lens carri
 there (hit points precise to 1e-6 mm); the facet normal is passed as a vector, and the truth uses
 the float32 values of every rendered parameter. Per frame only the facet normal, the lens (Δf) and
 the seed change, through ``mi.traverse`` (no recompilation).
+
+``rig.effects`` (docs/effects-boresight.md), each changing the scene only when enabled: ``gaussian_beam``
+(the emitter becomes a patch whose radiance is the Gaussian irradiance), ``prism_glass`` (a
+``dielectric`` entrance face in front of each facet, moved per frame with the facet; depth 12 for the
+ghosts) and ``objective_aberrations`` (the lens becomes ``rigsim_aberrated_lens``). The truth follows
+each (Gaussian ray origins, the exact Snell/Fresnel trace, the Seidel closed forms).
 """
 
 from __future__ import annotations
