@@ -26,6 +26,12 @@ plane, chosen so that the lens centre C is exactly representable; the lens carri
 there (hit points precise to 1e-6 mm); the facet normal is passed as a vector, and the truth uses
 the float32 values of every rendered parameter. Per frame only the facet normal, the lens (Δf) and
 the seed change, through ``mi.traverse`` (no recompilation).
+
+``rig.effects`` (docs/effects-boresight.md), each changing the scene only when enabled: ``gaussian_beam``
+(the emitter becomes a patch whose radiance is the Gaussian irradiance), ``prism_glass`` (a
+``dielectric`` entrance face in front of each facet, moved per frame with the facet; depth 12 for the
+ghosts) and ``objective_aberrations`` (the lens becomes ``rigsim_aberrated_lens``). The truth follows
+each (Gaussian ray origins, the exact Snell/Fresnel trace, the Seidel closed forms).
 """
 
 from __future__ import annotations
@@ -37,7 +43,11 @@ import warnings
 import numpy as np
 
 from rigsim.errors import GeometryWarning
+from rigsim.optics.gaussian_beam import beam_radius_mm, gaussian_irradiance, sample_gaussian_disk
 from rigsim.optics.line_camera import CameraGeometry, facet_normals_ota, loop_trace
+from rigsim.optics.objective_aberrations import centroid_shift_mm, tangential_variance_mm2
+from rigsim.optics.prism_glass import GlassFacet, glass_facet
+from rigsim.render.aberrated_lens import ABERRATED_LENS_PLUGIN, register_aberrated_lens
 from rigsim.render.backend import ensure_variant
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.plugins import LENS_PLUGIN, MIRROR_PLUGIN, register_plugins
@@ -53,6 +63,9 @@ LENS_PATCH_HALF_MM = 20.0
 FACET_HALF_MM = 25.0
 TRUTH_CHUNK = 32768         # rays per pass of the truth trace (its arrays stay in cache)
 MAX_DEPTH = 6               # emitter, lens, facet, lens, (laser disk, null), detector
+MAX_DEPTH_GLASS = 12        # + the prism glass: entrance face twice, the second ghost's two more bounces
+GLASS_PATHS = ("main", "ghost1", "ghost2")
+BEAM_BITMAP_PX = 256        # the Gaussian emitter's radiance bitmap (bilinear): ~0.02 w per texel
 
 
 def _f32(x) -> np.ndarray:
@@ -87,6 +100,23 @@ def _trace_xy(hx, hy, C, f_lens, N, facet_point, z_det):
     qx = rx / arz - (h2x - Cx) / f_lens              # slope per unit |z| after the lens
     qy = ry / arz - (h2y - Cy) / f_lens
     return h2x + (Cz - z_det) * qx, h2y + (Cz - z_det) * qy
+
+
+def _trace_glass(hx, hy, C, f_lens, glass: GlassFacet, z_det, path: str):
+    """The trace of :func:`_trace_xy` with the facet a glass element (``path``: "main", "ghost1" or
+    "ghost2" of :meth:`~rigsim.optics.prism_glass.GlassFacet.paths`): landing (x, y) and the power share."""
+    Cz = float(C[2])
+    dx, dy = -(hx - C[0]) / f_lens, -(hy - C[1]) / f_lens
+    d = np.stack([dx, dy, np.ones_like(dx)], axis=-1)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    p = np.stack([hx, hy, np.full_like(hx, Cz)], axis=-1)
+    q, r, frac = glass.paths(p, d, only="main" if path == "main" else None)[path]
+    t2 = (Cz - q[:, 2]) / r[:, 2]
+    h2x, h2y = q[:, 0] + t2 * r[:, 0], q[:, 1] + t2 * r[:, 1]
+    arz = np.abs(r[:, 2])
+    qx = r[:, 0] / arz - (h2x - C[0]) / f_lens
+    qy = r[:, 1] / arz - (h2y - C[1]) / f_lens
+    return h2x + (Cz - z_det) * qx, h2y + (Cz - z_det) * qy, np.broadcast_to(frac, hx.shape)
 
 
 class LoopRenderer:
@@ -126,6 +156,18 @@ class LoopRenderer:
         self.variant = ensure_variant()
         g, j = self.geom, self.j
         self.core_radius_mm = rig.laser.core_radius_um * 1e-3
+        eff = rig.effects
+        self.beam = eff.gaussian_beam if eff.gaussian_beam.enabled else None
+        self.glass_cfg = eff.prism_glass if eff.prism_glass.enabled else None
+        self.aberr = eff.objective_aberrations if eff.objective_aberrations.enabled else None
+        if self.aberr is not None:
+            register_aberrated_lens()
+        if self.beam is not None:   # the irradiance in the plane conjugate to the CMOS, w(z) from the waist
+            b = self.beam
+            self.beam_radius_mm = beam_radius_mm(b.waist_radius_um * 1e-3, b.wavelength_nm, b.m_squared, b.waist_offset_mm)
+            self.emit_radius_mm = b.truncation * self.beam_radius_mm
+        else:
+            self.emit_radius_mm = self.core_radius_mm
         e = g.emitter_mm[j]
         # world = OTA + C_W, with the lens centre C_W exactly representable in float32
         self.C_W = _f32([-e[0], -e[1], 0.0])
@@ -138,6 +180,15 @@ class LoopRenderer:
         D = g.facet_distance_mm
         u_out = -self.f0
         self.facet_point_W = _f32(np.array([e[0], e[1], 0.0]) + D / u_out[2] * u_out + self.C_W)
+        self.mirror0 = self.f0   # the reflecting face's normal at the reference (OTA = world axes)
+        self.glass0 = None
+        if self.glass_cfg is not None:
+            gc = self.glass_cfg
+            self.glass0 = glass_facet(u_out, self.facet_point_W, n=gc.refractive_index, thickness_mm=gc.thickness_mm,
+                                      wedge_rad=math.radians(gc.wedge_arcsec / 3600.0),
+                                      wedge_azimuth_rad=math.radians(gc.wedge_azimuth_deg))
+            self.mirror0 = self.glass0.mirror
+            self.front_point_W = _f32(self.glass0.front_point)
         # sensor: origin near the detector centre, axes (u, -v, -z): looks at the detector's face
         self.T_s = _f32(self.det_centre_W + SENSOR_STANDOFF_MM * np.array([0, 0, 1.0]))
         Q = self.T_s - SENSOR_STANDOFF_MM * np.array([0, 0, 1.0])
@@ -148,8 +199,10 @@ class LoopRenderer:
         self.roi_origin = (int(roi_origin[0]), int(roi_origin[1]))
         # the render loop's elements: per frame the facet's normal and the lens (Δf) follow the
         # camera state, and the sensor's window moves to the ROI (rigsim.render.scene)
-        self._scene = Scene.from_dict(self._scene_dict(), {"facet": self._facet_update, "lens": self._lens_update,
-                                                           "sensor": self._sensor_update})
+        updates = {"facet": self._facet_update, "lens": self._lens_update, "sensor": self._sensor_update}
+        if self.glass0 is not None:
+            updates["prism_front"] = self._front_update
+        self._scene = Scene.from_dict(self._scene_dict(), updates)
         M = np.eye(4)
         M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = self.u_axis, -self.v_axis, [0, 0, -1.0], self.T_s
         self._scene.params["sensor.to_world"] = mi.Transform4f(M.astype(np.float32))
@@ -177,11 +230,25 @@ class LoopRenderer:
 
         W = self.window_px
         rb = self.core_radius_mm
+        lens_bsdf = {"type": LENS_PLUGIN, "focal_length": g.F, "centre": self.C_W.tolist()}
+        if self.aberr is not None:   # the objective's Seidel wavefront at this CMOS's field point
+            lens_bsdf.update(self._aberration_props(), type=ABERRATED_LENS_PLUGIN)
+        max_depth = MAX_DEPTH if self.glass0 is None else MAX_DEPTH_GLASS
+        if self.beam is None:
+            laser = {"type": "disk", "to_world": M(np.diag([rb, rb, 1.0]), self.laser_W), "bsdf": {"type": "null"},
+                     "emitter": {"type": "directionalarea", "radiance": 1.0}}
+        else:   # a square patch carrying the Gaussian irradiance as its radiance (bilinear bitmap)
+            h = self.emit_radius_mm
+            img = gaussian_irradiance(BEAM_BITMAP_PX, self.beam.truncation).astype(np.float32)
+            laser = {"type": "rectangle", "to_world": M(np.diag([h, h, 1.0]), self.laser_W), "bsdf": {"type": "null"},
+                     "emitter": {"type": "directionalarea",
+                                 "radiance": {"type": "bitmap", "bitmap": mi.Bitmap(img[:, :, None]), "raw": True,
+                                              "filter_type": "bilinear", "wrap_mode": "clamp"}}}
         Rdet = np.column_stack([self.u_axis * 0.5 * g.width_px * g.pitch_mm,
                                 self.v_axis * 0.5 * g.height_px * g.pitch_mm, [0, 0, 1.0]])
         return {
             "type": "scene",
-            "integrator": {"type": "ptracer", "max_depth": MAX_DEPTH, "rr_depth": 100, "hide_emitters": True},
+            "integrator": {"type": "ptracer", "max_depth": max_depth, "rr_depth": 100, "hide_emitters": True},
             "sensor": {"type": "rigsim_telecentric", "pixel_size_mm": g.pitch_mm,
                        "cx": self.u_T, "cy": (g.height_px - 1) - self.v_T,
                        "detector_width": g.width_px, "detector_height": g.height_px,
@@ -189,26 +256,81 @@ class LoopRenderer:
                        "film": {"type": "hdrfilm", "width": W, "height": W, "rfilter": {"type": "box"},
                                 "pixel_format": "luminance", "component_format": "float32"},
                        "sampler": {"type": self.sampler, "sample_count": self.spp}},
-            "laser": {"type": "disk", "to_world": M(np.diag([rb, rb, 1.0]), self.laser_W), "bsdf": {"type": "null"},
-                      "emitter": {"type": "directionalarea", "radiance": 1.0}},
+            "laser": laser,
             "lens": {"type": "rectangle", "to_world": M(np.diag([LENS_PATCH_HALF_MM] * 2 + [1.0]), np.zeros(3)),
-                     "bsdf": {"type": LENS_PLUGIN, "focal_length": g.F, "centre": self.C_W.tolist()}},
+                     "bsdf": lens_bsdf},
             "facet": {"type": "rectangle", "to_world": M(np.diag([FACET_HALF_MM, -FACET_HALF_MM, -1.0]), self.facet_point_W),
                       "bsdf": {"type": MIRROR_PLUGIN, "normal": self.f0.tolist()}},
             "detector": {"type": "rectangle", "to_world": M(Rdet, self.det_centre_W),
                          "bsdf": {"type": "diffuse", "reflectance": 1.0}},
+            **({} if self.glass0 is None else {"prism_front": {
+                "type": "rectangle", "to_world": mi.ScalarTransform4f(self._front_matrix(None).tolist()),
+                "bsdf": {"type": "dielectric", "int_ior": self.glass0.n, "ext_ior": 1.0}}}),
         }
+
+    def _aberration_props(self) -> dict:
+        """The aberrated lens's properties: W131, W222 in mm, the pupil radius, the fill and the field's
+        tangential direction (from the optical axis towards this CMOS's field point, in the lens plane)."""
+        a = self.aberr
+        lam = a.wavelength_nm * 1e-6
+        e = self.geom.emitter_mm[self.j]
+        t = np.array([e[0], e[1], 0.0]) / math.hypot(e[0], e[1])
+        return {"coma_mm": a.coma_waves * lam, "astig_mm": a.astigmatism_waves * lam,
+                "pupil_radius_mm": 0.5 * a.aperture_diameter_mm, "fill": a.beam_fill, "tangential": t.tolist()}
+
+    def aberration_truth(self) -> dict:
+        """Closed forms of the aberrated spot (:mod:`rigsim.optics.objective_aberrations`): its centroid
+        shift (u, v) px and the variance astigmatism adds along the tangential direction, px²."""
+        p = self._aberration_props()
+        g = self.geom
+        fa = g.F / p["pupil_radius_mm"]
+        shift = centroid_shift_mm(coma_mm=p["coma_mm"], f_over_a=fa, fill=p["fill"]) * np.array(p["tangential"][:2])
+        return {"centroid_shift_px": [float(shift @ self.u_axis[:2] / g.pitch_mm), float(shift @ self.v_axis[:2] / g.pitch_mm)],
+                "tangential_uv": [float(np.array(p["tangential"][:2]) @ self.u_axis[:2]),
+                                  float(np.array(p["tangential"][:2]) @ self.v_axis[:2])],
+                "astigmatism_tangential_variance_px2":
+                    tangential_variance_mm2(astig_mm=p["astig_mm"], f_over_a=fa, fill=p["fill"]) / g.pitch_mm**2}
+
+    def _front_matrix(self, E_ota) -> np.ndarray:
+        """float32 to_world of the glass's entrance face (a rectangle whose normal is the face's,
+        towards the camera) for the camera rotation ``E_ota`` (None: the reference)."""
+        nf = self.glass0.front
+        a = np.cross(nf, [0.0, 1.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(nf, a)
+        R = np.column_stack([a * FACET_HALF_MM, b * FACET_HALF_MM, nf])
+        if E_ota is not None:
+            R = E_ota.T @ R
+        A = np.eye(4)
+        A[:3, :3], A[:3, 3] = R, self.front_point_W
+        return A.astype(np.float32)
+
+    def _glass_now(self, front_matrix: np.ndarray, N: np.ndarray) -> GlassFacet:
+        """The glass element the scene renders: the entrance face's normal as Mitsuba derives it from the
+        float32 matrix (inverse transpose), the coated face's float32 normal."""
+        A = front_matrix.astype(np.float64)
+        nf = np.linalg.inv(A[:3, :3]).T @ np.array([0.0, 0.0, 1.0])
+        return GlassFacet(nf / np.linalg.norm(nf), N, A[:3, 3], self.facet_point_W, self.glass0.n)
 
     def _rendered_params(self, E_hrc, delta_f_mm) -> dict:
         """Float32 values of everything the scene gets for this state (the truth uses these)."""
         g = self.geom
         C = g.R_ota_from_hrc
         E = np.eye(3) if E_hrc is None else np.asarray(E_hrc, float)
-        N = _f32((C @ E @ C.T).T @ self.f0)
+        N = _f32((C @ E @ C.T).T @ self.mirror0)
         dF = float(delta_f_mm) / g.telecentric_factor
         dz = float(_f32(dF))
         f_lens = float(_f32(g.F + dF))
-        return {"N": N, "lens_z": dz, "f_lens": f_lens, "C": self.C_W + np.array([0.0, 0.0, dz])}
+        out = {"N": N, "lens_z": dz, "f_lens": f_lens, "C": self.C_W + np.array([0.0, 0.0, dz])}
+        if self.glass0 is not None:
+            out["front"] = self._front_matrix(C @ E @ C.T)
+            out["glass"] = self._glass_now(out["front"], N)
+        return out
+
+    def _front_update(self, state) -> dict:
+        import mitsuba as mi
+
+        return {"prism_front.to_world": mi.Transform4f(state["params"]["front"])}
 
     def _facet_update(self, state) -> dict:
         import mitsuba as mi
@@ -238,8 +360,28 @@ class LoopRenderer:
     def exact_uv(self, E_hrc=None, delta_f_mm=0.0) -> np.ndarray:
         """Spot centre (image of the core's centre) from the exact forward model, rigsim px."""
         g = self.geom
+        if self.glass0 is not None:
+            return self.glass_spots_uv(E_hrc, delta_f_mm)["main"][0]
         P = loop_trace(g, E_hrc, delta_f_mm)[self.j]
         return g.xy_to_uv(g.focal_to_xy(np.stack([P, P]))[self.j])
+
+    def glass_spots_uv(self, E_hrc=None, delta_f_mm=0.0) -> dict:
+        """With the prism glass on: {path: (centre uv of the image of the core's centre, fraction of the
+        power)} for the main return and the two ghosts (exact vector Snell/Fresnel trace of the
+        rendered float32 parameters)."""
+        p = self._rendered_params(E_hrc, delta_f_mm)
+        out = {}
+        for path in GLASS_PATHS:
+            lx, ly, frac = _trace_glass(np.array([self.laser_W[0]]), np.array([self.laser_W[1]]), p["C"], p["f_lens"],
+                                        p["glass"], self.det_centre_W[2], path)
+            out[path] = (np.array(self._uv_of_landing(lx, ly))[:, 0], float(frac[0]))
+        return out
+
+    def _uv_of_landing(self, lx, ly):
+        g = self.geom
+        ex, ey = lx - self.det_centre_W[0], ly - self.det_centre_W[1]   # the landing plane is the detector's
+        return ((ex * self.u_axis[0] + ey * self.u_axis[1]) / g.pitch_mm + g.cx,
+                (ex * self.v_axis[0] + ey * self.v_axis[1]) / g.pitch_mm + g.cy)
 
     def truth(self, E_hrc=None, delta_f_mm=0.0, window_origin=None, rng_seed: int = 0) -> dict:
         """Exact truth of the rendered scene (float64 trace of its float32 parameters): the spot
@@ -252,7 +394,10 @@ class LoopRenderer:
         du, dv = np.empty(n), np.empty(n)
         for a in range(0, n, TRUTH_CHUNK):   # in cache-sized chunks: the trace is many passes over its arrays
             sl = slice(a, a + TRUTH_CHUNK)
-            lx, ly = _trace_xy(sx[sl], sy[sl], p["C"], p["f_lens"], p["N"], self.facet_point_W, self.det_centre_W[2])
+            if self.glass0 is None:
+                lx, ly = _trace_xy(sx[sl], sy[sl], p["C"], p["f_lens"], p["N"], self.facet_point_W, self.det_centre_W[2])
+            else:   # the main return (the ghosts: glass_spots_uv)
+                lx, ly, _ = _trace_glass(sx[sl], sy[sl], p["C"], p["f_lens"], p["glass"], self.det_centre_W[2], "main")
             ex, ey = lx - self.det_centre_W[0], ly - self.det_centre_W[1]   # the landing plane is the detector's
             du[sl] = (ex * self.u_axis[0] + ey * self.u_axis[1]) / g.pitch_mm + g.cx
             dv[sl] = (ex * self.v_axis[0] + ey * self.v_axis[1]) / g.pitch_mm + g.cy
@@ -265,7 +410,7 @@ class LoopRenderer:
         inside = (iu >= u0) & (iu < u0 + W) & (iv >= v0) & (iv < v0 + W) & (iu >= 0) & (iv >= 0) \
             & (iu < g.width_px) & (iv < g.height_px)
         binned = np.array([iu[inside].mean(), iv[inside].mean()]) if inside.any() else np.array([np.nan, np.nan])
-        rad_px = self.core_radius_mm / g.pitch_mm
+        rad_px = self.emit_radius_mm / g.pitch_mm
         flags = {
             "spot_outside_model": False,
             "spot_off_detector": bool(not (-0.5 <= centre[0] <= g.width_px - 0.5 and -0.5 <= centre[1] <= g.height_px - 0.5)),
@@ -273,10 +418,23 @@ class LoopRenderer:
                                      or centre[0] + rad_px > g.width_px - 1.5 or centre[1] + rad_px > g.height_px - 1.5),
             "spot_exceeds_window": bool(inside.mean() < 1.0),
         }
-        return {"spot_uv": centre.tolist(), "mean_uv": [float(du.mean()), float(dv.mean())],
-                "pixel_centroid_uv": binned.tolist(), "window_origin_uv": [int(u0), int(v0)],
-                "fraction_in_window": float(inside.mean()), "flags": flags,
-                "facet_normal_ota_f32": p["N"].tolist(), "lens_focal_length_mm_f32": p["f_lens"]}
+        out = {"spot_uv": centre.tolist(), "mean_uv": [float(du.mean()), float(dv.mean())],
+               "pixel_centroid_uv": binned.tolist(), "window_origin_uv": [int(u0), int(v0)],
+               "fraction_in_window": float(inside.mean()), "flags": flags,
+               "facet_normal_ota_f32": p["N"].tolist(), "lens_focal_length_mm_f32": p["f_lens"]}
+        if self.aberr is not None:
+            ab = self.aberration_truth()
+            ab["aberrated_centroid_uv"] = (binned + np.array(ab["centroid_shift_px"])).tolist()
+            out["objective_aberrations"] = ab
+        if self.beam is not None:
+            out["gaussian_beam"] = {"radius_mm": self.beam_radius_mm, "second_moment_px2": (self.beam_radius_mm / g.pitch_mm) ** 2 / 4}
+        if self.glass0 is not None:   # every path's centre and power share, and the centroid of all of them
+            spots = self.glass_spots_uv(E_hrc, delta_f_mm)
+            w = np.array([spots[k][1] for k in GLASS_PATHS])
+            uv = np.array([spots[k][0] for k in GLASS_PATHS])
+            out["prism_glass"] = {k: {"uv": spots[k][0].tolist(), "fraction": spots[k][1]} for k in GLASS_PATHS}
+            out["prism_glass"]["all_paths_centroid_uv"] = (w @ uv / w.sum()).tolist()
+        return out
 
     def _truth_sources(self, rng_seed: int) -> tuple[np.ndarray, np.ndarray]:
         """The truth's ray origins on the core (uniform on the disk, drawn from ``rng_seed``): the same for
@@ -286,9 +444,13 @@ class LoopRenderer:
             return cached[1], cached[2]
         rng = np.random.default_rng(rng_seed)
         n = self.truth_rays
-        r = self.core_radius_mm * np.sqrt(rng.random(n))
-        t = 2 * np.pi * rng.random(n)
-        sx, sy = self.laser_W[0] + r * np.cos(t), self.laser_W[1] + r * np.sin(t)
+        if self.beam is not None:   # the Gaussian irradiance, cut where the emitting patch's disk ends
+            x, y = sample_gaussian_disk(rng, n, self.beam_radius_mm, self.beam.truncation)
+            sx, sy = self.laser_W[0] + x, self.laser_W[1] + y
+        else:
+            r = self.core_radius_mm * np.sqrt(rng.random(n))
+            t = 2 * np.pi * rng.random(n)
+            sx, sy = self.laser_W[0] + r * np.cos(t), self.laser_W[1] + r * np.sin(t)
         self._sources = ((rng_seed, self.truth_rays), sx, sy)
         return sx, sy
 
@@ -376,7 +538,16 @@ class LoopRenderer:
 
     def settings(self, spp=None) -> dict:
         g = self.geom
-        return {"primitive": "boresight_laser_loop", "variant": self.variant, "camera": g.name,
+        extra = {}
+        if self.beam is not None:
+            extra["gaussian_beam"] = {"w_at_conjugate_mm": self.beam_radius_mm, **self.beam.model_dump(exclude={"enabled"})}
+        if self.aberr is not None:
+            extra["objective_aberrations"] = {"model": "Seidel wavefront (coma, astigmatism) ×2 on the return crossing",
+                                              **self.aberr.model_dump(exclude={"enabled"})}
+        if self.glass0 is not None:
+            extra["prism_glass"] = {"integrator_max_depth": MAX_DEPTH_GLASS, "entrance_face": "dielectric rectangle",
+                                    **self.glass_cfg.model_dump(exclude={"enabled"})}
+        return {**extra, "primitive": "boresight_laser_loop", "variant": self.variant, "camera": g.name,
                 "detector": f"M{self.j + 1}", "integrator": f"ptracer(max_depth={MAX_DEPTH}, hide_emitters)",
                 "sampler": self.sampler, "spp": int(spp or self.spp), "window_px": self.window_px,
                 "lens": "ideal thin lens (rigsim_ideal_lens), in focus", "facet": "rigsim_normal_mirror",
