@@ -39,7 +39,8 @@ in quadrature the RMS grows by more than 12 %."""
 MUST_LIMIT = 1.0
 """…and must be handled beyond this fraction: the RMS grows by more than 41 %."""
 COUNT_LOSS_MARGINAL, COUNT_LOSS_LIMIT = 0.01, 0.05
-"""Shares of the ideal run's identified stars or frames whose loss is marginal / must be handled."""
+"""Shares of a count of the ideal run (identified stars or frames, sweep frames, converged runs) whose
+loss is marginal / must be handled."""
 
 
 @dataclass(frozen=True)
@@ -254,12 +255,14 @@ def _markdown(results: list[RobustnessResult], rows: list[list[dict]], verdict: 
     lines = [f"# Robustness of the {res.family} pipeline to the rig's effects — {res.rig_name}", "",
              f"{res.trials} trials per configuration (seeds {res.seed} … {res.seed + res.trials - 1}, the same for "
              "every configuration), each a full rendered run compared with its truth"
-             + (f"; every run's frames go through {len(results)} pipeline variants" if len(results) > 1 else "")
+             + (f"; every configuration goes through {len(results)} pipeline variants" if len(results) > 1 else "")
              + ". *added* is the RMS of the paired difference to the ideal run: the error the effect itself adds. "
              f"An effect is *marginal* when it adds more than {ADDED_LIMIT:g}× the reference (the budget, or the "
              f"ideal run's RMS error: the RMS grows by 12 %) or loses more than {100 * COUNT_LOSS_MARGINAL:g} % of the "
-             f"identified stars or frames; it *must be handled* beyond {MUST_LIMIT:g}× (the RMS grows by 41 %), "
-             f"beyond {100 * COUNT_LOSS_LIMIT:g} % lost, or with more than 0.5 wrong identifications per run.", ""]
+             f"count (identified stars or frames, sweep frames, converged runs); it *must be handled* beyond "
+             f"{MUST_LIMIT:g}× (the RMS grows by 41 %), beyond {100 * COUNT_LOSS_LIMIT:g} % lost"
+             + (", or with more than 0.5 more wrong counts (wrong identifications) per run"
+                if any(q.lower_is_better for q in res.quantities) else "") + ".", ""]
     if frames_png:
         lines += [f"![a frame, ideal and with every effect]({frames_png})", ""]
     lines += ["## Verdict", ""]
