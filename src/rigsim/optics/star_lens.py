@@ -14,12 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GLASSES", "STAR_LENS_4", "STAR_LENS_4_STOP", "StarLens", "Surface", "abbe_number", "refractive_index"]
+__all__ = ["GLASSES", "STAR_LENS", "STAR_LENS_STOP", "StarLens", "Surface", "abbe_number", "refractive_index"]
 
 # Schott catalogue Sellmeier coefficients (B1..B3, C1..C3 in µm²): n² − 1 = Σ Bᵢ λ² / (λ² − Cᵢ)
 GLASSES = {
     "N-SK16": ((1.34317774, 0.241144399, 0.994317969), (0.00704687339, 0.0229005, 92.7508526)),
     "F2": ((1.34533359, 0.209073176, 0.937357162), (0.00997743871, 0.0470450767, 111.886764)),
+    "SK2": ((1.28189012, 0.257738258, 0.96818604), (0.0072719164, 0.0242823527, 110.377773)),
+    "F5": ((1.3104463, 0.19603426, 0.96612977), (0.00958633048, 0.0457627627, 115.011883)),
 }
 
 
@@ -46,22 +48,26 @@ class Surface:
     medium: str       # medium after the surface
 
 
-# (chosen) A four-element air-spaced objective (N-SK16, N-SK16 / F2 / N-SK16: a Cooke triplet with its
-# front crown split in two), stop at the front of the flint. Radius (mm), thickness to the next vertex
-# (mm), medium after. The form is the classical triplet; the radii and spacings were optimised with
-# this module's trace for f/2.17 over the 20° × 20° field at 450–800 nm (least rms spot radius, edge
-# thickness ≥ 1 mm glass / 0.3 mm air): docs/effects-star.md. StarLens scales it to the rig's focal length.
-STAR_LENS_4 = (
-    (33.561, 1.378, "N-SK16"),
-    (84.454, 0.117, "air"),
-    (17.264, 3.627, "N-SK16"),
-    (-54.861, 0.257, "air"),
-    (-46.562, 11.143, "F2"),
-    (10.366, 9.776, "air"),
-    (17.703, 2.225, "N-SK16"),
-    (-4120.674, 0.0, "air"),
+# (chosen) A double-Gauss objective of six elements: SK2 | N-SK16 + F5 | stop | F5 + N-SK16 | N-SK16, two
+# cemented doublets. Radius (mm, 0 = plane), thickness to the next vertex (mm), medium after. The form
+# is the classical double Gauss; the radii and spacings were re-optimised with this module's trace
+# for f = 43.3 mm, f/2.17 over the 20° × 20° field at 450–850 nm (least polychromatic rms spot radius,
+# edge thickness ≥ 1 mm glass / 0.2 mm air): docs/effects-star.md. StarLens scales it to the rig's
+# focal length (a factor 1.0000 for the default rig).
+STAR_LENS = (
+    (25.941, 2.388, "SK2"),
+    (70.327, 0.173, "air"),
+    (16.577, 6.448, "N-SK16"),
+    (55.979, 1.473, "F5"),
+    (10.374, 9.863, "air"),
+    (0.0, 4.461, "air"),          # the aperture stop
+    (-14.700, 2.993, "F5"),
+    (38.059, 5.865, "N-SK16"),
+    (-18.055, 0.460, "air"),
+    (44.999, 2.996, "N-SK16"),
+    (-68.204, 0.0, "air"),
 )
-STAR_LENS_4_STOP = 4  # index of the stop surface
+STAR_LENS_STOP = 5  # index of the stop surface
 
 
 class StarLens:
@@ -70,7 +76,7 @@ class StarLens:
     entrance pupil of ``epd_mm``; the detector ``defocus_mm`` behind the best focus (least rms spot radius on
     axis) at ``ref_nm``."""
 
-    def __init__(self, surfaces=STAR_LENS_4, *, stop: int = STAR_LENS_4_STOP, focal_length_mm: float = 50.0,
+    def __init__(self, surfaces=STAR_LENS, *, stop: int = STAR_LENS_STOP, focal_length_mm: float = 50.0,
                  epd_mm: float = 10.0, ref_nm: float = 587.5618, defocus_mm: float = 0.0):
         s0 = [Surface(0.0 if r == 0 else 1.0 / r, t, m) for r, t, m in surfaces]
         k = focal_length_mm / _efl(s0, ref_nm)
