@@ -154,3 +154,15 @@ def test_tabulated_psfs_are_integrated_exactly_over_the_pixels_with_smear():
 def test_the_mitsuba_renderer_refuses_the_traced_psf(traced):
     with pytest.raises(ValueError, match="traced_psf"):
         render_frame(traced, np.eye(3), seed=1, renderer="mitsuba", mitsuba=object(), fits_header=False)
+
+
+def test_bad_traced_psf_values_name_the_field_and_the_range():
+    from rigsim.errors import RigError
+    from rigsim.rig.load import parse_model
+    from rigsim.rig.star import StarRig
+
+    with pytest.raises(RigError, match=r"effects\.traced_psf\.wavelengths` = 0.*≥ 1 and ≤ 41"):
+        parse_model(StarRig, {"name": "x", "effects": {"traced_psf": {"wavelengths": 0}}}, "f.toml")
+    with pytest.raises(RigError, match=r"band_max_nm = 500.0 must be ≥ band_min_nm = 800.0"):
+        parse_model(StarRig, {"name": "x", "effects": {"traced_psf": {"band_min_nm": 800.0, "band_max_nm": 500.0}}},
+                    "f.toml")

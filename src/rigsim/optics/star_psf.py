@@ -120,10 +120,11 @@ def psf_table(lens, *, tan_max_x: float, tan_max_y: float, wavelengths_nm, pixel
                 g = (o + R) * os_ - 0.5                  # continuous bin coordinate (bin k's centre at k)
                 k0 = np.floor(g).astype(np.int64)
                 f = g - k0
-                img = np.zeros((n, n))
+                img = np.zeros(n * n)
                 for du, dv, wt in ((0, 0, (1 - f[:, 0]) * (1 - f[:, 1])), (1, 0, f[:, 0] * (1 - f[:, 1])),
                                    (0, 1, (1 - f[:, 0]) * f[:, 1]), (1, 1, f[:, 0] * f[:, 1])):
-                    np.add.at(img, (k0[:, 1] + dv, k0[:, 0] + du), wt)
+                    img += np.bincount((k0[:, 1] + dv) * n + k0[:, 0] + du, weights=wt, minlength=n * n)
+                img = img.reshape(n, n)
                 sig = 0.42 * lam * 1e-3 * f_number / pixel_pitch_um * os_
                 img = gaussian_filter(img, sig, mode="constant", truncate=4.0)
                 img /= img.sum()

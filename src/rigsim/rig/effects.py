@@ -81,7 +81,7 @@ class TracedPSF(Effect):
     band_min_nm: float = Field(450.0, ge=300.0, le=1100.0, description="shortest wavelength of the sensor's band")
     band_max_nm: float = Field(850.0, ge=300.0, le=1100.0, description="longest wavelength of the sensor's band")
     wavelengths: int = Field(7, ge=1, le=41, description="wavelengths traced across the band")
-    field_nodes: int = Field(7, ge=2, le=33, description="field directions traced per axis (bilinear between them)")
+    field_nodes: int = Field(13, ge=2, le=33, description="field directions traced per axis (bilinear between them)")
     pupil_rays: int = Field(48, ge=8, le=512, description="rays across the entrance pupil")
     oversample: int = Field(4, ge=1, le=16, description="PSF bins per pixel")
 
