@@ -15,7 +15,7 @@ F, EPD, REF, PITCH = 43.3, 20.0, 600.0, 15.0   # the default rig's [sensor]
 
 @pytest.fixture(scope="module")
 def lens():
-    return StarLens(focal_length_mm=F, epd_mm=EPD, ref_nm=REF, defocus_mm=0.1)
+    return StarLens(focal_length_mm=F, epd_mm=EPD, ref_nm=REF, defocus_mm=-0.1)   # as the rig's traced_psf
 
 
 @pytest.mark.parametrize("glass, nd, vd", [("N-SK16", 1.62041, 60.32), ("F2", 1.62004, 36.37),

@@ -73,8 +73,8 @@ STAR_LENS_STOP = 5  # index of the stop surface
 class StarLens:
     """A rotationally symmetric lens: ``surfaces`` (radius mm, thickness mm, medium after) scaled so its
     paraxial focal length at ``ref_nm`` is ``focal_length_mm``; the stop (surface ``stop``) sized for an
-    entrance pupil of ``epd_mm``; the detector ``defocus_mm`` behind the best focus (least rms spot radius on
-    axis) at ``ref_nm``."""
+    entrance pupil of ``epd_mm``; the detector ``defocus_mm`` from the best focus (least rms spot radius on
+    axis) at ``ref_nm``, + away from the lens."""
 
     def __init__(self, surfaces=STAR_LENS, *, stop: int = STAR_LENS_STOP, focal_length_mm: float = 50.0,
                  epd_mm: float = 10.0, ref_nm: float = 587.5618, defocus_mm: float = 0.0):

@@ -96,7 +96,9 @@ def _table(key: tuple):
     from rigsim.optics.star_psf import psf_table
 
     f_mm, epd_mm, ref_nm, defocus_um, pitch_um, tx, ty, lo, hi, nl, nodes, rays, os_ = key
-    lens = StarLens(focal_length_mm=f_mm, epd_mm=epd_mm, ref_nm=ref_nm, defocus_mm=defocus_um * 1e-3)
+    # the detector sits defocus_um before best focus (towards the lens): on that side the lens's spherical
+    # aberration leaves a filled blur disk; behind it the rays cross in a caustic core (docs/effects-star.md)
+    lens = StarLens(focal_length_mm=f_mm, epd_mm=epd_mm, ref_nm=ref_nm, defocus_mm=-defocus_um * 1e-3)
     return psf_table(lens, tan_max_x=tx, tan_max_y=ty, wavelengths_nm=np.linspace(lo, hi, nl), pixel_pitch_um=pitch_um,
                      nodes=nodes, pupil_rays=rays, oversample=os_)
 

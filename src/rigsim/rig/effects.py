@@ -75,8 +75,8 @@ class StrayLight(Effect):
 class TracedPSF(Effect):
     """The PSF of the traced lens (``rigsim.optics.star_lens``) instead of the Gaussian: field-dependent,
     and the spectrum-weighted sum over the band for each star's colour (B−V). Focal length and entrance
-    pupil come from ``[sensor]``; the detector sits ``[sensor.psf] defocus_um`` behind the best focus at
-    ``[sensor.psf] wavelength_nm``."""
+    pupil come from ``[sensor]``; the detector sits ``[sensor.psf] defocus_um`` before the best focus (towards
+    the lens) at ``[sensor.psf] wavelength_nm``."""
 
     band_min_nm: float = Field(450.0, ge=300.0, le=1100.0, description="shortest wavelength of the sensor's band")
     band_max_nm: float = Field(850.0, ge=300.0, le=1100.0, description="longest wavelength of the sensor's band")
