@@ -19,10 +19,11 @@ from scipy.special import erf
 from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
 from rigsim.render.scene import Element, PinholeSensor, Scene
-from rigsim.render.star_effects import star_frame_effects
+from rigsim.render.star_effects import star_frame_effects, traced_margin_px, traced_star_psfs
 from rigsim.truth.star import StarSky
 
-__all__ = ['render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'pixel_fractions_1d', 'MitsubaStarRenderer']
+__all__ = ['render_frame', 'render_sequence', 'frame_seed', 'render_stars', 'render_stars_psf', 'pixel_fractions_1d',
+           'MitsubaStarRenderer']
 
 def _window_seed(seed: int, k: int) -> int:
     """The sampler seed of window k of a frame (the earlier seed·100003 + k while it fits 32 bits)."""
@@ -45,9 +46,25 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
     fit the frame's FITS cards (``extra["fits_header"]``, a TAN-SIP WCS fit) for writing it as a file."""
     s = sky.rig.sensor
     sigma = s.psf_sigma_px
+    traced = sky.rig.effects.traced_psf.enabled
     margin = -math.ceil(5.0 * sigma)  # stars just off the detector still put their wings on it
+    if traced:
+        margin = min(margin, -traced_margin_px(sky.rig))
     truth = sky.field(R_cam_from_icrs, omega_cam_rad_s=omega_cam_rad_s, substeps=substeps, margin_px=margin)
-    if renderer == "analytic":
+    traced_truth = None
+    if traced:
+        if renderer != "analytic":
+            raise ValueError("effects.traced_psf: the traced PSF is rendered by the analytic renderer only "
+                             f"(renderer = {renderer!r})")
+        psfs, shift, table = traced_star_psfs(sky.rig, truth)
+        photons = render_stars_psf(truth.uv_substeps, truth.photons, truth.shape_hw, psfs, table.radius_px,
+                                   table.oversample, background=truth.background_photons_per_px)
+        settings = {"renderer": "analytic", "psf": "traced lens (effects.traced_psf)", "substeps": int(substeps),
+                    "psf_radius_px": table.radius_px, "psf_oversample": table.oversample}
+        traced_truth = {"centroid_shift_px": shift.tolist(),
+                        "truth_uv": "uv is the geometric image point (the rig's pinhole + Brown camera); the "
+                                    "rendered PSF's centroid lies at uv + centroid_shift_px"}
+    elif renderer == "analytic":
         photons = render_stars(truth.uv_substeps, truth.photons, truth.shape_hw, sigma,
                                background=truth.background_photons_per_px)
         settings = {"renderer": "analytic", "psf": "pixel-integrated gaussian", "sigma_px": sigma,
@@ -62,6 +79,8 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
     fx = star_frame_effects(sky, seed=int(seed), noiseless=noiseless)
     if fx.photons is not None:
         photons = photons + fx.photons
+    if traced_truth is not None:
+        fx.truth["traced_psf"] = traced_truth
     truth_dict = truth.as_dict()
     if fx.truth:
         truth_dict["effects"] = fx.truth
@@ -156,6 +175,45 @@ def render_stars(uv, photons, shape_hw: tuple[int, int], sigma_px: float, *, bac
     if not inside.all():
         vals, cols, rows = vals[inside], cols[inside], rows[inside]
     img += np.bincount(rows * W + cols, weights=vals, minlength=H * W)
+    return img.reshape(H, W)
+
+def render_stars_psf(uv, photons, shape_hw: tuple[int, int], psfs, radius_px: int, oversample: int, *,
+                     background: float = 0.0) -> np.ndarray:
+    """Expected photons per pixel of stars with their own tabulated PSFs: ``psfs`` (N, n, n) on bins of
+    1/``oversample`` px (n = 2·radius·oversample, bin k's centre at (k + ½)/oversample − radius from the
+    star's ``uv``), constant within a bin and integrated exactly over each pixel. ``uv`` (N, 2) or
+    (N, K, 2) as in :func:`render_stars`."""
+    H, W = int(shape_hw[0]), int(shape_hw[1])
+    uv = np.asarray(uv, dtype=float)
+    if uv.ndim == 2:
+        uv = uv[:, None, :]
+    ph = np.asarray(photons, dtype=float)
+    img = np.full(H * W, float(background))
+    ok = np.all(np.isfinite(uv), axis=(1, 2)) & (ph > 0)
+    if not ok.any():
+        return img.reshape(H, W)
+    uv, ph, P = uv[ok], ph[ok], np.asarray(psfs, dtype=float)[ok]
+    n = P.shape[-1]
+    R, os_ = int(radius_px), int(oversample)
+    spread = math.ceil(np.abs(uv - uv.mean(axis=1, keepdims=True)).max())
+    m = 2 * (R + spread) + 2                                      # pixels of each star's window, per axis
+    lo = np.floor(uv.mean(axis=1) + 0.5).astype(np.int64) - R - spread - 1   # (N, 2) first pixel
+    e = np.arange(n + 1) / os_ - R                                 # bin edges from the star's position
+
+    def overlap(c, lo_ax):  # (N, K, m, n): share of each bin in each pixel
+        pix = lo_ax[:, None, None, None] + np.arange(m)[None, None, :, None]
+        a = c[:, :, None, None] + e[None, None, None, :-1]
+        b = c[:, :, None, None] + e[None, None, None, 1:]
+        return np.clip(np.minimum(pix + 0.5, b) - np.maximum(pix - 0.5, a), 0.0, None) * os_
+
+    Au, Av = overlap(uv[:, :, 0], lo[:, 0]), overlap(uv[:, :, 1], lo[:, 1])
+    win = (Av @ P[:, None] @ np.swapaxes(Au, 2, 3)).mean(axis=1) * ph[:, None, None]   # (N, m, m) rows v
+    cols = lo[:, 0, None, None] + np.arange(m)[None, None, :]
+    rows = lo[:, 1, None, None] + np.arange(m)[None, :, None]
+    cols, rows = np.broadcast_arrays(cols, rows)
+    vals, cols, rows = win.ravel(), cols.ravel(), rows.ravel()
+    inside = (cols >= 0) & (cols < W) & (rows >= 0) & (rows < H)
+    img += np.bincount(rows[inside] * W + cols[inside], weights=vals[inside], minlength=H * W)
     return img.reshape(H, W)
 
 # ------------------------------------------------------------------------------------------ (from render_mitsuba.py)

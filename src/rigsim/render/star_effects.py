@@ -8,6 +8,8 @@ detector noise nor another effect's draw.
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,7 +17,7 @@ import numpy as np
 from rigsim.detector.defects import deposit_cosmic_rays, draw_cosmic_rays, hot_pixel_electrons, hot_pixel_rates
 from rigsim.optics.stray_light import stray_light_mag_map, surface_brightness_photons
 
-__all__ = ["FrameEffects", "effects_rng", "star_frame_effects"]
+__all__ = ["FrameEffects", "effects_rng", "star_frame_effects", "traced_psf_table", "traced_star_psfs"]
 
 _STREAMS = {"hot_pixels": 0x407, "cosmic_rays": 0xC05}
 
@@ -86,3 +88,48 @@ def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffec
     if eff.hot_pixels.enabled or eff.cosmic_rays.enabled:
         out.electrons = electrons
     return out
+
+
+@functools.lru_cache(maxsize=4)
+def _table(key: tuple):
+    from rigsim.optics.star_lens import StarLens
+    from rigsim.optics.star_psf import psf_table
+
+    f_mm, epd_mm, ref_nm, defocus_um, pitch_um, tx, ty, lo, hi, nl, nodes, rays, os_ = key
+    # the detector sits defocus_um before best focus (towards the lens): on that side the lens's spherical
+    # aberration leaves a filled blur disk; behind it the rays cross in a caustic core (docs/effects-star.md)
+    lens = StarLens(focal_length_mm=f_mm, epd_mm=epd_mm, ref_nm=ref_nm, defocus_mm=-defocus_um * 1e-3)
+    return psf_table(lens, tan_max_x=tx, tan_max_y=ty, wavelengths_nm=np.linspace(lo, hi, nl), pixel_pitch_um=pitch_um,
+                     nodes=nodes, pupil_rays=rays, oversample=os_)
+
+
+def traced_psf_table(rig):
+    """The :class:`rigsim.optics.star_psf.PSFTable` of the rig's traced lens over its field (cached per
+    lens, detector and ``[effects.traced_psf]`` values: the robustness trials share it)."""
+    s, tp = rig.sensor, rig.effects.traced_psf
+    cam = s.camera()
+    W, H = s.resolution_px
+    corners = np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]])
+    d = cam.unproject(corners)
+    t = np.abs(d[:, :2] / d[:, 2:3]).max(axis=0) * 1.02   # the field's tangents, 2 % wider (off-detector wings)
+    key = (float(s.focal_length_mm), float(s.aperture_diameter_mm), float(s.psf.wavelength_nm), float(s.psf.defocus_um),
+           float(s.pixel_pitch_um), round(float(t[0]), 6), round(float(t[1]), 6), float(tp.band_min_nm),
+           float(tp.band_max_nm), int(tp.wavelengths), int(tp.field_nodes), int(tp.pupil_rays), int(tp.oversample))
+    return _table(key)
+
+
+def traced_star_psfs(rig, truth):
+    """Each star's traced PSF (N, n, n), its shift from the truth position (N, 2) px, and the table: the
+    PSF of the star's direction and colour (B−V → blackbody temperature → photons per wavelength)."""
+    from rigsim.optics.star_psf import bv_temperature_k, photon_spectrum_weights
+
+    table = traced_psf_table(rig)
+    bv = np.where(np.isfinite(truth.bv), truth.bv, 0.65) if truth.bv is not None else np.full(len(truth), 0.65)
+    w = photon_spectrum_weights(bv_temperature_k(bv), table.wavelengths_nm)
+    psfs, shift = table.star_psfs(truth.dirs_cam, w)
+    return psfs, shift, table
+
+
+def traced_margin_px(rig) -> int:
+    """How far off the detector a star's traced PSF still reaches (px)."""
+    return math.ceil(traced_psf_table(rig).radius_px)

@@ -8,11 +8,12 @@ switchable (``enabled``) with its physical parameters. Every effect is off unles
 
 from __future__ import annotations
 
-from pydantic import Field, StrictBool
+from pydantic import Field, StrictBool, model_validator
 
 from rigsim.rig.model import RigModel
 
-__all__ = ["STAR_EFFECTS", "CosmicRays", "Effect", "EffectsTable", "HotPixels", "StarEffects", "StrayLight"]
+__all__ = ["STAR_EFFECTS", "CosmicRays", "Effect", "EffectsTable", "HotPixels", "StarEffects", "StrayLight",
+           "TracedPSF"]
 
 
 class Effect(RigModel):
@@ -71,10 +72,31 @@ class StrayLight(Effect):
                                  description="direction towards the source in the image, from +u towards +v")
 
 
+class TracedPSF(Effect):
+    """The PSF of the traced lens (``rigsim.optics.star_lens``) instead of the Gaussian: field-dependent,
+    and the spectrum-weighted sum over the band for each star's colour (B−V). Focal length and entrance
+    pupil come from ``[sensor]``; the detector sits ``[sensor.psf] defocus_um`` before the best focus (towards
+    the lens) at ``[sensor.psf] wavelength_nm``."""
+
+    band_min_nm: float = Field(450.0, ge=300.0, le=1100.0, description="shortest wavelength of the sensor's band")
+    band_max_nm: float = Field(850.0, ge=300.0, le=1100.0, description="longest wavelength of the sensor's band")
+    wavelengths: int = Field(7, ge=1, le=41, description="wavelengths traced across the band")
+    field_nodes: int = Field(13, ge=2, le=33, description="field directions traced per axis (bilinear between them)")
+    pupil_rays: int = Field(48, ge=8, le=512, description="rays across the entrance pupil")
+    oversample: int = Field(4, ge=1, le=16, description="PSF bins per pixel")
+
+    @model_validator(mode="after")
+    def _band(self):
+        if self.band_max_nm < self.band_min_nm:
+            raise ValueError(f"band_max_nm = {self.band_max_nm} must be ≥ band_min_nm = {self.band_min_nm}")
+        return self
+
+
 class StarEffects(EffectsTable):
     hot_pixels: HotPixels = Field(default_factory=HotPixels)
     cosmic_rays: CosmicRays = Field(default_factory=CosmicRays)
     stray_light: StrayLight = Field(default_factory=StrayLight)
+    traced_psf: TracedPSF = Field(default_factory=TracedPSF)
 
 
 STAR_EFFECTS = StarEffects.names()

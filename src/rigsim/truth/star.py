@@ -38,6 +38,7 @@ class StarField:
     R_cam_from_icrs: np.ndarray  # (3, 3) mid-exposure attitude
     background_photons_per_px: float
     shape_hw: tuple[int, int]
+    bv: np.ndarray | None = None  # (N,) catalogue colour B−V (mag) of each star (the traced PSF's spectrum)
 
     def __len__(self) -> int:
         return int(self.hip.shape[0])
@@ -111,7 +112,7 @@ class StarSky:
         return StarField(hip=cat.hip[gi], mag=cat.hp_mag[gi], photons=self.photons(cat.hp_mag[gi], cos_t[sel]),
                          dirs_icrs=v_icrs[sel], dirs_cam=d_cam[sel], uv=uv[sel], uv_substeps=uv_sub[sel],
                          R_cam_from_icrs=R, background_photons_per_px=self.background_photons_per_px,
-                         shape_hw=self.shape_hw)
+                         shape_hw=self.shape_hw, bv=cat.bv_mag[gi])
 
 
 def true_sequence(rig, commanded: AttitudeSequence, rng: np.random.Generator) -> AttitudeSequence:
