@@ -202,3 +202,19 @@ def test_disabled_effects_leave_the_scene_unchanged(tmp_path):
     fb = b.render_frame(b.layout.reference_pose_rad, seed=4)
     assert np.array_equal(fa.dn, fb.dn)
     assert "effects" not in fa.sidecar["truth"]
+
+
+def test_a_live_reticle_emitter_leaves_other_scenes_renders_unchanged(tmp_path):
+    """Mitsuba's vcalls over emitters trace every live emitter instance of the process, the Python
+    reticle included: a sun-sensor frame (a path tracer asking every emitter for pdf_direction) must
+    render, and render the same pixels, while a reticle renderer is alive."""
+    from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
+
+    pose = {"X": 0.2, "Y": -0.1}
+    before = SunSensorScene(RIG, spp=16).render(pose, seed=3, truth_points=2000).dn
+    r = AutocollimatorRenderer(_with(["reticle"]), None, "face", spp=16, mesh_dir=tmp_path)
+    fr = r.render_frame(r.layout.reference_pose_rad, seed=1, noiseless=True)
+    assert fr.dn.max() > RIG.autocollimator.detector.offset_dn + 100  # the reticle is there
+    during = SunSensorScene(RIG, spp=16).render(pose, seed=3, truth_points=2000).dn
+    np.testing.assert_array_equal(during, before)
+    del r

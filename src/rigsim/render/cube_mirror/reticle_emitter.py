@@ -97,6 +97,28 @@ def _make_class():
         def sample_wavelengths(self, si, sample, active=True):
             return mi.Color0f(), mi.Spectrum(1.0)
 
+        # The reticle is seen by light tracing only (sample_ray). A scene's vcalls over emitters
+        # trace every live emitter instance, this one included, even from another scene in the same
+        # process (a path tracer's MIS asks every emitter for pdf_direction): without these methods
+        # that trace calls a pure virtual function. None of them ever contributes light.
+        def sample_direction(self, it, sample, active=True):
+            return dr.zeros(mi.DirectionSample3f), mi.Spectrum(0.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            return mi.Float(0.0)
+
+        def eval_direction(self, it, ds, active=True):
+            return mi.Spectrum(0.0)
+
+        def eval(self, si, active=True):
+            return mi.Spectrum(0.0)
+
+        def sample_position(self, time, sample, active=True):
+            return dr.zeros(mi.PositionSample3f), mi.Float(0.0)
+
+        def pdf_position(self, ps, active=True):
+            return mi.Float(0.0)
+
         def bbox(self):
             e = self.extent
             return mi.ScalarBoundingBox3f([-e, -e, self.z], [e, e, self.z])
