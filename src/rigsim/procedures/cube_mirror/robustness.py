@@ -259,11 +259,13 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
         except SearchError:
             pass  # a search that does not converge still shows its frames
         rows["null"].append(keep.frames[-1][1] if keep.frames else None)
-    null_kind = "aiming camera (returned spot)" if rig.procedure.method == "diaphragm" else "autocollimator"
-    fig, axs = plt.subplots(2, 2, figsize=(10, 10))
-    titles = ("ideal", "every effect on: " + ", ".join(n.replace("_", " ") for n in names))
-    for row, (key, label, half) in enumerate((("sun", f"sun sensor, {angle:.0f}° off axis", 40),
-                                              ("null", f"{null_kind}, face {rig.procedure.faces[0]} at its null", 120))):
+    null_kind = "aiming camera (spot frame)" if rig.procedure.method == "diaphragm" else "autocollimator"
+    fig, axs = plt.subplots(2, 2, figsize=(10, 10.4))
+    from matplotlib.colors import PowerNorm
+
+    rows_spec = (("sun", f"sun sensor, {angle:.0f}° off axis", 40, True),
+                 ("null", f"{null_kind}, face {rig.procedure.faces[0]}, last frame of its null search", 120, False))
+    for row, (key, label, half, shared) in enumerate(rows_spec):
         imgs = rows[key]
         if imgs[0] is None:
             for ax in axs[row]:
@@ -271,23 +273,25 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
             continue
         centre = centres[key] or _bright_centre(imgs[0])
         crops = [_crop(im, centre, half) if im is not None else (None, (0, 0)) for im in imgs]
-        lo = float(np.percentile(crops[0][0], 1))
-        hi = max(float(crops[0][0].max()), lo + 1.0)
-        for ax, (im, (u0, v0)), title in zip(axs[row], crops, titles):
+        for k, (ax, (im, (u0, v0))) in enumerate(zip(axs[row], crops)):
             if im is None:
                 ax.set_axis_off()
                 continue
-            from matplotlib.colors import PowerNorm
-
+            ref = crops[0][0] if shared else im  # the sun row on the ideal's scale; the null row each on its own
+            lo = float(np.percentile(ref, 1))
+            hi = max(float(ref.max()), lo + 1.0)
             h, w = im.shape
             ax.imshow(im, cmap="gray", norm=PowerNorm(0.5, vmin=lo, vmax=hi, clip=True),
                       extent=(u0 - 0.5, u0 + w - 0.5, v0 + h - 0.5, v0 - 0.5))
-            ax.set_title(f"{label}\n{title}", fontsize=9)
+            scale = "the ideal's grey scale" if shared else f"own grey scale, DN {lo:.0f}–{hi:.0f}"
+            ax.set_title(f"{label}\n{'ideal' if k == 0 else 'every effect on'} ({scale})", fontsize=9)
             ax.set_xlabel("u (px)")
             ax.set_ylabel("v (px)")
-    fig.suptitle(f"{rig.name}: seed {seed}, each row on one square-root grey scale (the ideal crop's range); "
-                 "crops centred on the ideal spot",
-                 fontsize=10)
+    import textwrap
+
+    on = ", ".join(n.replace("_", " ") for n in names)
+    fig.suptitle(f"{rig.name}, seed {seed}: ideal (left) and every effect on (right); square-root grey scales, "
+                 "crops centred on the ideal spot\n" + "\n".join(textwrap.wrap("effects: " + on, 110)), fontsize=9)
     fig.tight_layout()
     out = save_figure(fig, path, dpi=100)
     plt.close(fig)
