@@ -21,6 +21,7 @@ __all__ = [
     "ALL",
     "IDEAL",
     "MUST_LIMIT",
+    "BoundTrial",
     "Quantity",
     "RobustnessResult",
     "configs_for",
@@ -79,6 +80,17 @@ def rig_with(rig, config: str, names):
     all of ``names`` for ALL, else the one named."""
     on = () if config == IDEAL else (tuple(names) if config == ALL else (config,))
     return rig.model_copy(update={"effects": rig.effects.only(on)})
+
+
+class BoundTrial:
+    """A picklable ``trial(config, seed)`` for :func:`run_configs`: the module-level function
+    ``fn(rig, names, config, seed)`` with the rig and the effect names bound."""
+
+    def __init__(self, fn, rig, names):
+        self.fn, self.rig, self.names = fn, rig, tuple(names)
+
+    def __call__(self, config, seed):
+        return self.fn(self.rig, self.names, config, seed)
 
 
 def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None) -> dict:

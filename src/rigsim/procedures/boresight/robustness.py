@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, configs_for, rig_with, run_configs
+from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "boresight_trial", "effect_names", "frames_figure", "quantities",
            "run_robustness"]
@@ -89,16 +89,6 @@ def boresight_trial(rig, names, config: str, seed: int) -> dict:
     return out
 
 
-class _Trial:
-    """A picklable ``trial(config, seed)`` for :func:`run_configs`."""
-
-    def __init__(self, rig, names):
-        self.rig, self.names = rig, tuple(names)
-
-    def __call__(self, config, seed):
-        return boresight_trial(self.rig, self.names, config, seed)
-
-
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
                    progress=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
@@ -109,7 +99,7 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     seeds = list(range(int(seed), int(seed) + int(trials)))
     qs = quantities(rig)
     t0 = time.perf_counter()
-    raw = run_configs(_Trial(rig, names), configs, seeds, workers=workers, progress=progress)
+    raw = run_configs(BoundTrial(boresight_trial, rig, names), configs, seeds, workers=workers, progress=progress)
     render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
     effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
     values = {c: {q.key: np.array([raw[(c, s)][q.key] for s in seeds], dtype=float) for q in qs} for c in configs}

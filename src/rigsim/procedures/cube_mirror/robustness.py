@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, configs_for, rig_with, run_configs
+from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
 from rigsim.rig.effects_cube import cube_effect_names
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "angle_budget_arcsec", "campaign_trial", "effect_names", "frames_figure",
@@ -138,16 +138,6 @@ class _Counter:
         pass
 
 
-class _Trial:
-    """A picklable ``trial(config, seed)`` for :func:`run_configs`."""
-
-    def __init__(self, rig, names):
-        self.rig, self.names = rig, tuple(names)
-
-    def __call__(self, config, seed):
-        return campaign_trial(self.rig, self.names, config, seed)
-
-
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
                    progress=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
@@ -156,7 +146,7 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
     t0 = time.perf_counter()
-    raw = run_configs(_Trial(rig, names), configs, seeds, workers=workers, progress=progress)
+    raw = run_configs(BoundTrial(campaign_trial, rig, names), configs, seeds, workers=workers, progress=progress)
     render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
     effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
     qs = quantities(rig)

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, configs_for, rig_with, run_configs
+from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
 from rigsim.rig.effects import STAR_EFFECTS
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "QUANTITIES", "effect_names", "frames_figure", "pipeline_variants",
@@ -116,16 +116,6 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
     return out
 
 
-class _Trial:
-    """A picklable ``trial(config, seed)`` for :func:`run_configs`."""
-
-    def __init__(self, rig, names):
-        self.rig, self.names = rig, tuple(names)
-
-    def __call__(self, config, seed):
-        return star_trial(self.rig, self.names, config, seed)
-
-
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
                         progress=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
@@ -134,7 +124,7 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
     t0 = time.perf_counter()
-    raw = run_configs(_Trial(rig, names), configs, seeds, workers=workers, progress=progress)
+    raw = run_configs(BoundTrial(star_trial, rig, names), configs, seeds, workers=workers, progress=progress)
     render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
     effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
     wall = time.perf_counter() - t0
