@@ -508,6 +508,13 @@ class AutocollimatorOptics:
         return (0.5 * math.atan(0.5 * self.width * self.pitch_mm / self.efl_mm),
                 0.5 * math.atan(0.5 * self.height * self.pitch_mm / self.efl_mm))
 
+    def calibration_range_rad(self) -> float:
+        """Largest tilt (rad) of the calibration: the measuring range along x, or less when the mirror
+        at ``distance_mm`` throws the return beam off the objective sooner — the tilt that shifts it
+        by a quarter of the clear aperture (2·t·distance = aperture/4, about 70 % of it back)."""
+        returning = 0.5 * math.atan(0.25 * self.objective.clear_aperture_mm / self.distance_mm)
+        return min(self.measuring_range_rad()[0], returning)
+
     # -- exact trace ---------------------------------------------------------------------
     def _outgoing(self, d: np.ndarray, z_source: float | None = None):
         """Reticle → flat face → convex face → stop plane. Returns (P_stop, dir, T, ok)."""
@@ -830,23 +837,28 @@ class AutocollimatorOptics:
     def calibration(self, n_rays: int = 400_000) -> dict:
         """The instrument's factory calibration, fitted on the exact model: a flat mirror larger
         than the beam at ``distance_mm``, tilted along x_A; the spot's radial offset s (mm) is
-        fitted as ``F·tan(ρ)·(1 + c·ρ²)`` with ρ the return beam's angle (= 2·tilt)."""
+        fitted as ``F·tan(ρ)·(1 + c·ρ²)`` with ρ the return beam's angle (= 2·tilt), over six
+        tilts up to :meth:`calibration_range_rad`."""
         if self._calib is None:
-            half = self.measuring_range_rad()[0]
-            ts = np.linspace(0.1, 1.0, 6) * half
+            half = self.calibration_range_rad()
             s, rho = [], []
-            for t in ts:
+            for t in np.linspace(0.1, 1.0, 6) * half:
                 m = flat_mirror(self.distance_mm + self.objective.z_vertex, (t, 0.0),
                                 radius_mm=2.0 * self.objective.clear_aperture_mm)
                 sp = self.spot(m, n_rays=n_rays)
+                if sp.mean_uv is None:  # no light back at this tilt: not a calibration point
+                    continue
                 s.append((sp.mean_uv[0] - self.cx) * self.pitch_mm)
                 rho.append(2.0 * t)
+            if len(s) < 3:
+                raise ValueError(f"autocollimator calibration: light returned at {len(s)} of 6 tilts up to "
+                                 f"{math.degrees(half) * 60:.2f} arcmin (need 3)")
             s, rho = np.array(s), np.array(rho)
             A = np.column_stack([np.tan(rho), np.tan(rho) * rho ** 2])
             (F, Fc), *_ = np.linalg.lstsq(A, s, rcond=None)
             resid = s - A @ np.array([F, Fc])
             self._calib = {"F_mm": float(F), "c": float(Fc / F), "fit_rms_px": float(np.sqrt(np.mean(resid ** 2)) / self.pitch_mm),
-                           "ref_uv": [self.cx, self.cy], "n_rays": n_rays,
+                           "ref_uv": [self.cx, self.cy], "n_rays": n_rays, "range_rad": float(half),
                            "mirror": "flat, Ø2×aperture, at distance_mm"}
         return self._calib
 
