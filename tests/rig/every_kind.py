@@ -87,25 +87,31 @@ def render_every_kind(rig) -> dict:
     return out
 
 
+def share(d: dict, parts: int) -> int:
+    """Which of ``parts`` shares the rig dictionary ``d`` falls in (stable across processes and runs)."""
+    import hashlib
+
+    return int(hashlib.sha256(repr(d).encode()).hexdigest(), 16) % parts
+
+
 def rendered_rig_tests(method: str, draws: int, distinct: int, parts: int = 1, part: int = 0):
     """The two slow tests of one file: ``draws`` hypothesis rigs of ``method`` (derandomized: the same rigs in
-    every run and every file), of which this file renders every ``parts``-th from number ``part`` in every kind,
-    then a check that at least ``distinct`` of those were different (derandomized hypothesis repeats a few
-    draws). Files go to different workers of the parallel runner: a slow method is spread over several."""
-    import itertools
-
+    every run, every worker and every file — tests/conftest.py), of which this file renders the ``part``-th
+    share of ``parts`` in every kind, then a check that at least ``distinct`` of those were different
+    (derandomized hypothesis repeats a few draws). A rig's share is a hash of its dictionary, so the rig a
+    failure reports is the one hypothesis replays. Files go to different workers of the parallel runner: a
+    slow method is spread over several."""
     import pytest
     from hypothesis import given
     from random_rigs import build, draw, rig_dicts
 
     seen: set[str] = set()
-    number = itertools.count()
 
     @pytest.mark.slow  # 216 rigs: ~15 min on 2 workers (docs/testing.md)
     @draw(draws)
     @given(rig_dicts(method))
     def renders_a_frame_of_every_kind(d):
-        if next(number) % parts != part:
+        if share(d, parts) != part:
             return
         seen.add(repr(d))
         render_every_kind(build(d))
