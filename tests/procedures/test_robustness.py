@@ -89,11 +89,13 @@ def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_
         assert (out / name).stat().st_size > 0
     d = json.loads((out / "robustness.json").read_text())
     assert d["configs"] == [IDEAL, "hot_pixels"]
-    conf, no_filter, no_pattern, poor_kept = d["pipelines"]
-    assert conf["pipeline"] == "as configured (single-pixel filter on, fixed pattern: sequence, poor fits rejected)"
-    assert no_filter["pipeline"] == "single-pixel filter off, fixed pattern: sequence, poor fits rejected"
-    assert no_pattern["pipeline"] == "single-pixel filter on, fixed pattern: none, poor fits rejected"
+    conf, no_filter, no_pattern, poor_kept, poor_frame = d["pipelines"]
+    rejected = "poor fits rejected against the model"
+    assert conf["pipeline"] == f"as configured (single-pixel filter on, fixed pattern: sequence, {rejected})"
+    assert no_filter["pipeline"] == f"single-pixel filter off, fixed pattern: sequence, {rejected}"
+    assert no_pattern["pipeline"] == f"single-pixel filter on, fixed pattern: none, {rejected}"
     assert poor_kept["pipeline"] == "single-pixel filter on, fixed pattern: sequence, poor fits kept"
+    assert poor_frame["pipeline"] == "single-pixel filter on, fixed pattern: sequence, poor fits rejected against the frame"
 
     def mean(p, c, key):
         return np.mean(p["trials_values"][c][key])
@@ -110,6 +112,9 @@ def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_
     # the ideal frames are the same for every pipeline: neither the filter nor the pattern finds anything on them
     assert conf["trials_values"][IDEAL] == no_filter["trials_values"][IDEAL] == no_pattern["trials_values"][IDEAL]
     assert poor_kept["trials_values"][IDEAL]["identified_count"] >= conf["trials_values"][IDEAL]["identified_count"]
+    # judged against the frame, a poor fit must also stand out of its frame: never fewer stars than the model test
+    for c in (IDEAL, "hot_pixels"):
+        assert mean(poor_frame, c, "identified_count") >= mean(conf, c, "identified_count")
 
 
 def test_run_robustness_refuses_what_it_cannot_do(short_star_rig, capsys):

@@ -15,7 +15,12 @@ import numpy as np
 
 from rigsim.imaging import Flag, NoiseModel, find_spots
 
-__all__ = ["BAD_FLAGS", "Observations", "extract_stars"]
+__all__ = ["BAD_FLAGS", "POOR_FIT_REFERENCES", "Observations", "extract_stars", "frame_poor_fits"]
+
+POOR_FIT_REFERENCES = ("model", "frame")
+# a star's unexplained share of signal is an outlier of its frame beyond this many robust σ
+FRAME_OUTLIER_SIGMA = 3.0
+MIN_FRAME_STARS = 8
 
 BAD_FLAGS = int(Flag.INVALID | Flag.SATURATED | Flag.EDGE | Flag.BLENDED | Flag.NAN)
 
@@ -40,14 +45,19 @@ class Observations:
 
 def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "gauss",
                   threshold_sigma: float = 5.0, saturation: float | None = None,
-                  repair_single_pixels: bool = False) -> Observations:
+                  repair_single_pixels: bool = False, poor_fit: str = "model") -> Observations:
     """Detect and centroid every star of a frame (``find_spots`` with the detector's noise model).
 
     ``saturation`` defaults to the ADC's top code. For the Gaussian fit σ starts at ``sigma_px``
     and is fitted (smeared spots are slightly wider than the static PSF). ``repair_single_pixels``:
     first replace the pixels no PSF could have lit alone (hot pixels, particle hits:
     :func:`rigsim.imaging.cosmetics.single_pixel_events`) by their neighbours' mean.
+    ``poor_fit`` (Gaussian fit only): what a star's fit is judged against before it is flagged
+    POOR_FIT. ``"model"``: the noise model (reduced χ² far above 1). ``"frame"``: the frame's other
+    stars as well (:func:`frame_poor_fits`), for a PSF that is not a Gaussian at all.
     """
+    if poor_fit not in POOR_FIT_REFERENCES:
+        raise ValueError(f"poor_fit = {poor_fit!r}: allowed {', '.join(POOR_FIT_REFERENCES)}")
     noise = NoiseModel.from_detector(detector)
     if repair_single_pixels:
         from rigsim.imaging.cosmetics import repair_pixels, single_pixel_events
@@ -61,4 +71,32 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
                            threshold_sigma=threshold_sigma, saturation=sat, **kw)
     uv = np.stack([res.u, res.v], axis=1) if len(res) else np.zeros((0, 2))
     sig = np.stack([res.sigma_u, res.sigma_v], axis=1) if len(res) else np.zeros((0, 2))
-    return Observations(uv.astype(float), sig.astype(float), np.asarray(res.flux, float), np.asarray(res.flags, np.int64))
+    flags = np.asarray(res.flags, np.int64)
+    if poor_fit == "frame" and method == "gauss" and len(res):
+        poor = int(Flag.POOR_FIT)
+        judged = (flags & BAD_FLAGS) == 0
+        outlier = frame_poor_fits(res.extra["chi2_red"], res.flux / res.extra["sigma_flux"], judged)
+        flags = np.where((flags & poor) != 0, np.where(outlier, flags, flags & ~poor), flags)
+    return Observations(uv.astype(float), sig.astype(float), np.asarray(res.flux, float), flags)
+
+
+def frame_poor_fits(chi2_red, snr, judged) -> np.ndarray:
+    """Which stars' PSF fits are poor next to the rest of their frame.
+
+    A PSF that is not the fitted Gaussian (a defocus ring, coma) leaves a residual proportional to
+    the star's signal, so its excess reduced χ² grows as SNR²: the share of the signal the model
+    leaves unexplained, e = (χ²_red − 1) / SNR², is about the same for every star of the frame (it
+    varies with field as the PSF does). A particle hit on a star or a blend adds residual that is not
+    proportional to the star: its e stands out. A star is an outlier when its e exceeds the median
+    of the ``judged`` stars by ``FRAME_OUTLIER_SIGMA`` robust σ (1.4826 · MAD). With fewer than
+    ``MIN_FRAME_STARS`` judged stars there is no population to compare with: every star is an
+    outlier (the noise-model test alone decides)."""
+    chi2_red, snr = np.asarray(chi2_red, float), np.asarray(snr, float)
+    judged = np.asarray(judged, bool) & np.isfinite(chi2_red) & (snr > 0)
+    e = np.full(chi2_red.shape, np.inf)
+    e[judged] = (chi2_red[judged] - 1.0) / snr[judged] ** 2
+    if judged.sum() < MIN_FRAME_STARS:
+        return np.ones(chi2_red.shape, bool)
+    med = float(np.median(e[judged]))
+    scale = 1.4826 * float(np.median(np.abs(e[judged] - med)))
+    return ~(e <= med + FRAME_OUTLIER_SIGMA * scale)

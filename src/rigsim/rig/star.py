@@ -203,6 +203,10 @@ class Calibration(_Model):
                                                                "hits) before extracting the stars")
     reject_poor_fits: StrictBool = Field(True, description="leave out of the calibration the stars whose PSF fit is "
                                                             "poor (reduced χ² far above 1: a particle hit, a blend)")
+    poor_fit_reference: Literal["model", "frame"] = Field(
+        "model", description="what a poor fit is judged against: the noise model alone, or also the frame's "
+                             "other stars (a PSF that is not a Gaussian at all: only the stars whose unexplained "
+                             "share of signal stands out of their frame are poor)")
     fixed_pattern: Literal["none", "sequence"] = Field(
         "none", description="subtract the detector's fixed pattern (hot pixels, DSNU) estimated from the sequence "
                             "itself (per-pixel median over the frames) before extracting the stars")

@@ -42,13 +42,14 @@ def effect_names(rig) -> tuple[str, ...]:
 
 def _describe(cal) -> str:
     return (f"single-pixel filter {'on' if cal.single_pixel_filter else 'off'}, fixed pattern: {cal.fixed_pattern}, "
-            f"poor fits {'rejected' if cal.reject_poor_fits else 'kept'}")
+            f"poor fits {'rejected against the ' + cal.poor_fit_reference if cal.reject_poor_fits else 'kept'}")
 
 
 def pipeline_variants(rig) -> dict[str, object]:
     """The pipelines every robustness run's frames go through (name → nominal rig): as the rig
     configures it, then with each of its defect settings switched the other way in turn (the
-    single-pixel filter, the fixed pattern ``none`` ↔ ``sequence``, the rejection of poor fits)."""
+    single-pixel filter, the fixed pattern ``none`` ↔ ``sequence``, the rejection of poor fits and,
+    when they are rejected, what they are judged against)."""
     nominal = rig.nominal_rig()
     cal = nominal.calibration
 
@@ -59,6 +60,9 @@ def pipeline_variants(rig) -> dict[str, object]:
     out = {f"as configured ({_describe(cal)})": nominal}
     for alt in (with_cal(single_pixel_filter=not cal.single_pixel_filter), with_cal(fixed_pattern=other_pattern),
                 with_cal(reject_poor_fits=not cal.reject_poor_fits)):
+        out[_describe(alt.calibration)] = alt
+    if cal.reject_poor_fits:
+        alt = with_cal(poor_fit_reference="frame" if cal.poor_fit_reference == "model" else "model")
         out[_describe(alt.calibration)] = alt
     return out
 
