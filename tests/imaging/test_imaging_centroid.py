@@ -188,3 +188,43 @@ def test_pixel_convention_matches_opencv_moments_and_fitellipse():
     t = centroid_tcom(img, threshold=0.0)
     assert t.u == pytest.approx(m["m10"] / m["m00"], abs=1e-6)
     assert t.v == pytest.approx(m["m01"] / m["m00"], abs=1e-6)
+
+
+def test_tcom_peak_leaves_out_a_ghost_the_threshold_separates():
+    """A spot (σ 1.5 px) and a 4 % ghost 17.5 px away (the boresight prism's Fresnel ghost at 2ε·F/d):
+    the ROI's thresholded centroid is pulled towards the ghost by the ghost's weight above the threshold
+    (closed form from the two blobs' own moments); the peak's blob alone is the spot's centroid, to the
+    noise-free digit and, with noise, to within the noise's scatter."""
+    roi, s = 48, 1.5
+    c = np.array([20.3, 23.6])
+    g = c + np.array([0.0, 17.5])
+    F = 2.0e5
+    spot = gaussian_spots((roi, roi), c[0], c[1], F, s, 0.0)
+    ghost = gaussian_spots((roi, roi), g[0], g[1], 0.04 * F, s, 0.0)
+    thr = 0.01 * spot.max()            # the ghost's peak is 4 % of the spot's: above it
+    both = centroid_tcom(spot + ghost, threshold=thr)
+    peak = centroid(spot + ghost, method="tcom_peak", threshold=thr)
+    alone = centroid_tcom(spot, threshold=thr)
+    ghost_alone = centroid_tcom(ghost, threshold=thr)
+    # the two blobs do not touch above the threshold: the ROI's centroid is their weighted mean
+    w_s, w_g = (np.clip(im - thr, 0.0, None).sum() for im in (spot, ghost))
+    want_v = (w_s * alone.v + w_g * ghost_alone.v) / (w_s + w_g)
+    assert both.v == pytest.approx(want_v, abs=1e-9)
+    assert both.v - alone.v > 0.3                       # the ghost's pull
+    assert (peak.u, peak.v) == pytest.approx((alone.u, alone.v), abs=1e-12)
+    # with noise (background 20 e⁻, read 5 e⁻), over 200 frames: the peak blob's error is the noise's
+    rng = np.random.default_rng(7)
+    imgs = np.stack([add_noise(spot + ghost + B_E, NOISE, rng) for _ in range(200)])
+    pk = centroid(imgs, method="tcom_peak", noise=NOISE)
+    roi_c = centroid_tcom(imgs, noise=NOISE)
+    assert abs(np.mean(pk.v) - c[1]) < 4 * np.std(pk.v) / np.sqrt(200) + 0.01
+    assert np.mean(roi_c.v) - c[1] > 0.3
+
+
+def test_tcom_peak_equals_tcom_on_a_lone_spot_and_refuses_a_bad_region():
+    img, *_ = _spots(200, 50, seed=3, roi=15)
+    a, b = centroid_tcom(img, noise=NOISE), centroid(img, method="tcom_peak", noise=NOISE)
+    # isolated noise pixels above 3σ away from the spot are the only difference
+    assert np.median(np.abs(a.u - b.u)) < 1e-3 and np.median(np.abs(a.v - b.v)) < 1e-3
+    with pytest.raises(ValueError, match="region must be"):
+        centroid_tcom(img, noise=NOISE, region="blob")

@@ -12,6 +12,7 @@ from .centroid import (
     centroid_gauss_lsq,
     centroid_gauss_multi,
     centroid_tcom,
+    centroid_tcom_peak,
     centroid_wcom,
 )
 from .crlb import CRLB, crlb_gaussian, crlb_psf, fisher_information
@@ -45,6 +46,7 @@ __all__ = [
     "CentroidBatch",
     "centroid",
     "centroid_tcom",
+    "centroid_tcom_peak",
     "centroid_wcom",
     "centroid_gauss",
     "centroid_gauss_lsq",

@@ -3,6 +3,7 @@
 centre at (0, 0)), plus ``origin_uv`` if given, with 1-sigma uncertainties and `Flag` bits.
 
 * `centroid_tcom`: thresholded centre of mass (seed 003's "带阈值的质心算法").
+* `centroid_tcom_peak`: the same over the brightest blob only (a ghost beside the spot is left out).
 * `centroid_wcom`: iterative Gaussian-windowed centre of mass (as SExtractor/sep ``winpos``).
 * `centroid_gauss`: weighted least-squares fit of a pixel-integrated Gaussian, vectorised
   Gauss–Newton over the batch; attains the Cramér–Rao bound.
@@ -44,6 +45,7 @@ from .result import Centroid, CentroidBatch, Flag, NoiseModel
 
 __all__ = [
     "centroid_tcom",
+    "centroid_tcom_peak",
     "centroid_wcom",
     "centroid_gauss",
     "centroid_gauss_lsq",
@@ -64,10 +66,25 @@ def _peak_index(p: Prepared, d: np.ndarray):
     return np.divmod(k, w)  # (pv, pu)
 
 
-def _threshold_moments(p: Prepared, thr: np.ndarray, mode: str):
+def _peak_region(p: Prepared, above: np.ndarray) -> np.ndarray:
+    """The pixels of ``above`` (n, h, w) 8-connected to each ROI's brightest pixel among them."""
+    from scipy import ndimage
+
+    n = above.shape[0]
+    out = np.zeros_like(above)
+    k = np.argmax(np.where(above, p.data, -np.inf).reshape(n, -1), axis=1)
+    for i in np.flatnonzero(above.reshape(n, -1).any(axis=1)):
+        lab, _ = ndimage.label(above[i], structure=np.ones((3, 3), bool))
+        out[i] = lab == lab.flat[k[i]]
+    return out
+
+
+def _threshold_moments(p: Prepared, thr: np.ndarray, mode: str, region: str = "roi"):
     """Thresholded first moments. Returns u, v, W (sum of weights), var_u, var_v, flux, var_flux, npix."""
     d = p.data
     above = p.good & (d > thr[:, None, None])
+    if region == "peak":
+        above = _peak_region(p, above)
     if mode == "subtract":
         wgt = np.where(above, d - thr[:, None, None], 0.0)
     elif mode == "mask":
@@ -102,6 +119,7 @@ def centroid_tcom(
     origin_uv=None,
     min_snr: float = 5.0,
     edge_margin_px: float = 1.0,
+    region: str = "roi",
 ) -> Centroid | CentroidBatch:
     """Thresholded centre of mass (seed 003: "初始参考点质心采用带阈值的质心算法计算").
 
@@ -112,7 +130,9 @@ def centroid_tcom(
 
     with T = ``threshold`` (DN, absolute) or, if None, T = background + ``threshold_sigma`` *
     background_sd. ``mode="mask"`` instead weights the selected pixels by I_k - background.
-    The whole ROI is used (no connectivity test). sigma_u, sigma_v propagate the pixel noise
+    ``region="roi"``: every pixel of the ROI above T counts (no connectivity test). ``"peak"``: only
+    the pixels above T 8-connected to the brightest of them — the spot's own blob, without a ghost or
+    another spot that the threshold separates from it. sigma_u, sigma_v propagate the pixel noise
     through the weighted mean; they ignore the noise of the threshold and of which pixels pass it
     (measured: within 10 % of the Monte-Carlo scatter for SNR 30-300, sigma = 1 px).
     """
@@ -121,8 +141,10 @@ def centroid_tcom(
     if n == 0 or min(p.data.shape[1:]) < 3:
         return trivial_result(p, "tcom", origin_uv)
     thr_given = None if threshold is None else np.broadcast_to(np.asarray(threshold, dtype=float), (n,))
+    if region not in ("roi", "peak"):
+        raise ValueError(f"region must be 'roi' or 'peak', got {region!r}")
     thr = p.bg + threshold_sigma * p.bg_sd if thr_given is None else thr_given.astype(float)
-    u, v, W, var_u, var_v, flux, var_flux, npix = _threshold_moments(p, thr, mode)
+    u, v, W, var_u, var_v, flux, var_flux, npix = _threshold_moments(p, thr, mode, region)
     fl = p.flags.copy()
     empty = ~(W > 0) | (npix == 0)
     fl[empty] |= Flag.EMPTY | Flag.INVALID
@@ -785,8 +807,15 @@ def _scatter(vals: np.ndarray, use: np.ndarray, h: int, w: int) -> np.ndarray:
     return full.reshape(h, w)
 
 
+def centroid_tcom_peak(img, **kwargs) -> Centroid | CentroidBatch:
+    """:func:`centroid_tcom` of the peak's own blob (``region="peak"``): a ghost or a second spot that
+    the threshold separates from the brightest one does not pull the centroid."""
+    return centroid_tcom(img, region="peak", **kwargs)
+
+
 METHODS = {
     "tcom": centroid_tcom,
+    "tcom_peak": centroid_tcom_peak,
     "wcom": centroid_wcom,
     "gauss": centroid_gauss,
     "gauss_lsq": centroid_gauss_lsq,
@@ -794,7 +823,7 @@ METHODS = {
 
 
 def centroid(img, method: str = "gauss", **kwargs) -> Centroid | CentroidBatch:
-    """Dispatch to one of `METHODS` by name ("tcom", "wcom", "gauss", "gauss_lsq")."""
+    """Dispatch to one of `METHODS` by name ("tcom", "tcom_peak", "wcom", "gauss", "gauss_lsq")."""
     try:
         fn = METHODS[method]
     except KeyError:

@@ -22,7 +22,7 @@ Geometry (docs/boresight.md has the figure in words):
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
@@ -119,6 +119,9 @@ class OrbitScenario(_Model):
     phase_deg: float = Field(30.0, ge=-360.0, le=360.0)
     reference_frames: int = Field(16, ge=1, le=1000, description="frames averaged into the reference spots")
     window_px: int = Field(48, ge=12, le=256, description="fixed ROI read from each CMOS")
+    centroider: Literal["tcom", "tcom_peak"] = Field(
+        "tcom", description="spot centroider: the thresholded centre of mass of the whole ROI (seed 003), or of "
+                            "the brightest blob only (a ghost the threshold separates from the spot is left out)")
     spp: int = Field(256, ge=16, le=65536, description="light paths per ROI pixel")
 
 

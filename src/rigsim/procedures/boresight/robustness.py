@@ -11,11 +11,11 @@ import numpy as np
 
 from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
 
-__all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "boresight_trial", "effect_names", "frames_figure", "quantities",
-           "run_robustness"]
+__all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "boresight_trial", "effect_names", "frames_figure", "pipeline_variants",
+           "quantities", "run_robustness"]
 
-DESCRIPTION = ("the boresight pipeline (render the CMOS ROIs of the orbit → thresholded centroids → DVAD and the "
-               "simplified formulas → relative angle of the cameras, Δf)")
+DESCRIPTION = ("the boresight pipeline (render the CMOS ROIs of the orbit → thresholded centroids of the ROI or of "
+               "the peak's blob → DVAD and the simplified formulas → relative angle of the cameras, Δf)")
 DEFAULT_TRIALS = 4
 
 _AXES = ("roll", "pitch", "yaw")
@@ -62,29 +62,52 @@ def _score(res: dict) -> dict:
     return out
 
 
+def pipeline_variants(rig) -> dict[str, str]:
+    """The centroiders every run's frames go through (name → centroider): the rig's ``[orbit]
+    centroider`` first, then the other one (the whole ROI's thresholded centroid ↔ the peak's blob)."""
+    own = rig.orbit.centroider
+    other = "tcom_peak" if own == "tcom" else "tcom"
+    return {f"as configured ({_CENTROIDERS[own]})": own, _CENTROIDERS[other]: other}
+
+
+_CENTROIDERS = {"tcom": "thresholded centroid of the ROI", "tcom_peak": "thresholded centroid of the peak's blob"}
+
+
 def boresight_trial(rig, names, config: str, seed: int) -> dict:
     """One rendered orbit run of ``rig`` with ``config`` (IDEAL, an effect name or ALL of ``names``) at
-    ``seed`` (frames rendered in this process): the errors of :func:`quantities` and the render time per
-    frame (ms, key ``_render_ms_per_frame``). A run whose spots are not measurable scores NaN and counts
-    as failed."""
+    ``seed`` (frames rendered in this process), its frames measured by every :func:`pipeline_variants`
+    centroider: {variant: the errors of :func:`quantities`} and the render time per frame (ms, key
+    ``_render_ms_per_frame``). A run whose spots are not measurable scores NaN and counts as failed."""
     import warnings
 
     from rigsim.errors import GeometryWarning
-    from rigsim.procedures.boresight.studies import run_orbit
+    from rigsim.procedures.boresight.studies import orbit_from_frames, run_orbit
 
     r = rig_with(rig, config, names)
     t0 = time.perf_counter()
     n = 4 * (r.orbit.reference_frames + r.orbit.measurements)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", GeometryWarning)
-            res = run_orbit(r, seed=int(seed), workers=1, jitter_px=0.0)
-        out = _score(res)
-        ms = 1e3 * (res["seconds"] - res["warm_up_seconds"]) / res["frames_rendered"]
-    except RuntimeError:   # a spot not measurable: the pipeline fails on this run
-        out = {q.key: np.nan for q in quantities(rig)}
-        out["failed_runs_count"] = 1.0
-        ms = 1e3 * (time.perf_counter() - t0) / n
+    variants = pipeline_variants(rig)
+    (first, own), *others = variants.items()
+    frames: list = []
+    failed = {q.key: np.nan for q in quantities(rig)} | {"failed_runs_count": 1.0}
+    out: dict = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        try:
+            res = run_orbit(r, seed=int(seed), workers=1, jitter_px=0.0, centroider=own,
+                            on_frame=lambda *a: frames.append(a[-1]))
+            out[first] = _score(res)
+            ms = 1e3 * (res["seconds"] - res["warm_up_seconds"]) / res["frames_rendered"]
+        except RuntimeError:   # a spot not measurable: the pipeline fails on this run
+            out[first] = dict(failed)
+            ms = 1e3 * (time.perf_counter() - t0) / n
+        for name, centroider in others:
+            try:
+                if len(frames) != n:
+                    raise RuntimeError("the run stopped before its last frame")
+                out[name] = _score(orbit_from_frames(r, frames, seed=int(seed), centroider=centroider))
+            except RuntimeError:
+                out[name] = dict(failed)
     out["_render_ms_per_frame"] = ms
     return out
 
@@ -92,8 +115,8 @@ def boresight_trial(rig, names, config: str, seed: int) -> dict:
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
                    progress=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
-    :class:`RobustnessResult` (the boresight pipeline has one variant; DVAD and the simplified
-    formulas are quantities of it)."""
+    :class:`RobustnessResult` per :func:`pipeline_variants` centroider, the configured one first (DVAD
+    and the simplified formulas are quantities of each)."""
     names = tuple(effect_names(rig) if names is None else names)
     configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
@@ -102,9 +125,13 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     raw = run_configs(BoundTrial(boresight_trial, rig, names), configs, seeds, workers=workers, progress=progress)
     render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
     effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
-    values = {c: {q.key: np.array([raw[(c, s)][q.key] for s in seeds], dtype=float) for q in qs} for c in configs}
-    return [RobustnessResult("boresight", rig.name, int(seed), int(trials), qs, configs, values, render, effects,
-                             {"wall": time.perf_counter() - t0}, pipeline="thresholded centroids, DVAD and simplified")]
+    results = []
+    for v in pipeline_variants(rig):
+        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds], dtype=float) for q in qs}
+                  for c in configs}
+        results.append(RobustnessResult("boresight", rig.name, int(seed), int(trials), qs, configs, values, render,
+                                        effects, {"wall": time.perf_counter() - t0}, pipeline=v))
+    return results
 
 
 def frames_figure(rig, path, *, seed: int = 0, names=None):

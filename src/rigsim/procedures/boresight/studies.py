@@ -31,7 +31,7 @@ from rigsim.rig.boresight import BoresightRig
 from rigsim.truth.boresight import OrbitTruth, orbit_truth
 
 __all__ = ["PARAMS", "mc_errors", "predicted_3sigma", "sweep", "fig8_residual", "rotation_order",
-           "orbit_truth", "run_orbit", "claims", "run_study", "EQ20_COS2BETA", "eq20_focal_threshold",
+           "orbit_truth", "run_orbit", "orbit_from_frames", "claims", "run_study", "EQ20_COS2BETA", "eq20_focal_threshold",
            "beta_noise_excess", "loop_model_comparison", "orbit_frame_pool"]
 
 PARAMS = ("delta_f_um", "alpha_arcsec", "beta_arcsec", "gamma_arcsec")
@@ -238,12 +238,13 @@ def _orbit_estimates(geoms, ref_uv, meas, truth: OrbitTruth, o, reading) -> dict
     return est
 
 
-def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider: str = "tcom",
+def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider: str | None = None,
               reading: str = "consistent", spp: int | None = None, measurements: int | None = None,
               jitter_px: float = 0.1, on_frame=None, workers: int | None = None, frame_pool=None) -> dict:
     """Render the four CMOS ROIs at every measurement of the orbit scenario, centroid, estimate
     per camera (DVAD, and the simplified method for comparison), form the relative angle and compare
-    with truth. ``progress(n)`` is called after each rendered frame.
+    with truth. ``progress(n)`` is called after each rendered frame. ``centroider``: a method of
+    :func:`rigsim.imaging.centroid` (default the rig's ``[orbit] centroider``).
 
     ``jitter_px``: the same frames are also evaluated with Gaussian noise of this σ added to every
     measured centroid (an *equivalent* centroid error, the paper's 0.1 px: vibration, thermal
@@ -258,6 +259,7 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
     from rigsim.render.boresight import LoopRenderer
 
     t_start = time.perf_counter()
+    centroider = rig.orbit.centroider if centroider is None else centroider
     geoms = [CameraGeometry.from_rig(c) for c in rig.cameras]
     if len(geoms) < 2:
         raise ValueError("the orbit scenario needs two cameras")
@@ -297,6 +299,25 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
     res.update({"seconds": time.perf_counter() - t_start, "warm_up_seconds": t_warm,
                 "spp": rends[(0, 0)].spp, "window_px": rends[(0, 0)].window_px})
     return res
+
+
+def orbit_from_frames(rig: BoresightRig, frames, *, seed: int = 2023, centroider: str | None = None,
+                      reading: str = "consistent", measurements: int | None = None) -> dict:
+    """:func:`run_orbit` on frames already rendered, in the order its ``on_frame`` saw them (the
+    reference frames, then every measurement's four): the same result for another centroider or
+    reading without rendering again (``seconds`` and the render keys are not set)."""
+    o = rig.orbit
+    geoms = [CameraGeometry.from_rig(c) for c in rig.cameras]
+    n_meas = measurements or o.measurements
+    frames = list(frames)
+    if len(frames) != 4 * (o.reference_frames + n_meas):
+        raise ValueError(f"{len(frames)} frames for {o.reference_frames} reference frames and {n_meas} measurements "
+                         f"of four ROIs each")
+    truth = orbit_truth(rig, geoms, np.linspace(0.0, o.orbits * o.period_min, n_meas))
+    it = iter(frames)
+    return _orbit_frames(rig, geoms, truth, lambda: next(it), seed=seed, progress=None,
+                         centroider=rig.orbit.centroider if centroider is None else centroider, reading=reading,
+                         jitter_px=0.0, on_frame=None)
 
 
 def orbit_frame_pool(rig: BoresightRig, workers: int | None = None, spp: int | None = None):
