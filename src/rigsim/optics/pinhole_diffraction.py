@@ -71,7 +71,7 @@ class PinholePSF:
         """N = (D/2)² / (λ f) on axis."""
         return (self.diameter_mm / 2.0) ** 2 / (wavelength_nm * 1e-6 * self.focal_length_mm)
 
-    def aperture(self, theta: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    def aperture(self, theta: float, samples: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """The opening seen along the chief ray at field angle ``theta``: cell centres (p along the
         field direction, q across; mm, in the plane across the chief ray), each cell's open fraction
         (4×4 sub-samples), and the cell area (mm²). The overlap of the entrance and exit circles is
@@ -81,7 +81,7 @@ class PinholePSF:
         if d >= 2.0 * R:
             raise ValueError(f"the mask ({self.thickness_mm} mm) closes the pinhole at {math.degrees(theta):.2f}°")
         hp = R - d / 2.0  # the overlap's half width along the field direction (mask plane)
-        n = int(self.samples)
+        n = int(self.samples if samples is None else samples)
         dp, dq = 2.0 * hp / n, 2.0 * R / n
         sub = (np.arange(4) + 0.5) / 4.0 - 0.5
         c = (np.arange(n) + 0.5) - n / 2.0
@@ -106,7 +106,9 @@ class PinholePSF:
         cos = math.cos(theta)
         f = self.focal_length_mm
         L = f / cos
-        p, q, a, dA = self.aperture(theta)
+        # the sampled opening's pattern repeats every λL/cell: at least 4× the half width (no alias)
+        cell = min(self.wavelengths_nm) * 1e-6 * L / (4.0 * half_px * max(f / fx, f / fy))
+        p, q, a, dA = self.aperture(theta, max(int(self.samples), math.ceil(self.diameter_mm / cell)))
         m = round(half_px / step_px)
         off = np.arange(-m, m + 1) * step_px
         # detector offset (a, b) mm → plane across the chief ray: (ξ cos θ, η), ξ along ê, η across

@@ -538,7 +538,7 @@ def diffraction_truth(renderer: SunSpotRenderer, s: np.ndarray) -> dict:
     psf, cam, W = renderer.diffraction, renderer.camera, renderer.window_px
     c_uv, _ = cam.project_valid(s[None, :])
     o = renderer.window_origin_for(c_uv[0])
-    step = 0.5
+    step = 1.0  # the PSF's band ends below 1 cycle/px: its sums and moments on the pixel grid are exact
     K = psf.kernel(s, cam.fx, cam.fy, W, step)
     off = np.arange(-(K.shape[0] // 2), K.shape[0] // 2 + 1) * step
     iu = (off + c_uv[0][0] >= o[0] - 0.5) & (off + c_uv[0][0] < o[0] + W - 0.5)
