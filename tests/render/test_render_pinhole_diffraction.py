@@ -50,7 +50,7 @@ def test_rendered_diffracted_spot_is_the_convolution(theta_deg):
     peak (the seed-to-seed noise at 256 spp is 0.3 %); its centroid is the second method's to
     5e-3 px and the exact continuous centroid's to 0.012 px (a centrosymmetric PSF does not move
     it; the window keeps 98 %, cut slightly off-centre); the spot's mean-square radius grows by the
-    PSF's over the window (21 px² on axis, 21 px² at 40°) to 6 %, and is the second method's to 1 %; the window keeps the light the
+    PSF's over the window (16 px² on axis, 21 px² at 40°) to 6 %, and is the second method's to 1 %; the window keeps the light the
     batch reports. With the effect off the peak is 6× higher and the spot 3.5 px² wide: all fail."""
     th = math.radians(theta_deg)
     s = np.array([math.sin(th), 0.0, math.cos(th)])
