@@ -37,7 +37,7 @@ def test_on_axis_fraunhofer_is_the_airy_pattern():
     assert 1 - j0(x) ** 2 - j1(x) ** 2 == pytest.approx(0.838, abs=1e-3)
     assert ee == pytest.approx(1 - j0(x) ** 2 - j1(x) ** 2, abs=4e-3)
     Kf = mono("fresnel").kernel([0, 0, 1], FX, FX, 3 * R0, step)
-    assert not Kf[c, c] == pytest.approx(peak, rel=0.1)
+    assert Kf[c, c] < 0.2 * peak  # 0.081 of it at N = 1.52
 
 
 def test_fresnel_on_axis_intensity_is_the_closed_form():
