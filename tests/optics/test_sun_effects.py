@@ -142,7 +142,8 @@ def test_glass_spots_quadrature():
 def test_effects_tables_in_the_scenes_are_off_and_checked():
     for name in ("sun_sensor_2axis_diaphragm", "sun_sensor_3axis_autocollimator"):
         rig = load_rig(name)
-        for eff in ("limb_darkening", "simulator_nonuniformity", "cover_glass_ghost", "vignetting"):
+        for eff in ("limb_darkening", "simulator_nonuniformity", "cover_glass_ghost", "vignetting",
+                    "pinhole_diffraction"):
             assert eff in rig.effects.names() and not getattr(rig.effects, eff).enabled
     data = load_rig("sun_sensor_2axis_diaphragm").model_dump(mode="json")
     data["effects"]["limb_darkening"]["u"] = 1.5

@@ -7,11 +7,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
+from rigsim.optics.pinhole_diffraction import DEFAULT_BAND_NM
 from rigsim.rig.effects import Effect, EffectsTable
 
-__all__ = ["CoverGlassGhost", "LimbDarkening", "SimulatorNonuniformity", "SunSensorEffects", "Vignetting"]
+__all__ = ["CoverGlassGhost", "LimbDarkening", "PinholeDiffraction", "SimulatorNonuniformity", "SunSensorEffects",
+           "Vignetting"]
 
 
 class LimbDarkening(Effect):
@@ -57,6 +59,31 @@ class Vignetting(Effect):
     mask_thickness_mm: float = Field(0.025, ge=0.0, le=5.0, description="mask thickness t")
 
 
+class PinholeDiffraction(Effect):
+    """The pinhole's diffraction: each point of the sun's geometric image (through a point pinhole)
+    spreads into the Fresnel pattern of the opening seen along its chief ray (the pinhole projected,
+    the entrance and exit circles' overlap in a thick mask), summed over the band: a
+    ``source_temperature_k`` blackbody's photons times a silicon detector's quantum efficiency."""
+
+    pinhole_diameter_mm: float = Field(0.1, gt=0.0, le=5.0, description="pinhole diameter D (as vignetting's)")
+    mask_thickness_mm: float = Field(0.025, ge=0.0, le=5.0, description="mask thickness t (as vignetting's)")
+    propagation: Literal["fresnel", "fraunhofer"] = "fresnel"
+    wavelengths_nm: list[float] = Field(list(DEFAULT_BAND_NM), min_length=1, max_length=16,
+                                        description="wavelengths summed over (each 300–1100 nm)")
+    source_temperature_k: float = Field(5800.0, ge=2000.0, le=10000.0,
+                                        description="the simulator's spectrum as a blackbody (AM0 ≈ 5800 K)")
+    supersampling: Literal[1, 2, 4] = Field(4, description="sub-pixels per pixel side of the geometric image "
+                                                           "before the convolution")
+
+    @field_validator("wavelengths_nm")
+    @classmethod
+    def _band(cls, v):
+        for x in v:
+            if not 300.0 <= x <= 1100.0:
+                raise ValueError(f"wavelength {x} nm: must be in [300, 1100] nm (a silicon detector's band)")
+        return v
+
+
 class SunSensorEffects(EffectsTable):
     """Effects of the sun sensor (both cube-mirror rigs): the sun and its simulator, the cover glass, the pinhole."""
 
@@ -64,3 +91,4 @@ class SunSensorEffects(EffectsTable):
     simulator_nonuniformity: SimulatorNonuniformity = Field(default_factory=SimulatorNonuniformity)
     cover_glass_ghost: CoverGlassGhost = Field(default_factory=CoverGlassGhost)
     vignetting: Vignetting = Field(default_factory=Vignetting)
+    pinhole_diffraction: PinholeDiffraction = Field(default_factory=PinholeDiffraction)

@@ -14,6 +14,7 @@ numbers differ. Nothing but the disk emits, so pixels outside a tile are exactly
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -251,6 +252,23 @@ def _register() -> None:
     _registered.add(variant)
 
 
+@dataclass(frozen=True)
+class _Scaled:
+    """A camera's intrinsics on a ``supersampling``× finer pixel grid (what the tiled sensor reads)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    k1: float
+    k2: float
+    k3: float
+    p1: float
+    p2: float
+    width: int
+    height: int
+
+
 class SunSpotBatch:
     """Render the windows of many sun directions with a :class:`SunSpotRenderer`'s disk, camera,
     sampler and response, ``tile_px`` wide, a grid of up to ``tiles_per_launch`` tiles per launch.
@@ -269,7 +287,12 @@ class SunSpotBatch:
         # tile: a direct batch returns whole readout windows and adds the ghost, drawn by a ghost
         # batch in window-sized tiles, to the spots whose ghost reaches their window.
         self.glass = glass
-        self.out_px = max(self.tile_px, renderer.window_px) if renderer.ghost is not None else self.tile_px
+        # with the pinhole's diffraction: the tile is drawn at ``supersampling``× the resolution (the
+        # same samples per pixel), convolved with the PSF into the readout window and binned
+        self.diffraction = renderer.diffraction
+        self.sub = renderer.supersampling if self.diffraction is not None else 1
+        spread = renderer.ghost is not None or self.diffraction is not None
+        self.out_px = max(self.tile_px, renderer.window_px) if spread else self.tile_px
         self._ghost_batches: dict[int, SunSpotBatch] = {}
         self.n_tiles = max(1, min(int(tiles_per_launch), MAX_LAUNCH_SAMPLES // (self.tile_px**2 * renderer.spp)))
         self.tiles_x = math.ceil(math.sqrt(self.n_tiles))
@@ -278,7 +301,8 @@ class SunSpotBatch:
         self.batched = self.variant.startswith("llvm")
         r = renderer
         if r.tiled_only and not self.batched:
-            raise ValueError("the cover glass's ghost and the pinhole's vignetting need an llvm variant of Mitsuba")
+            raise ValueError("the cover glass's ghost and the pinhole's vignetting and diffraction need an llvm "
+                             "variant of Mitsuba")
         self._scene = self._build(glass) if self.batched else r._build(self.tile_px, self.tile_px, r.spp)
 
     @property
@@ -292,6 +316,11 @@ class SunSpotBatch:
 
         _register()
         r, cam, t = self.renderer, self.renderer.camera, self.tile_px
+        m, spp = self.sub, r.spp // self.sub**2
+        if m > 1:  # sub-pixel J = m i + j of pixel i: U = m u + (m − 1)/2
+            cam = _Scaled(cam.fx * m, cam.fy * m, cam.cx * m + (m - 1) / 2, cam.cy * m + (m - 1) / 2,
+                          cam.k1, cam.k2, cam.k3, cam.p1, cam.p2, cam.width * m, cam.height * m)
+            t = t * m
         sensor = {
             "type": TILED_PLUGIN, "tile_px": t, "tiles_x": self.tiles_x, "n_tiles": self.n_tiles,
             "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
@@ -299,7 +328,7 @@ class SunSpotBatch:
             "detector_width": cam.width, "detector_height": cam.height, "response": r.response,
             "film": {"type": "hdrfilm", "width": self.tiles_x * t, "height": self.tiles_y * t,
                      "rfilter": {"type": "box"}, "pixel_format": "luminance"},
-            "sampler": {"type": r.sampler, "sample_count": r.spp},
+            "sampler": {"type": r.sampler, "sample_count": spp},
         }
         if r.ghost is not None:
             g = r.ghost
@@ -339,8 +368,11 @@ class SunSpotBatch:
         window (offset within the window's half width plus the tile's)."""
         t, W = self.tile_px, self.out_px
         a = W // 2 - t // 2
-        big = np.zeros((len(out), W, W))
-        big[:, a:a + t, a:a + t] = out
+        if out.shape[1] == W:  # already readout windows (the pinhole's diffraction)
+            big = out
+        else:
+            big = np.zeros((len(out), W, W))
+            big[:, a:a + t, a:a + t] = out
         cam = self.renderer.camera
         off = self.renderer.ghost.offset_px(sun_dirs, cam.fx, cam.fy)
         need = np.flatnonzero(np.all(np.abs(off) < W / 2 + t / 2 + 1, axis=1))
@@ -355,6 +387,8 @@ class SunSpotBatch:
 
     def _render(self, sun_dirs, origins, seed, axes) -> np.ndarray:
         K, t = len(sun_dirs), self.tile_px
+        if self.diffraction is not None:
+            self.window_fractions = np.ones(K)
         if not self.batched:
             def state(k, s, o):
                 st = {"sun_dir": _unit(s), "window_origin": tuple(int(x) for x in o)}
@@ -363,15 +397,37 @@ class SunSpotBatch:
             return np.array([self._scene.render(state(k, s, o), seed=mitsuba_seed(seed, k), spp=self.renderer.spp)
                              for k, (s, o) in enumerate(zip(sun_dirs, origins))]).reshape(K, t, t)
         rot = tile_rotations(sun_dirs, axes)
-        out = np.empty((K, t, t))
+        out = np.empty((K, t, t)) if self.diffraction is None else np.empty((K, self.out_px, self.out_px))
         for launch, a in enumerate(range(0, K, self.n_tiles)):
             b = min(K, a + self.n_tiles)
             data = np.zeros((self.n_tiles, 12))
             data[:b - a, 0:2] = origins[a:b]
             data[:b - a, 2] = 1.0
             data[:b - a, 3:] = rot[a:b].reshape(-1, 9)
+            data[:b - a, 0:2] *= self.sub
             img = self._scene.render({"tiles": data.ravel().astype(np.float32)}, seed=mitsuba_seed(seed, launch),
-                                     spp=self.renderer.spp)
-            grid = img.reshape(self.tiles_y, t, self.tiles_x, t).transpose(0, 2, 1, 3).reshape(-1, t, t)
-            out[a:b] = grid[:b - a]
+                                     spp=self.renderer.spp // self.sub**2)
+            T = t * self.sub
+            grid = img.reshape(self.tiles_y, T, self.tiles_x, T).transpose(0, 2, 1, 3).reshape(-1, T, T)
+            if self.diffraction is None:
+                out[a:b] = grid[:b - a]
+            else:
+                for k in range(a, b):
+                    out[k], self.window_fractions[k] = self._diffract(grid[k - a], sun_dirs[k])
         return out
+
+    def _diffract(self, sub: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, float]:
+        """The sub-pixel geometric tile ``sub`` placed in its readout window, convolved with the
+        diffraction PSF at ``s``'s field angle (one PSF per spot: it is a few px wide) and binned to
+        pixels. Returns the window and the share of the tile's light it keeps."""
+        from scipy.signal import fftconvolve
+
+        m, t, W, cam = self.sub, self.tile_px, self.out_px, self.renderer.camera
+        a = (W // 2 - t // 2) * m
+        win = np.zeros((W * m, W * m))
+        win[a:a + t * m, a:a + t * m] = sub
+        K = self.diffraction.kernel(s, cam.fx, cam.fy, W / 2, 1.0 / m)
+        conv = fftconvolve(win, K, mode="same")
+        out = conv.reshape(W, m, W, m).mean(axis=(1, 3))
+        total = sub.sum() / m**2
+        return out, float(out.sum() / total) if total > 0 else 1.0

@@ -21,6 +21,7 @@ from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.cover_glass import CoverGlass
 from rigsim.optics.pinhole import ThickPinhole
+from rigsim.optics.pinhole_diffraction import PinholePSF, band_weights, kernel_moments
 from rigsim.optics.sun_disk import (
     SUN_FULL_ANGLE_RAD,
     _basis,
@@ -94,7 +95,8 @@ class SunSpotRenderer:
                  window_px: int = 32, spp: int = 1024, spot_photons: float = 1.0e6,
                  sampler: str = "ldsampler", response: str = "flux", distance_mm: float = 1000.0,
                  radiance: DiskRadiance | None = None, ghost: CoverGlass | None = None,
-                 pinhole: ThickPinhole | None = None):
+                 pinhole: ThickPinhole | None = None, diffraction: PinholePSF | None = None,
+                 supersampling: int = 4):
         if not (0.0 < full_angle_rad < math.radians(20.0)):
             raise ValueError(f"full_angle_rad = {full_angle_rad!r}: must be in (0, 0.349) rad")
         if int(window_px) != window_px or not (4 <= window_px <= 4096):
@@ -116,6 +118,10 @@ class SunSpotRenderer:
         self.radiance = radiance if radiance is not None and not radiance.uniform else None
         self.ghost = ghost
         self.pinhole = pinhole  # a thick pinhole's vignetting
+        self.diffraction = diffraction  # the pinhole's diffraction (PSF convolved in sun_batch)
+        if diffraction is not None and (int(supersampling) not in (1, 2, 4) or self.spp < int(supersampling) ** 2):
+            raise ValueError(f"supersampling = {supersampling!r}: must be 1, 2 or 4, with spp >= its square")
+        self.supersampling = int(supersampling)
         self._ghost_batch = None
         self.variant = ensure_variant()
         register_sensors()
@@ -135,8 +141,9 @@ class SunSpotRenderer:
     @property
     def tiled_only(self) -> bool:
         """Whether only the tiled sensor draws this renderer's effects (the cover glass's ghost, the
-        thick pinhole's vignetting): the per-frame windows are then drawn by a one-tile batch."""
-        return self.ghost is not None or self.pinhole is not None
+        thick pinhole's vignetting, the pinhole's diffraction): the per-frame windows are then drawn
+        by a one-tile batch."""
+        return self.ghost is not None or self.pinhole is not None or self.diffraction is not None
 
     @property
     def needs_axis(self) -> bool:
@@ -240,6 +247,8 @@ class SunSpotRenderer:
                 self._ghost_batch = SunSpotBatch(self, W, 1)
             arr = self._ghost_batch.render(s[None, :], np.array([origin]), seed=int(seed),
                                            axes=None if axis is None else np.asarray(axis)[None, :])[0]
+            if self.diffraction is not None:  # the share of the spot's light the readout window keeps
+                settings["diffraction_window_fraction"] = float(self._ghost_batch.window_fractions[0])
         elif not 4 <= t < W:  # the whole window (a spot overflowing it is flagged above)
             arr = self._scene.render(state, seed=int(seed), spp=self.spp)
         else:
@@ -352,6 +361,8 @@ class SunSpotRenderer:
             **({} if self.radiance is None else {"disk_radiance": {"u": self.radiance.u, "g": self.radiance.g}}),
             **({} if self.ghost is None else {"cover_glass": self.ghost.as_dict()}),
             **({} if self.pinhole is None else {"thick_pinhole": self.pinhole.as_dict()}),
+            **({} if self.diffraction is None else {"pinhole_diffraction": {
+                **self.diffraction.as_dict(), "supersampling": self.supersampling}}),
         }
 
 
@@ -402,9 +413,14 @@ class SunSensorScene:
                            ghost.coating_reflectance) if ghost.enabled else None
         vig = eff.vignetting
         pinhole = ThickPinhole(vig.pinhole_diameter_mm, vig.mask_thickness_mm) if vig.enabled else None
+        pd = eff.pinhole_diffraction
+        diffraction = PinholePSF(pd.pinhole_diameter_mm, pd.mask_thickness_mm, rig.sun_sensor.focal_length_mm,
+                                 tuple(pd.wavelengths_nm),
+                                 tuple(band_weights(pd.wavelengths_nm, pd.source_temperature_k).tolist()),
+                                 pd.propagation) if pd.enabled else None
         self.renderer = SunSpotRenderer(self.camera, full_angle_rad=self.full_angle_rad, window_px=window_px,
                                         spp=spp, spot_photons=self.spot_photons, radiance=radiance, ghost=ghost,
-                                        pinhole=pinhole)
+                                        pinhole=pinhole, diffraction=diffraction, supersampling=pd.supersampling)
 
     def sun_dir_cam(self, pose_rad: dict) -> np.ndarray:
         R = self.real.turntable.R_rot_from_mount(pose_rad)
@@ -510,7 +526,29 @@ class SunSensorScene:
                 "offset_px": g.offset_px(s, self.camera.fx, self.camera.fy).tolist()}
         if self.irradiance_scale(pose_rad) != 1.0:
             out["irradiance_scale"] = self.irradiance_scale(pose_rad)
+        if self.renderer.diffraction is not None:
+            out["pinhole_diffraction"] = diffraction_truth(self.renderer, s)
         return out
+
+
+def diffraction_truth(renderer: SunSpotRenderer, s: np.ndarray) -> dict:
+    """The diffraction PSF at the spot's field angle (the sidecar's truth): its rms radius and
+    covariance (px, over the readout window), and the share of its light that falls inside the
+    window around the spot's centre (the rest is lost to the readout)."""
+    psf, cam, W = renderer.diffraction, renderer.camera, renderer.window_px
+    c_uv, _ = cam.project_valid(s[None, :])
+    o = renderer.window_origin_for(c_uv[0])
+    step = 1.0  # the PSF's band ends below 1 cycle/px: its sums and moments on the pixel grid are exact
+    K = psf.kernel(s, cam.fx, cam.fy, W, step)
+    off = np.arange(-(K.shape[0] // 2), K.shape[0] // 2 + 1) * step
+    iu = (off + c_uv[0][0] >= o[0] - 0.5) & (off + c_uv[0][0] < o[0] + W - 0.5)
+    iv = (off + c_uv[0][1] >= o[1] - 0.5) & (off + c_uv[0][1] < o[1] + W - 0.5)
+    c, h = K.shape[0] // 2, round(W / 2 / step)
+    mom = kernel_moments(K[c - h:c + h + 1, c - h:c + h + 1], step)  # over a window's width around the spot
+    theta = math.acos(min(1.0, float(s[2])))
+    return {"theta_deg": math.degrees(theta), "fresnel_number_550nm_across": psf.fresnel_number(550.0) * math.cos(theta),
+            "psf_rms_radius_px": mom["rms_radius_px"], "psf_cov_px2": mom["cov_px2"],
+            "flux_fraction_in_window": float(K[np.ix_(iv, iu)].sum())}
 
 
 def detector_part(image: np.ndarray, origin_uv, shape: tuple[int, int]) -> tuple[np.ndarray, tuple[int, int]]:
