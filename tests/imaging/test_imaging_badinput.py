@@ -27,7 +27,7 @@ from rigsim.imaging import (
 from rigsim.imaging.synth import add_noise, gaussian_spots
 
 NOISE = NoiseModel(1.0, 5.0)
-KW = {"tcom": {}, "wcom": {}, "gauss": {"sigma_px": 1.0}, "gauss_lsq": {"sigma_px": 1.0}}
+KW = {"tcom": {}, "tcom_peak": {}, "wcom": {}, "gauss": {"sigma_px": 1.0}, "gauss_lsq": {"sigma_px": 1.0}}
 ALL = sorted(METHODS)
 
 
