@@ -14,7 +14,7 @@ numbers differ. Nothing but the disk emits, so pixels outside a tile are exactly
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 
@@ -252,23 +252,6 @@ def _register() -> None:
     _registered.add(variant)
 
 
-@dataclass(frozen=True)
-class _Scaled:
-    """A camera's intrinsics on a ``supersampling``× finer pixel grid (what the tiled sensor reads)."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    k1: float
-    k2: float
-    k3: float
-    p1: float
-    p2: float
-    width: int
-    height: int
-
-
 class SunSpotBatch:
     """Render the windows of many sun directions with a :class:`SunSpotRenderer`'s disk, camera,
     sampler and response, ``tile_px`` wide, a grid of up to ``tiles_per_launch`` tiles per launch.
@@ -318,8 +301,8 @@ class SunSpotBatch:
         r, cam, t = self.renderer, self.renderer.camera, self.tile_px
         m, spp = self.sub, r.spp // self.sub**2
         if m > 1:  # sub-pixel J = m i + j of pixel i: U = m u + (m − 1)/2
-            cam = _Scaled(cam.fx * m, cam.fy * m, cam.cx * m + (m - 1) / 2, cam.cy * m + (m - 1) / 2,
-                          cam.k1, cam.k2, cam.k3, cam.p1, cam.p2, cam.width * m, cam.height * m)
+            cam = replace(cam, fx=cam.fx * m, fy=cam.fy * m, cx=cam.cx * m + (m - 1) / 2, cy=cam.cy * m + (m - 1) / 2,
+                          width=cam.width * m, height=cam.height * m)
             t = t * m
         sensor = {
             "type": TILED_PLUGIN, "tile_px": t, "tiles_x": self.tiles_x, "n_tiles": self.n_tiles,
