@@ -9,10 +9,12 @@ import numpy as np
 from rigsim.detector.config import DetectorConfig
 from rigsim.detector.pattern import fixed_pattern, signal_maps
 from rigsim.detector.poisson import poisson_inverse_cdf
+from rigsim.detector.scratch import Scratch, thread_scratch
 
 __all__ = ["DetectorFrame", "apply_detector", "fixed_pattern", "poisson_inverse_cdf"]
 
-_CHUNK = 1 << 15  # pixels per block of the noisy chain: its temporaries stay in the cache
+_CHUNK = 1 << 17  # pixels per block of the noisy chain (a multiple of _PAIR)
+_PAIR = 1 << 15   # the read noise's Box–Muller pairs are formed within runs of this many pixels
 
 
 @dataclass
@@ -22,13 +24,25 @@ class DetectorFrame:
     ``dn``: uint16 image (rows v, columns u). ``saturated``: bool mask of pixels clipped at the
     full well or at the ADC's top code. ``expected_dn``: the noise-free mean DN of every pixel
     (fixed patterns included unless ``noiseless``; full-well clip applied; not quantised) -- the
-    reference for fidelity checks. ``meta``: seeds, config, counts.
+    reference for fidelity checks, float64, built when first read. ``meta``: seeds, config, counts.
     """
 
     dn: np.ndarray
     saturated: np.ndarray
-    expected_dn: np.ndarray
+    # float64 mean DN, or (noisy chain) the float32 gain x electrons to which ``offset_dn`` is added
+    # in float64 on first read -- the same values, without writing 8 bytes per pixel per frame
+    # that most callers never read
+    _expected: np.ndarray = field(repr=False)
     meta: dict = field(default_factory=dict)
+    _offset_dn: float = field(default=0.0, repr=False)
+
+    @property
+    def expected_dn(self) -> np.ndarray:
+        if self._expected.dtype != np.float64:
+            v = self._expected.astype(np.float64)
+            v += self._offset_dn
+            self._expected, self._offset_dn = v, 0.0
+        return self._expected
 
     @property
     def saturated_pixels(self) -> int:
@@ -48,9 +62,38 @@ def _check_photons(ph: np.ndarray) -> float:
     return float(top)
 
 
-def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float) -> None:
+def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float, work: Scratch | None = None) -> None:
     """Add N(0, sigma²) to float32 ``x`` in place: Box–Muller pairs from 24-bit uniforms (the
-    tails end at 5.8 σ, a probability of 1e-8)."""
+    tails end at 5.8 σ, a probability of 1e-8).
+
+    The pixels are paired within consecutive runs of :data:`_PAIR` (the first half of a run with
+    its second half, the last, shorter run likewise), whatever the block size of the caller."""
+    n = x.size
+    q = n // _PAIR
+    if q:
+        h = _PAIR // 2
+        work = Scratch() if work is None else work
+        uu = rng.random(dtype=np.float32, out=work.get("bm_u", q * _PAIR, np.float32)).reshape(q, 2, h)
+        r = work.get("bm_r", q * h, np.float32).reshape(q, h)
+        g = work.get("bm_g", q * h, np.float32).reshape(q, h)
+        np.negative(uu[:, 0], out=r)
+        np.log1p(r, out=r)                     # log(1 - u), 1 - u in (0, 1]
+        r *= np.float32(-2.0 * sigma * sigma)
+        np.sqrt(r, out=r)
+        ang = uu[:, 1]
+        ang *= np.float32(2.0 * np.pi)
+        xx = x[: q * _PAIR].reshape(q, 2, h)
+        np.cos(ang, out=g)
+        g *= r
+        xx[:, 0] += g
+        np.sin(ang, out=g)
+        g *= r
+        xx[:, 1] += g
+    if n > q * _PAIR:
+        _add_normals_run(rng, x[q * _PAIR:], sigma)
+
+
+def _add_normals_run(rng: np.random.Generator, x: np.ndarray, sigma: float) -> None:
     n = x.size
     m = (n + 1) // 2
     uu = rng.random(2 * m, dtype=np.float32)
@@ -67,12 +110,17 @@ def _add_normals_f32(rng: np.random.Generator, x: np.ndarray, sigma: float) -> N
     x[m:] += g[:n - m]
 
 
-def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn, added=None, clamp=True):
+def _noisy_block(ph, eg, dark, rng_shot, cfg, rng_read, dn, saturated, mean_kdn, added=None, clamp=True,
+                 work: Scratch | None = None):
     """The noisy chain over one block of pixels (flat views); writes the outputs in place and
     returns the counts of full-well and ADC-clipped pixels. ``added``: electrons added after the
     shot noise (or None). ``clamp=False``: no value of photons × QE × PRNU reaches 1e15 (the clamp
     would change nothing)."""
-    e = np.empty(ph.size, np.float32)
+    size = ph.size
+    w = Scratch() if work is None else work
+    u = rng_shot.random(dtype=np.float32, out=w.get("u", size, np.float32))
+    e, t, n = (w.get(k, size, np.float32) for k in ("e", "t", "n"))
+    well, adc = w.get("well", size, bool), w.get("adc", size, bool)
     np.minimum(ph, 1e30, out=e, casting="unsafe")
     e *= eg
     if clamp:
@@ -80,20 +128,23 @@ def _noisy_block(ph, eg, dark, u, cfg, rng_read, dn, saturated, expected_dn, add
     e += dark                                  # λ: photo-electrons and dark electrons are Poisson
     fw = np.float32(cfg.full_well_e)
     K = cfg.gain_dn_per_e
-    t = np.minimum(e, fw) if added is None else np.minimum(e + added, fw)
-    np.multiply(t, np.float32(K), out=expected_dn)
-    expected_dn += cfg.offset_dn
-    n = poisson_inverse_cdf(e, u)
+    if added is None:
+        np.minimum(e, fw, out=t)
+    else:
+        np.add(e, added, out=t)
+        np.minimum(t, fw, out=t)
+    np.multiply(t, np.float32(K), out=mean_kdn)      # float32 K·electrons: offset_dn is added on reading
+    poisson_inverse_cdf(e, u, out=n, work=w)
     if added is not None:
         n += added
-    well = n >= fw
+    np.greater_equal(n, fw, out=well)
     np.minimum(n, fw, out=n)
     if cfg.read_noise_e > 0:
-        _add_normals_f32(rng_read, n, cfg.read_noise_e)
+        _add_normals_f32(rng_read, n, cfg.read_noise_e, w)
     n *= np.float32(K)
     n += np.float32(cfg.offset_dn + 0.5)       # round half up: truncation of y + 0.5 once clipped to >= 0
     top = np.float32(cfg.max_dn)
-    adc = n >= top
+    np.greater_equal(n, top, out=adc)
     np.clip(n, np.float32(0.0), top, out=n)
     dn[:] = n
     np.logical_or(well, adc, out=saturated)
@@ -118,7 +169,7 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     (hot pixels, cosmic-ray hits: rigsim.detector.defects).
 
     The noisy chain runs in float32 over blocks of pixels (counts stay exact integers up to the
-    largest full well, 1e7 < 2^24); ``expected_dn`` is float64.
+    largest full well, 1e7 < 2^24); ``expected_dn`` is float64 (computed when first read).
     """
     ph = np.asarray(photons_per_px)
     if ph.dtype.kind not in "fiub":
@@ -166,15 +217,15 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         rng_shot, rng_read = np.random.default_rng(ss_shot), np.random.default_rng(ss_read)
         dn = np.empty(ph.shape, np.uint16)
         saturated = np.empty(ph.shape, bool)
-        expected_dn = np.empty(ph.shape, np.float64)
+        expected_dn = np.empty(ph.shape, np.float32)  # the mean's K·electrons (see DetectorFrame)
         flat = [a.reshape(-1) for a in (np.ascontiguousarray(ph), eg, dark, dn, saturated, expected_dn)]
         flat_added = None if added is None else added.astype(np.float32).reshape(-1)
         n_well = n_adc = 0
+        work = thread_scratch()
         for i in range(0, ph.size, _CHUNK):
             s = slice(i, min(ph.size, i + _CHUNK))
-            u = rng_shot.random(s.stop - s.start, dtype=np.float32)
-            w, a = _noisy_block(*(f[s] for f in flat[:3]), u, cfg, rng_read, *(f[s] for f in flat[3:]),
-                                None if flat_added is None else flat_added[s], clamp=clamp)
+            w, a = _noisy_block(*(f[s] for f in flat[:3]), rng_shot, cfg, rng_read, *(f[s] for f in flat[3:]),
+                                None if flat_added is None else flat_added[s], clamp=clamp, work=work)
             n_well += w
             n_adc += a
     meta = {
@@ -188,4 +239,4 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         "adc_clipped_pixels": n_adc,
         "config": cfg.model_dump(),
     }
-    return DetectorFrame(dn=dn, saturated=saturated, expected_dn=expected_dn, meta=meta)
+    return DetectorFrame(dn, saturated, expected_dn, meta, 0.0 if noiseless else float(cfg.offset_dn))
