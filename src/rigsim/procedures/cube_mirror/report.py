@@ -79,7 +79,7 @@ def campaign_rig_size(campaign) -> tuple[int, int]:
 def plot_search_path(campaign, path: Path) -> Path:
     plt = _plt()
     n = len(campaign.searches)
-    fig, axs = plt.subplots(1, n, figsize=(6 * n, 5.2))
+    fig, axs = plt.subplots(1, n, figsize=(6 * n, 5.6))
     axs = np.atleast_1d(axs)
     for ax, s in zip(axs, campaign.searches):
         m = np.array([st.measured for st in s.steps])
@@ -99,17 +99,18 @@ def plot_search_path(campaign, path: Path) -> Path:
         ax.set_xlabel(f"x ({s.unit})")
         ax.set_ylabel(f"y ({s.unit})")
         ax.set_title(f"face {s.face}: {len(s.steps)} frames, {'converged' if s.converged else 'NOT converged'}")
-        ax.legend(fontsize=8, loc="lower right")
-        # inset: zoom on the threshold box
-        ins = ax.inset_axes([0.62, 0.62, 0.36, 0.36])
-        ins.plot(m[:, 0], m[:, 1], "o-", ms=3)
-        ins.plot(t[:, 0], t[:, 1], "x--", ms=3, alpha=0.7)
-        ins.add_patch(plt.Rectangle((-th, -th), 2 * th, 2 * th, fill=False, ls=":", color="k"))
-        ins.set_xlim(-2 * th, 2 * th)
-        ins.set_ylim(-2 * th, 2 * th)
-        ins.set_aspect("equal")
-        ins.tick_params(labelsize=6)
-    fig.tight_layout()
+        if lim > 4 * th:  # inset: zoom on the threshold box (only when the panel does not already show it large)
+            ins = ax.inset_axes([0.62, 0.62, 0.36, 0.36])
+            ins.plot(m[:, 0], m[:, 1], "o-", ms=3)
+            ins.plot(t[:, 0], t[:, 1], "x--", ms=3, alpha=0.7)
+            ins.add_patch(plt.Rectangle((-th, -th), 2 * th, 2 * th, fill=False, ls=":", color="k"))
+            ins.set_xlim(-2 * th, 2 * th)
+            ins.set_ylim(-2 * th, 2 * th)
+            ins.set_aspect("equal")
+            ins.tick_params(labelsize=6)
+    # one legend under the panels: inside a panel it hides the path wherever the path runs
+    fig.legend(*axs[0].get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
