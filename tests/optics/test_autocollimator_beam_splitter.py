@@ -126,12 +126,13 @@ def test_the_factory_calibration_keeps_the_reading_within_the_instrument():
     it is off by up to 0.3″ (the re-zeroing and the y scale matter)."""
     o0 = AutocollimatorOptics(RIG.autocollimator)
     o1 = AutocollimatorOptics(RIG.autocollimator, beam_splitter=BeamSplitter())
-    cal = o1.calibration(n_rays=200_000)
+    cal = o1.calibration(n_rays=100_000)
+    o0.calibration(n_rays=100_000)
     assert cal["ref_uv"][0] - o1.cx == pytest.approx(-0.157, abs=0.02)
     worst1 = worst0 = 0.0
-    for tx, ty in [(0, 0), (3, 0), (-7, 2), (0, 5), (0, -8), (10, 0), (-10, 0), (6, 6), (-8, -7)]:
+    for tx, ty in [(0, 0), (-7, 2), (0, -8), (10, 0), (-10, 0), (6, 6)]:
         m = flat_mirror(o0.distance_mm + o0.objective.z_vertex, (tx * ARCMIN, ty * ARCMIN), radius_mm=100)
-        uv = o1.spot(m, n_rays=200_000).mean_uv
+        uv = o1.spot(m, n_rays=100_000).mean_uv
         worst1 = max(worst1, np.max(np.abs(o1.reading(uv) - m.tilt_rad())) * ARCSEC_PER_RAD)
         worst0 = max(worst0, np.max(np.abs(o0.reading(uv) - m.tilt_rad())) * ARCSEC_PER_RAD)
     assert worst1 < 0.05, worst1

@@ -34,7 +34,16 @@ def _rms(img, origin, c):
     return float(np.sqrt((img * ((u + origin[0] - c[0]) ** 2 + (v + origin[1] - c[1]) ** 2)).sum() / img.sum()))
 
 
+def test_plate_moves_the_spot_by_the_closed_form(tmp_path):
+    _check_plate(tmp_path, [(1.0, -0.5)], reading=False)
+
+
+@pytest.mark.slow
 def test_plate_moves_the_spot_by_the_closed_form_and_the_reading_stays_within_the_instrument(tmp_path):
+    _check_plate(tmp_path, [(1.0, -0.5), (-4.0, 3.0)], reading=True)
+
+
+def _check_plate(tmp_path, poses, reading):
     ideal = AutocollimatorRenderer(RIG, None, "face", spp=1024, sampler="independent", mesh_dir=tmp_path,
                                    diffraction=False)
     plate = AutocollimatorRenderer(PLATE_RIG, None, "face", spp=1024, sampler="independent", mesh_dir=tmp_path,
@@ -42,7 +51,7 @@ def test_plate_moves_the_spot_by_the_closed_form_and_the_reading_stays_within_th
     bs = plate.effects.beam_splitter
     assert bs is not None and plate.max_depth == ideal.max_depth + 5
     pitch = ideal.optics.pitch_mm
-    for k, (dy, dx) in enumerate([(1.0, -0.5), (-4.0, 3.0)]):
+    for k, (dy, dx) in enumerate(poses):
         pose = _pose(ideal.layout.reference_pose_rad, dy, dx)
         w0 = ideal.render_window(pose, seed=11 + k)
         w1 = plate.render_window(pose, seed=11 + k)
@@ -62,6 +71,8 @@ def test_plate_moves_the_spot_by_the_closed_form_and_the_reading_stays_within_th
         # brighter by as much, for the same peak)
         ratio = (w1.image.sum() / plate.source_photons) / (w0.image.sum() / ideal.source_photons)
         assert ratio == pytest.approx(0.5 * 0.5 * (1 - bs.fresnel_at_tilt), rel=0.04)
+        if not reading:
+            continue
         # the reading after the factory calibration (made with the plate, full aperture): what the
         # plate adds to the ideal instrument's reading of this 25 mm face stays within 0.1″ near the
         # null (exact model: +0.065″ at the null, +0.08″ here, +0.15″ at 6′: the face halves the

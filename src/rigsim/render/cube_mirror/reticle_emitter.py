@@ -73,7 +73,7 @@ def _make_class():
             if self.ring is not None:
                 self.extent = max(self.extent, self.ring[1])
             self.fold = None
-            if props.has_property("fold_plane"):
+            if "fold_plane" in props:
                 v = [float(x) for x in props["fold_plane"].split(",")]
                 c, n = v[:3], v[3:]
                 self.fold = (mi.ScalarVector3f(n), 2.0 * sum(a * b for a, b in zip(c, n)))
