@@ -427,7 +427,7 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
                         "drawing": fx.reticle.as_props()}
         if fx.beam_splitter is not None:
             bs = fx.beam_splitter
-            d["reticle"]["fold_plane"] = ",".join(f"{v!r}" for v in (*bs.placement.point, *bs.normal))
+            d["reticle"]["fold_plane"] = ",".join(repr(float(v)) for v in (*bs.placement.point, *bs.normal))
     # a Lambertian detector of reflectance 1 shows radiance E/π: photons per pixel = π·L·pitch²
     return AutocollimatorScene(d, optics, layout, mirror, window, math.pi * optics.pitch_mm ** 2,
                                float(source_photons), anchor, files, shift, bias)
