@@ -22,6 +22,9 @@ Scene (millimetres, world frame = the autocollimator frame A of
   The render window is moved by moving this camera (``sensor.to_world``), never the film crop.
   The camera sees the detector from the lens side, so the film is mirrored in u: window pixel
   (i, j) is ``film[j, window_px - 1 - i]``;
+* ``beam_splitter_s1/s2`` -- with ``[effects.beam_splitter]`` only: the plate's two faces; the
+  reticle is then folded (mirrored in S1) and the detector and the camera follow the plate's
+  displaced, refocused axis (docs/effects-autocollimator.md);
 * ``integrator`` -- ``ptracer`` (the beam → mirror → lens → detector path is a caustic),
   ``hide_emitters``, ``max_depth`` = the length of the main path (so light scattered back off the
   detector is not re-imaged).
@@ -792,7 +795,7 @@ def export_autocollimator(rig: CubeMirrorRig, real: Realization | None = None, p
     if rig.autocollimator is None:
         return None
     real = real if real is not None else realization_from_rig(rig)
-    optics = AutocollimatorOptics(rig.autocollimator)
+    optics = AutocollimatorOptics(rig.autocollimator, beam_splitter=beam_splitter_of(rig))
     layout = autocollimator_layout(rig, real, "face", None, objective_vertex_z_mm=optics.objective.z_vertex)
     if not pose_rad:
         pose_rad = dict(layout.reference_pose_rad)  # the face's exact null: the spot on the axis
