@@ -155,14 +155,14 @@ def test_the_effect_builds_the_plate_and_is_off_by_default():
     ("second_surface_reflectance", -0.1, "greater than or equal to 0"),
 ])
 def test_bad_beam_splitter_values_name_field_value_and_range(tmp_path, field, value, expect):
-    from rigsim.rig.load import SCENES_DIR
-
     import re
+
+    from rigsim.rig.load import SCENES_DIR
 
     text = (SCENES_DIR / "sun_sensor_3axis_autocollimator.toml").read_text()
     head, _, block = text.partition("[effects.beam_splitter]")
     assert block, "the shipped scene lists the effect"
-    block = re.sub(rf"^#? ?{field} = .*$", "", block, flags=re.M)
+    block = re.sub(rf"^#? ?{field} = .*$", "", block, flags=re.MULTILINE)
     p = tmp_path / "r.toml"
     p.write_text(head + f"[effects.beam_splitter]\n{field} = {value}" + block)
     with pytest.raises(RigError) as ei:

@@ -88,7 +88,7 @@ def _ghost_window(rig, renderer, pose, centre, size, spp, tmp_path):
     import mitsuba as mi
 
     sc = autocollimator_scene(rig, None, pose, "face", spp=spp, mesh_dir=tmp_path, window_px=size,
-                              window_origin=(int(round(centre[0])) - size // 2, int(round(centre[1])) - size // 2),
+                              window_origin=(int(np.rint(centre[0])) - size // 2, int(np.rint(centre[1])) - size // 2),
                               optics=renderer.optics if rig is PLATE_RIG else None, layout=renderer.layout,
                               source_photons=renderer.source_photons, sampler="independent")
     img = np.asarray(mi.render(mi.load_dict(sc.scene_dict), spp=spp, seed=5)).reshape(size, size)[:, ::-1]

@@ -20,13 +20,13 @@ import numpy as np
 __all__ = [
     "BeamSplitter",
     "PlatePlacement",
-    "fresnel_unpolarised",
-    "refracted_angle",
-    "lateral_shift",
-    "ghost_separation",
-    "ghost_ratio",
     "focus_shift_sagittal",
     "focus_shift_tangential",
+    "fresnel_unpolarised",
+    "ghost_ratio",
+    "ghost_separation",
+    "lateral_shift",
+    "refracted_angle",
     "surface_weights",
     "trace_plate",
 ]

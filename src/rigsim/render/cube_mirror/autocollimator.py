@@ -197,7 +197,7 @@ def plate_spawn_bias_mm(bs: BeamSplitter, optics: AutocollimatorOptics, n_rays: 
     d = cone_directions(n_rays, optics.cone_half_angle_rad)
     S = optics.source_position
     H = S + (((c1 - S) @ n1) / (d @ n1))[:, None] * d          # the unfolded reticle rays on S1
-    eps = lambda P: MITSUBA_RAY_EPSILON * (1.0 + np.max(np.abs(P), axis=1))  # noqa: E731
+    eps = lambda P: MITSUBA_RAY_EPSILON * (1.0 + np.max(np.abs(P), axis=1))
     ci = d @ n1
     w = bs.weights(ci, 1)[0] * bs.weights(ci, 1)[1] * bs.weights(ci, 2)[1]
     shift_src = eps(H)[:, None] * (n1[None, :] - ci[:, None] * d)   # ⊥ the ray
