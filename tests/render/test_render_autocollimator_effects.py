@@ -192,7 +192,8 @@ def test_disabled_effects_leave_the_scene_unchanged(tmp_path):
     fx = RIG.effects.model_copy(update={
         "reticle": RIG.effects.reticle.model_copy(update={"pattern": "cross_ring", "line_width_um": 30.0}),
         "face_reflectance": RIG.effects.face_reflectance.model_copy(update={"coating": "enhanced_al"}),
-        "ghosts": RIG.effects.ghosts.model_copy(update={"surface_reflectance": 0.01})})
+        "ghosts": RIG.effects.ghosts.model_copy(update={"surface_reflectance": 0.01}),
+        "beam_splitter": RIG.effects.beam_splitter.model_copy(update={"thickness_mm": 3.0})})
     assert fx.enabled == ()
     a = AutocollimatorRenderer(RIG, None, "face", spp=16, mesh_dir=tmp_path)
     b = AutocollimatorRenderer(RIG.model_copy(update={"effects": fx}), None, "face", spp=16, mesh_dir=tmp_path)

@@ -449,11 +449,15 @@ class AutocollimatorOptics:
     ``"collimated"`` (reticle at the best-collimation position, default) or ``"paraxial"``
     (paraxial focal point); ``source_offset_mm``: the detector plane lies this far behind the
     reticle (the reticle is a point source, not a surface: it casts no shadow); ``overfill``:
-    the reticle's cone reaches the stop plane at ``overfill`` × the stop radius.
+    the reticle's cone reaches the stop plane at ``overfill`` × the stop radius;
+    ``beam_splitter`` (:class:`~rigsim.optics.beam_splitter.BeamSplitter`, default none): the
+    reticle is folded in by reflection off the plate's first surface and the return crosses the
+    plate; the detector is centred on the plate's displaced axis and refocused for it.
     """
 
     def __init__(self, ac, *, wavelength_nm: float = 587.56, center_thickness_mm: float | None = None,
-                 focus: str = "collimated", source_offset_mm: float = 0.005, overfill: float = 1.01):
+                 focus: str = "collimated", source_offset_mm: float = 0.005, overfill: float = 1.01,
+                 beam_splitter=None):
         if focus not in ("collimated", "paraxial"):
             raise ValueError(f"focus = {focus!r}: must be 'collimated' or 'paraxial'")
         if not (0.0 < source_offset_mm < 1.0):
@@ -473,10 +477,17 @@ class AutocollimatorOptics:
         self.cx = (self.width - 1) / 2.0
         self.cy = (self.height - 1) / 2.0
         self.distance_mm = float(ac.distance_mm)
+        self.beam_splitter = beam_splitter
         z_par = self.objective.z_flat - self.objective.bfd_paraxial_mm
         self.focus_shift_mm = 0.0 if focus == "paraxial" else self._best_collimation_shift(z_par)
         self.z_source = z_par + self.focus_shift_mm
         self.z_detector = self.z_source - self.source_offset_mm
+        self.detector_xy0 = np.zeros(2)  # where the detector's centre (cx, cy) lies in x_A, y_A
+        if beam_splitter is not None:
+            # the detector follows the plate's displaced, refocused axis (its axial ray exits the
+            # plate −d along x_A; the foci move away from the plate)
+            self.z_detector -= beam_splitter.focus_shift_mm
+            self.detector_xy0 = np.array([-beam_splitter.lateral_shift_mm, 0.0])
         self.cone_half_angle_rad = self._cone_for_stop(self.overfill)
         self._calib = None
 
@@ -491,11 +502,13 @@ class AutocollimatorOptics:
 
     def uv_to_xy(self, uv) -> np.ndarray:
         uv = np.asarray(uv, float)
-        return np.stack([(uv[..., 0] - self.cx) * self.pitch_mm, (uv[..., 1] - self.cy) * self.pitch_mm], -1)
+        return np.stack([(uv[..., 0] - self.cx) * self.pitch_mm + self.detector_xy0[0],
+                         (uv[..., 1] - self.cy) * self.pitch_mm + self.detector_xy0[1]], -1)
 
     def xy_to_uv(self, xy) -> np.ndarray:
         xy = np.asarray(xy, float)
-        return np.stack([xy[..., 0] / self.pitch_mm + self.cx, xy[..., 1] / self.pitch_mm + self.cy], -1)
+        return np.stack([(xy[..., 0] - self.detector_xy0[0]) / self.pitch_mm + self.cx,
+                         (xy[..., 1] - self.detector_xy0[1]) / self.pitch_mm + self.cy], -1)
 
     def on_detector(self, uv, margin_px: float = 0.0) -> np.ndarray:
         uv = np.asarray(uv, float)
@@ -537,7 +550,10 @@ class AutocollimatorOptics:
         t3 = (ob.z_stop - P2[:, 2]) / d2[:, 2]
         P3 = P2 + t3[:, None] * d2
         ok &= ok1 & ok2 & (np.hypot(P3[:, 0], P3[:, 1]) <= ob.stop_radius_mm)
-        return P3, d2, T1 * T2, ok
+        T = T1 * T2
+        if self.beam_splitter is not None:  # the reticle's light comes off S1 (a plane mirror: same rays)
+            T = T * self.beam_splitter.weights(d @ self.beam_splitter.normal, 1)[0]
+        return P3, d2, T, ok
 
     def _return(self, H: np.ndarray, r: np.ndarray):
         """Mirror → stop plane → convex face → flat face → detector plane. Returns (xy, T, ok)."""
@@ -562,6 +578,13 @@ class AutocollimatorOptics:
         P3 = P2 + t3[:, None] * d1
         ok &= np.hypot(P3[:, 0], P3[:, 1]) <= ob.lens_radius_mm
         d2, T2, ok2 = _refract(d1, np.array([0.0, 0.0, 1.0]), ob.n)
+        if self.beam_splitter is not None:
+            from rigsim.optics.beam_splitter import trace_plate
+
+            bs = self.beam_splitter
+            P3, d2, ci, okp = trace_plate(P3, d2, bs.placement)
+            T2 = T2 * bs.weights(ci, 1)[1] * bs.weights(ci, 2)[1]
+            ok2 = ok2 & okp
         t4 = (self.z_detector - P3[:, 2]) / d2[:, 2]
         P4 = P3 + t4[:, None] * d2
         return P4[:, :2], T1 * T2, ok & ok1 & ok2
@@ -652,7 +675,7 @@ class AutocollimatorOptics:
         nm = mirror.normal
         d = np.array([0.0, 0.0, 1.0])
         r = d - 2.0 * (d @ nm) * nm
-        return self.xy_to_uv(self.efl_mm * np.array([r[0], r[1]]) / (-r[2]))
+        return self.xy_to_uv(self.efl_mm * np.array([r[0], r[1]]) / (-r[2]) + self.detector_xy0)
 
     def spot(self, mirror: MirrorTarget, *, n_rays: int = 1_000_000, emitted_photons: float = 1.0,
              window: tuple[int, int, int, int] | None = None, window_px: int | None = None,
@@ -838,17 +861,26 @@ class AutocollimatorOptics:
         """The instrument's factory calibration, fitted on the exact model: a flat mirror larger
         than the beam at ``distance_mm``, tilted along x_A; the spot's radial offset s (mm) is
         fitted as ``F·tan(ρ)·(1 + c·ρ²)`` with ρ the return beam's angle (= 2·tilt), over six
-        tilts up to :meth:`calibration_range_rad`."""
+        tilts up to :meth:`calibration_range_rad`. With a beam splitter the plate breaks the
+        symmetry: the zero (``ref_uv``) is the spot of the untilted mirror and the y axis gets its
+        own scale (``y_scale``, from six tilts along y_A)."""
         if self._calib is None:
             half = self.calibration_range_rad()
+            ref = np.array([self.cx, self.cy])
+
+            def cal_spot(tilt):
+                m = flat_mirror(self.distance_mm + self.objective.z_vertex, tilt,
+                                radius_mm=2.0 * self.objective.clear_aperture_mm)
+                return self.spot(m, n_rays=n_rays).mean_uv
+
+            if self.beam_splitter is not None:
+                ref = cal_spot((0.0, 0.0))
             s, rho = [], []
             for t in np.linspace(0.1, 1.0, 6) * half:
-                m = flat_mirror(self.distance_mm + self.objective.z_vertex, (t, 0.0),
-                                radius_mm=2.0 * self.objective.clear_aperture_mm)
-                sp = self.spot(m, n_rays=n_rays)
-                if sp.mean_uv is None:  # no light back at this tilt: not a calibration point
+                uv = cal_spot((t, 0.0))
+                if uv is None:  # no light back at this tilt: not a calibration point
                     continue
-                s.append((sp.mean_uv[0] - self.cx) * self.pitch_mm)
+                s.append((uv[0] - ref[0]) * self.pitch_mm)
                 rho.append(2.0 * t)
             if len(s) < 3:
                 raise ValueError(f"autocollimator calibration: light returned at {len(s)} of 6 tilts up to "
@@ -858,14 +890,25 @@ class AutocollimatorOptics:
             (F, Fc), *_ = np.linalg.lstsq(A, s, rcond=None)
             resid = s - A @ np.array([F, Fc])
             self._calib = {"F_mm": float(F), "c": float(Fc / F), "fit_rms_px": float(np.sqrt(np.mean(resid ** 2)) / self.pitch_mm),
-                           "ref_uv": [self.cx, self.cy], "n_rays": n_rays, "range_rad": float(half),
+                           "ref_uv": [float(ref[0]), float(ref[1])], "n_rays": n_rays, "range_rad": float(half),
                            "mirror": "flat, Ø2×aperture, at distance_mm"}
+            if self.beam_splitter is not None:
+                half_y = min(half, self.measuring_range_rad()[1])
+                sy, ay = [], []
+                for t in np.linspace(0.1, 1.0, 6) * half_y:
+                    uv = cal_spot((0.0, t))
+                    if uv is not None:
+                        sy.append((uv[1] - ref[1]) * self.pitch_mm)
+                        ay.append(F * np.tan(2.0 * t) * (1.0 + Fc / F * 4.0 * t * t))
+                self._calib["y_scale"] = float(np.dot(ay, ay) / np.dot(ay, sy))
         return self._calib
 
     def reading(self, uv) -> np.ndarray:
         """Calibrated reading (θx, θy) in radians of a spot at ``uv`` (arrays of (…, 2) welcome)."""
         cal = self.calibration()
         xy = self.uv_to_xy(uv) - self.uv_to_xy(np.array(cal["ref_uv"]))
+        if "y_scale" in cal:
+            xy = xy * np.array([1.0, cal["y_scale"]])
         s = np.hypot(xy[..., 0], xy[..., 1])
         F, c = cal["F_mm"], cal["c"]
         rho = np.arctan(s / F)

@@ -84,8 +84,9 @@ def _range_half_rad(rig: CubeMirrorRig, margin_px: float) -> np.ndarray:
 
 def _optics(rig: CubeMirrorRig):
     from rigsim.optics.autocollimator import AutocollimatorOptics
+    from rigsim.rig.effects_autocollimator import beam_splitter_of
 
-    return AutocollimatorOptics(rig.autocollimator)
+    return AutocollimatorOptics(rig.autocollimator, beam_splitter=beam_splitter_of(rig))
 
 
 # ------------------------------------------------------------------------------ step A

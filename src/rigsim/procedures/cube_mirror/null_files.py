@@ -59,12 +59,15 @@ def null_step(rig: CubeMirrorRig, reading_rad: Mapping[str, float], offset_px, a
 
 
 def autocollimator_optics(rig: CubeMirrorRig):
-    """The autocollimator's nominal optics (its calibration: spot position → reading)."""
+    """The autocollimator's nominal optics (its calibration: spot position → reading), with its
+    beam splitter plate when ``[effects.beam_splitter]`` is on (the factory calibration is made
+    with it)."""
     from rigsim.optics.autocollimator import AutocollimatorOptics
+    from rigsim.rig.effects_autocollimator import beam_splitter_of
 
     if rig.autocollimator is None:
         raise InputError(f"rig {rig.name!r} has no autocollimator (seed 001's method)")
-    return AutocollimatorOptics(rig.autocollimator)
+    return AutocollimatorOptics(rig.autocollimator, beam_splitter=beam_splitter_of(rig))
 
 
 def autocollimator_targets(rig: CubeMirrorRig) -> dict[str, tuple[str, float]]:

@@ -22,6 +22,9 @@ Scene (millimetres, world frame = the autocollimator frame A of
   The render window is moved by moving this camera (``sensor.to_world``), never the film crop.
   The camera sees the detector from the lens side, so the film is mirrored in u: window pixel
   (i, j) is ``film[j, window_px - 1 - i]``;
+* ``beam_splitter_s1/s2`` -- with ``[effects.beam_splitter]`` only: the plate's two faces; the
+  reticle is then folded (mirrored in S1) and the detector and the camera follow the plate's
+  displaced, refocused axis (docs/effects-autocollimator.md);
 * ``integrator`` -- ``ptracer`` (the beam → mirror → lens → detector path is a caustic),
   ``hide_emitters``, ``max_depth`` = the length of the main path (so light scattered back off the
   detector is not re-imaged).
@@ -57,6 +60,7 @@ from rigsim.optics.autocollimator import (
     render_window_px,
 )
 from rigsim.optics.autocollimator import diffraction_half_px as _kernel_half_px
+from rigsim.optics.beam_splitter import BeamSplitter
 from rigsim.optics.meshes import lens_mesh, stop_mesh
 from rigsim.optics.reticle import ReticleDrawing, reticle_drawing
 from rigsim.render.backend import ensure_variant
@@ -65,6 +69,7 @@ from rigsim.render.frame import Frame, digitise, write_frame
 from rigsim.render.meshes import mesh_ply
 from rigsim.render.scene import Scene
 from rigsim.rig.cube_mirror import CubeMirrorRig
+from rigsim.rig.effects_autocollimator import beam_splitter_of
 from rigsim.truth.cube_mirror.autocollimator import (
     AutocollimatorLayout,
     autocollimator_layout,
@@ -113,12 +118,15 @@ class AutocollimatorEffectSettings:
     face_index: float = 1.5168
     face_reflectance: float = 1.0         # the coated face's (conductor)
     lens_ghost_scale: float | None = None  # None: no lens ghosts from the effects; else specular_reflectance
+    beam_splitter: BeamSplitter | None = None
 
     @property
     def extra_depth(self) -> int:
         # the uncoated cube's opposite face (in, reflect, out) and the double-pass lens ghosts
-        # (mirror, lens surface, mirror) each add two vertices to the longest path kept
-        return 2 * (self.face_bsdf == "dielectric") + 2 * (self.lens_ghost_scale is not None)
+        # (mirror, lens surface, mirror) each add two vertices to the longest path kept; the beam
+        # splitter three to the main path (S1 on the way out, S1 and S2 back) and two to its ghosts
+        return (2 * (self.face_bsdf == "dielectric") + 2 * (self.lens_ghost_scale is not None)
+                + 5 * (self.beam_splitter is not None))
 
     def as_dict(self) -> dict:
         d = {}
@@ -131,6 +139,8 @@ class AutocollimatorEffectSettings:
                                      else {"bsdf": "conductor", "reflectance": self.face_reflectance})
         if self.lens_ghost_scale is not None:
             d["ghosts"] = {"specular_reflectance_scale": self.lens_ghost_scale}
+        if self.beam_splitter is not None:
+            d["beam_splitter"] = self.beam_splitter.as_dict()
         return d
 
 
@@ -154,7 +164,86 @@ def effect_settings(rig: CubeMirrorRig, target: str, lens_n: float) -> Autocolli
     if eff.ghosts.enabled:
         g = eff.ghosts.surface_reflectance
         kw["lens_ghost_scale"] = 1.0 if g is None else float(g) / fresnel_normal(lens_n)
+    kw["beam_splitter"] = beam_splitter_of(rig, lens_n)
     return AutocollimatorEffectSettings(**kw)
+
+
+def plate_fold_matrix(bs: BeamSplitter) -> np.ndarray:
+    """4×4 reflection in the plane of the plate's first surface S1 (the fold of the reticle)."""
+    n = bs.normal
+    c = bs.placement.point
+    M = np.eye(4)
+    M[:3, :3] -= 2.0 * np.outer(n, n)
+    M[:3, 3] = 2.0 * (c @ n) * n
+    return M
+
+
+MITSUBA_RAY_EPSILON = 1500.0 * 2.0 ** -24
+"""Mitsuba offsets every new ray's origin by ``(1 + max|p|)·MITSUBA_RAY_EPSILON`` scene units along
+the surface's geometric normal, on the side of the new direction (``SurfaceInteraction.spawn_ray``)."""
+
+
+def plate_spawn_bias_mm(bs: BeamSplitter, optics: AutocollimatorOptics, n_rays: int = 20000) -> np.ndarray:
+    """Where Mitsuba's ray offsets at the plate's three crossings of the main path move the spot
+    (x_A, y_A, mm): the reticle's light leaving S1 by reflection (a parallel shift n1·ε of each
+    outgoing ray: the source seen ε·n1⊥ aside, its image −ε·n1⊥ away, point-inverted) and the return
+    entering S1 and leaving S2 (traced with and without the offsets). Rays: the reticle's cone at
+    the null (the return crosses the plate on the outgoing footprint); weights: R1·T1·T2."""
+    from rigsim.optics.autocollimator import cone_directions
+
+    n1 = bs.normal
+    c1 = bs.placement.point
+    c2 = c1 - bs.thickness_mm * n1
+    d = cone_directions(n_rays, optics.cone_half_angle_rad)
+    S = optics.source_position
+    H = S + (((c1 - S) @ n1) / (d @ n1))[:, None] * d          # the unfolded reticle rays on S1
+    eps = lambda P: MITSUBA_RAY_EPSILON * (1.0 + np.max(np.abs(P), axis=1))
+    ci = d @ n1
+    w = bs.weights(ci, 1)[0] * bs.weights(ci, 1)[1] * bs.weights(ci, 2)[1]
+    shift_src = eps(H)[:, None] * (n1[None, :] - ci[:, None] * d)   # ⊥ the ray
+    b_out = -(w[:, None] * shift_src[:, :2]).sum(0) / w.sum()
+
+    def back(offsets: bool):
+        r = -d
+        g = bs.n ** -1 * r + ((ci / bs.n) - np.sqrt(1.0 - (1.0 - ci * ci) / bs.n ** 2))[:, None] * n1  # Snell into glass
+        O1 = H - (eps(H)[:, None] * n1 if offsets else 0.0)
+        H2 = O1 + (((c2 - O1) @ n1) / (g @ n1))[:, None] * g
+        O2 = H2 - (eps(H2)[:, None] * n1 if offsets else 0.0)
+        # out of S2 the ray is parallel to r again (a plane-parallel plate)
+        s = (optics.z_detector - O2[:, 2]) / r[:, 2]
+        return O2[:, :2] + s[:, None] * r[:, :2]
+
+    b_ret = (w[:, None] * (back(True) - back(False))).sum(0) / w.sum()
+    return b_out + b_ret
+
+
+def plate_shapes(bs: BeamSplitter, optics: AutocollimatorOptics) -> dict:
+    """The plate's two faces: rectangles (sides left out: no kept path reaches them) with
+    ``dielectric`` BSDFs whose reflection and transmission weights give each surface its
+    reflectance at the plate's angle (:func:`rigsim.optics.beam_splitter.surface_weights`);
+    outward normals, S2 ``thickness`` behind S1."""
+    import mitsuba as mi
+
+    n1 = bs.normal
+    u = np.array([math.cos(bs.theta), 0.0, -math.sin(bs.theta)])
+    y = np.array([0.0, 1.0, 0.0])
+    r = 1.1 * optics.objective.stop_radius_mm * optics.overfill
+    a = r / math.cos(bs.theta) + 2.0 * bs.ghost_separation_mm
+    b = r + 1.0
+    F0 = bs.fresnel_at_tilt
+    out = {}
+    for k, (R, sign) in enumerate(((bs.r1, 1.0), (bs.r2, -1.0)), start=1):
+        M = np.eye(4)
+        M[:3, 0] = sign * a * u
+        M[:3, 1] = b * y
+        M[:3, 2] = sign * n1
+        M[:3, 3] = bs.placement.point - (k - 1) * bs.thickness_mm * n1
+        bsdf = {"type": "dielectric", "int_ior": float(bs.n), "ext_ior": 1.0}
+        if R is not None:
+            bsdf["specular_reflectance"] = float(R / F0)
+            bsdf["specular_transmittance"] = float((1.0 - R) / (1.0 - F0))
+        out[f"beam_splitter_s{k}"] = {"type": "rectangle", "to_world": mi.ScalarTransform4f(M.tolist()), "bsdf": bsdf}
+    return out
 
 
 # ------------------------------------------------------------------------------ scene
@@ -172,14 +261,14 @@ class AutocollimatorScene:
     anchor_A: np.ndarray
     mesh_files: dict = field(default_factory=dict)
     world_shift_A: np.ndarray = field(default_factory=lambda: np.zeros(3))  # world = A − shift
+    render_bias_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))  # detector/camera moved by (mm)
 
 
-def _camera_matrix(optics: AutocollimatorOptics, window_origin, window_px: int) -> np.ndarray:
+def _camera_matrix(optics: AutocollimatorOptics, window_origin, window_px: int, bias_xy=(0.0, 0.0)) -> np.ndarray:
     """Camera → world (A frame): at the window centre, CAMERA_STANDOFF_MM in front of the
     detector, looking −z; local x = +x_A, local y = −y_A (right-handed)."""
     u0, v0 = window_origin
-    xc = (u0 + (window_px - 1) / 2.0 - optics.cx) * optics.pitch_mm
-    yc = (v0 + (window_px - 1) / 2.0 - optics.cy) * optics.pitch_mm
+    xc, yc = optics.uv_to_xy(np.array([u0 + (window_px - 1) / 2.0, v0 + (window_px - 1) / 2.0])) + np.asarray(bias_xy)
     M = np.eye(4)
     M[:3, 0] = [1.0, 0.0, 0.0]
     M[:3, 1] = [0.0, -1.0, 0.0]
@@ -226,13 +315,15 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     if not (0.0 < mirror_reflectance <= 1.0):
         raise ValueError(f"mirror_reflectance = {mirror_reflectance!r}: must be in (0, 1]")
     real = real if real is not None else realization_from_rig(rig)
-    optics = optics or AutocollimatorOptics(rig.autocollimator)
+    optics = optics or AutocollimatorOptics(rig.autocollimator, beam_splitter=beam_splitter_of(rig))
     layout = layout or autocollimator_layout(rig, real, target, face, objective_vertex_z_mm=optics.objective.z_vertex,
                                              plane_mirror_centre_mount_mm=plane_mirror_centre_mount_mm)
     obj = optics.objective
     fx = effects if effects is not None else effect_settings(rig, layout.target, obj.n)
     if fx.reticle is not None and world_origin != "objective":
         raise ValueError("the reticle effect needs world_origin = 'objective'")
+    if fx.beam_splitter is not None and (world_origin != "objective" or optics.beam_splitter != fx.beam_splitter):
+        raise ValueError("the beam splitter effect needs world_origin = 'objective' and optics with the same plate")
     T = mi.ScalarTransform4f
     mirror = mirror_target(rig, real, layout, pose_rad, mirror_reflectance)
     if window_px is None:
@@ -279,9 +370,20 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     det[1, 1] = 0.5 * H * optics.pitch_mm
     det[:3, 3] = [(W - 1) / 2.0 - optics.cx, (H - 1) / 2.0 - optics.cy, 0.0]
     det[:2, 3] *= optics.pitch_mm
+    det[:2, 3] += optics.detector_xy0
+    bias = np.zeros(2)
+    if fx.beam_splitter is not None:
+        # the detector and the camera are moved by the spot's bias from Mitsuba's ray offsets at the
+        # plate (~1.4 px; docs/effects-autocollimator.md): the rendered pixels then mean what the
+        # exact model's do
+        bias = plate_spawn_bias_mm(fx.beam_splitter, optics)
+        det[:2, 3] += bias
     det[2, 3] = optics.z_detector
     reticle = np.eye(4)
     reticle[2, 3] = optics.z_source
+    if fx.beam_splitter is not None:  # the reticle on the fold: its mirror image in S1
+        reticle = plate_fold_matrix(fx.beam_splitter) @ reticle
+        reticle[:3, 0] *= -1.0  # a proper rotation again (the spot's cone is symmetric about its axis)
     cone_deg = math.degrees(optics.cone_half_angle_rad)
     depth = MAIN_PATH_DEPTH + fx.extra_depth if max_depth is None else int(max_depth)
     d = {
@@ -291,7 +393,7 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
             "type": "perspective",
             "fov": _fov_deg(optics, window_px), "fov_axis": "x",
             "near_clip": 1.0, "far_clip": 10.0 * CAMERA_STANDOFF_MM,
-            "to_world": placed(_camera_matrix(optics, window[:2], window_px)),
+            "to_world": placed(_camera_matrix(optics, window[:2], window_px, bias)),
             "film": {"type": "hdrfilm", "width": int(window_px), "height": int(window_px),
                      "rfilter": {"type": "box"}, "pixel_format": "luminance", "component_format": "float32"},
             "sampler": {"type": sampler, "sample_count": int(spp)},
@@ -317,6 +419,8 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
     }
     if world_origin == "mirror":
         d["stop"]["to_world"] = placed(np.eye(4))
+    if fx.beam_splitter is not None:
+        d.update(plate_shapes(fx.beam_splitter, optics))
     if fx.reticle is not None:
         from rigsim.render.cube_mirror.reticle_emitter import RETICLE_PLUGIN, register_reticle_emitter
 
@@ -324,9 +428,12 @@ def autocollimator_scene(rig: CubeMirrorRig, real: Realization | None, pose_rad:
         d["reticle"] = {"type": RETICLE_PLUGIN, "flux": float(source_photons), "z_mm": float(optics.z_source),
                         "z_stop_mm": float(obj.z_stop), "cutoff_rad": float(optics.cone_half_angle_rad),
                         "drawing": fx.reticle.as_props()}
+        if fx.beam_splitter is not None:
+            bs = fx.beam_splitter
+            d["reticle"]["fold_plane"] = ",".join(repr(float(v)) for v in (*bs.placement.point, *bs.normal))
     # a Lambertian detector of reflectance 1 shows radiance E/π: photons per pixel = π·L·pitch²
     return AutocollimatorScene(d, optics, layout, mirror, window, math.pi * optics.pitch_mm ** 2,
-                               float(source_photons), anchor, files, shift)
+                               float(source_photons), anchor, files, shift, bias)
 
 
 def build_autocollimator_scene_dict(rig: CubeMirrorRig, real: Realization | None, pose_rad: dict, target: str = "face",
@@ -415,7 +522,7 @@ class AutocollimatorRenderer:
         self.rig = rig
         self.deterministic = bool(deterministic)  # one Dr.Jit thread per render: bit-identical frames (ptracer)
         self.real = real if real is not None else realization_from_rig(rig)
-        self.optics = optics or AutocollimatorOptics(rig.autocollimator)
+        self.optics = optics or AutocollimatorOptics(rig.autocollimator, beam_splitter=beam_splitter_of(rig))
         self.layout = layout or autocollimator_layout(
             rig, self.real, target, face, objective_vertex_z_mm=self.optics.objective.z_vertex,
             plane_mirror_centre_mount_mm=plane_mirror_centre_mount_mm)
@@ -473,7 +580,7 @@ class AutocollimatorRenderer:
     def _sensor_update(self, state) -> dict:
         import mitsuba as mi
 
-        M = _camera_matrix(self.optics, state["window_origin"], self.window_px)
+        M = _camera_matrix(self.optics, state["window_origin"], self.window_px, self.scene_info.render_bias_xy)
         M[:3, 3] -= self.scene_info.world_shift_A
         return {"sensor.to_world": mi.ScalarTransform4f(M.tolist())}
 
@@ -688,7 +795,7 @@ def export_autocollimator(rig: CubeMirrorRig, real: Realization | None = None, p
     if rig.autocollimator is None:
         return None
     real = real if real is not None else realization_from_rig(rig)
-    optics = AutocollimatorOptics(rig.autocollimator)
+    optics = AutocollimatorOptics(rig.autocollimator, beam_splitter=beam_splitter_of(rig))
     layout = autocollimator_layout(rig, real, "face", None, objective_vertex_z_mm=optics.objective.z_vertex)
     if not pose_rad:
         pose_rad = dict(layout.reference_pose_rad)  # the face's exact null: the spot on the axis

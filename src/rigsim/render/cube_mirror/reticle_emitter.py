@@ -10,6 +10,11 @@ area (a line is chosen in proportion to its area), directions uniformly over the
 light path carries ``flux``: the same radiometric scale as the ``spot`` with intensity
 flux / (2π(1 − cos cutoff)). Only ``sample_ray`` is implemented: the ``ptracer`` with
 ``hide_emitters`` never looks at the emitter itself.
+
+``fold_plane`` ("px,py,pz,nx,ny,nz", optional): the reticle sits on a folded arm, mirrored in that
+plane (the beam splitter's first surface): every sampled position and direction is reflected in
+it (p → p − 2((p − c)·n)n, d → d − 2(d·n)n), so the light reaches the plane exactly where the
+unfolded reticle's would have come from.
 """
 
 from __future__ import annotations
@@ -67,6 +72,11 @@ def _make_class():
             self.extent = max(max(abs(cx) + hw, abs(cy) + hh) for cx, cy, hw, hh in self.rects)
             if self.ring is not None:
                 self.extent = max(self.extent, self.ring[1])
+            self.fold = None
+            if "fold_plane" in props:
+                v = [float(x) for x in props["fold_plane"].split(",")]
+                c, n = v[:3], v[3:]
+                self.fold = (mi.ScalarVector3f(n), 2.0 * sum(a * b for a, b in zip(c, n)))
             self.m_flags = mi.EmitterFlags.DeltaPosition
             self.m_needs_sample_2 = True
             self.m_needs_sample_3 = True
@@ -92,6 +102,10 @@ def _make_class():
             p = mi.Point3f(x, y, self.z)
             axis = dr.normalize(mi.Vector3f(-x, -y, self.z_stop - self.z))
             d = mi.Frame3f(axis).to_world(mi.warp.square_to_uniform_cone(sample3, self.cos_cutoff))
+            if self.fold is not None:
+                n, two_cn = self.fold
+                p = p - (2.0 * dr.dot(p, n) - two_cn) * mi.Vector3f(n)
+                d = d - 2.0 * dr.dot(d, n) * mi.Vector3f(n)
             return mi.Ray3f(p, d, time, mi.Color0f()), mi.Spectrum(self.flux)
 
         def sample_wavelengths(self, si, sample, active=True):
@@ -121,7 +135,15 @@ def _make_class():
 
         def bbox(self):
             e = self.extent
-            return mi.ScalarBoundingBox3f([-e, -e, self.z], [e, e, self.z])
+            if self.fold is None:
+                return mi.ScalarBoundingBox3f([-e, -e, self.z], [e, e, self.z])
+            n, two_cn = self.fold
+            bb = mi.ScalarBoundingBox3f()
+            for x in (-e, e):
+                for y in (-e, e):
+                    q = mi.ScalarPoint3f(x, y, self.z)
+                    bb.expand(q - (2.0 * dr.dot(q, n) - two_cn) * n)
+            return bb
 
         def traverse(self, callback):
             pass
