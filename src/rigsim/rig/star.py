@@ -25,6 +25,7 @@ from rigsim.rig.model import RigModel
 __all__ = [
     "PSF",
     "Calibration",
+    "CentroidMapSpec",
     "Identification",
     "Nominal",
     "NominalSensor",
@@ -189,6 +190,12 @@ class Nominal(_Model):
     k2: float = Field(0.0, ge=-20.0, le=20.0)
     p1: float = Field(0.0, ge=-0.1, le=0.1, description="assumed tangential distortion")
     p2: float = Field(0.0, ge=-0.1, le=0.1)
+    centroid_map: Literal["none", "traced_lens"] = Field(
+        "none", description="ground calibration of the lens's star-image centroid shift: 'traced_lens' = a collimator "
+                            "map of the traced lens (rigsim.procedures.star.ground_map) that the pipeline subtracts")
+    centroid_map_bv: float = Field(0.65, ge=-0.4, le=2.0, description="B−V of the map's reference star spectrum")
+    centroid_map_sigma_px: float = Field(0.01, ge=0.0, le=1.0,
+                                         description="the bench's measurement error per map node and axis (1σ)")
 
 
 class Calibration(_Model):
@@ -221,6 +228,24 @@ class Study(_Model):
     seed: int = Field(4, ge=0)
 
 
+class CentroidMapSpec(_Model):
+    """The ``[nominal] centroid_map = "traced_lens"`` ground calibration as the pipeline knows it: the lens
+    design it was measured on (``[sensor]`` optics, ``[effects.traced_psf]`` band and sampling), the
+    reference star colour and the bench's error (rigsim.procedures.star.ground_map builds the map)."""
+
+    reference_bv: float
+    sigma_px: float
+    seed: int
+    aperture_diameter_mm: float
+    reference_wavelength_nm: float
+    defocus_um: float
+    band_min_nm: float
+    band_max_nm: float
+    wavelengths: int
+    pupil_rays: int
+    oversample: int
+
+
 class NominalSensor(_Model):
     """The star sensor as the estimators know it: the detector and optics design (resolution, pitch,
     PSF, detector settings) and the ``[nominal]`` intrinsics. :meth:`StarRig.nominal_rig` builds it."""
@@ -237,6 +262,7 @@ class NominalSensor(_Model):
     principal_point_sigma_px: float
     psf_sigma_px: float
     detector: DetectorConfig
+    centroid_map: CentroidMapSpec | None = None
 
     @property
     def f_px(self) -> float:
@@ -288,6 +314,17 @@ class StarRig(_Model):
         W, H = self.sensor.resolution_px
         return Nominal(focal_length_mm=self.sensor.focal_length_mm, principal_point_px=[(W - 1) / 2.0, (H - 1) / 2.0])
 
+    def centroid_map_spec(self) -> CentroidMapSpec | None:
+        """The ``[nominal] centroid_map``: None, or what the pipeline needs to rebuild the ground map (the
+        bench's error drawn from ``[sensor.detector] sensor_seed``: one instrument, one ground calibration)."""
+        s, n, tp = self.sensor, self.nominal_intrinsics, self.effects.traced_psf
+        if n.centroid_map == "none":
+            return None
+        return CentroidMapSpec(reference_bv=n.centroid_map_bv, sigma_px=n.centroid_map_sigma_px, seed=s.detector.sensor_seed,
+                               aperture_diameter_mm=s.aperture_diameter_mm, reference_wavelength_nm=s.psf.wavelength_nm,
+                               defocus_um=s.psf.defocus_um, band_min_nm=tp.band_min_nm, band_max_nm=tp.band_max_nm,
+                               wavelengths=tp.wavelengths, pupil_rays=tp.pupil_rays, oversample=tp.oversample)
+
     def nominal_rig(self) -> NominalStarRig:
         """The rig as the estimators may see it (:class:`NominalStarRig`)."""
         s, n = self.sensor, self.nominal_intrinsics
@@ -297,6 +334,6 @@ class StarRig(_Model):
                                principal_point_sigma_px=n.principal_point_sigma_px,
                                psf_sigma_px=psf_sigma_px(s.psf, n.focal_length_mm / s.aperture_diameter_mm,
                                                          s.pixel_pitch_um),
-                               detector=s.detector)
+                               detector=s.detector, centroid_map=self.centroid_map_spec())
         return NominalStarRig(name=self.name, sensor=sensor, sky=self.sky, sequence=self.sequence,
                               identification=self.identification, calibration=self.calibration)

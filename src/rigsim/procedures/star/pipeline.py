@@ -24,6 +24,7 @@ from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
 from rigsim.imaging.stars import Observations, extract_stars
 from rigsim.optics.sky import SkyCatalogue
+from rigsim.procedures.star.ground_map import corrected_centroids, ground_centroid_map
 from rigsim.rig.star import NominalStarRig
 
 __all__ = [
@@ -102,6 +103,7 @@ class StarPipeline:
         self.nominal, self.sky = nominal, sky
         self.identification = identification
         self.camera = nominal.sensor.camera()
+        self.centroid_map = ground_centroid_map(nominal)
         self.usable: list[Observations] = []
         self.ident: list[IdentResult] = []
         self.frames_obs: list[FrameObs] = []
@@ -125,6 +127,8 @@ class StarPipeline:
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
         usable = found.subset(np.flatnonzero(keep))
+        if self.centroid_map is not None:  # the ground calibration of the lens's centroid shift ([nominal] centroid_map)
+            usable = replace(usable, uv=corrected_centroids(usable.uv, self.centroid_map, self.camera))
         t1 = time.perf_counter()
         kw = {"search_radius_px": idc.search_radius_px, "match_tolerance_px": idc.match_tolerance_px,
               "min_matches": idc.min_matches}
@@ -159,6 +163,8 @@ class StarPipeline:
                        **self.counts, "identified": int(sum(len(i) for i in self.ident)),
                        "attitude_error_deg": self.nominal.identification.attitude_error_deg,
                        "fixed_pattern": self.fixed_pattern_note,
+                       "centroid_map": "none" if s.centroid_map is None else
+                       f"ground map of the traced lens (B−V {s.centroid_map.reference_bv:g}, σ {s.centroid_map.sigma_px:g} px)",
                        "reasons": [i.reason for i in self.ident if not i.ok]}
         out = PipelineOutput(self.nominal, self.usable, self.ident, self.frames_obs, ident_stats, times=dict(self.times))
         t0 = time.perf_counter()

@@ -40,16 +40,18 @@ def effect_names(rig) -> tuple[str, ...]:
     return STAR_EFFECTS
 
 
-def _describe(cal) -> str:
+def _describe(cal, sensor) -> str:
     return (f"single-pixel filter {'on' if cal.single_pixel_filter else 'off'}, fixed pattern: {cal.fixed_pattern}, "
-            f"poor fits {'rejected against the ' + cal.poor_fit_reference if cal.reject_poor_fits else 'kept'}")
+            f"poor fits {'rejected against the ' + cal.poor_fit_reference if cal.reject_poor_fits else 'kept'}"
+            + ("" if sensor.centroid_map is None else ", ground centroid map of the traced lens"))
 
 
 def pipeline_variants(rig) -> dict[str, object]:
     """The pipelines every robustness run's frames go through (name → nominal rig): as the rig
     configures it, then with each of its defect settings switched the other way in turn (the
     single-pixel filter, the fixed pattern ``none`` ↔ ``sequence``, the rejection of poor fits and,
-    when they are rejected, what they are judged against)."""
+    when they are rejected, what they are judged against, and the ``[nominal] centroid_map``
+    ``none`` ↔ ``traced_lens``)."""
     nominal = rig.nominal_rig()
     cal = nominal.calibration
 
@@ -57,13 +59,16 @@ def pipeline_variants(rig) -> dict[str, object]:
         return nominal.model_copy(update={"calibration": cal.model_copy(update=upd)})
 
     other_pattern = "sequence" if cal.fixed_pattern == "none" else "none"
-    out = {f"as configured ({_describe(cal)})": nominal}
-    for alt in (with_cal(single_pixel_filter=not cal.single_pixel_filter), with_cal(fixed_pattern=other_pattern),
-                with_cal(reject_poor_fits=not cal.reject_poor_fits)):
-        out[_describe(alt.calibration)] = alt
+    out = {f"as configured ({_describe(cal, nominal.sensor)})": nominal}
+    alts = [with_cal(single_pixel_filter=not cal.single_pixel_filter), with_cal(fixed_pattern=other_pattern),
+            with_cal(reject_poor_fits=not cal.reject_poor_fits)]
     if cal.reject_poor_fits:
-        alt = with_cal(poor_fit_reference="frame" if cal.poor_fit_reference == "model" else "model")
-        out[_describe(alt.calibration)] = alt
+        alts.append(with_cal(poor_fit_reference="frame" if cal.poor_fit_reference == "model" else "model"))
+    n = rig.nominal_intrinsics
+    other_map = "traced_lens" if n.centroid_map == "none" else "none"
+    alts.append(rig.model_copy(update={"nominal": n.model_copy(update={"centroid_map": other_map})}).nominal_rig())
+    for alt in alts:
+        out[_describe(alt.calibration, alt.sensor)] = alt
     return out
 
 
