@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rigsim.optics.star_psf import ray_offsets
+
 __all__ = ["CentroidMap", "ray_centroids"]
 
 
@@ -23,19 +25,8 @@ def ray_centroids(lens, tan_x, tan_y, wavelengths_nm, *, pixel_pitch_um: float, 
     :class:`rigsim.optics.star_lens.StarLens`) from the chief ray at its reference wavelength, at each
     field direction (tan_x[i], tan_y[j]) and wavelength: the first moment of
     :func:`rigsim.optics.star_psf.psf_table`'s PSFs with the same pupil grid."""
-    tx, ty = np.asarray(tan_x, dtype=float), np.asarray(tan_y, dtype=float)
-    lams = np.asarray(wavelengths_nm, dtype=float)
-    pupil = lens.pupil_grid(int(pupil_rays))
-    pitch_mm = pixel_pitch_um * 1e-3
-    out = np.zeros((tx.size, ty.size, lams.size, 2))
-    for i, x in enumerate(tx):
-        for j, y in enumerate(ty):
-            d = np.array([x, y, 1.0])
-            chief = lens.trace(d, np.zeros((1, 2)), lens.ref_nm)[0][0]
-            for k, lam in enumerate(lams):
-                h, ok = lens.trace(d, pupil, lam)
-                out[i, j, k] = -(h[ok] - chief).mean(axis=0) / pitch_mm   # px, the lens inverts the image
-    return out
+    offs = ray_offsets(lens, tan_x, tan_y, wavelengths_nm, pixel_pitch_um=pixel_pitch_um, pupil_rays=pupil_rays)
+    return np.array([o.mean(axis=0) for o in offs.flat]).reshape(offs.shape + (2,))
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-__all__ = ["PSFTable", "bv_temperature_k", "photon_spectrum_weights", "psf_table"]
+__all__ = ["PSFTable", "bv_temperature_k", "photon_spectrum_weights", "psf_table", "ray_offsets"]
 
 _HC_OVER_K_UM_K = 14387.7688  # h c / k in µm·K (second radiation constant, CODATA 2018)
 
@@ -86,6 +86,26 @@ class PSFTable:
         return out, cen
 
 
+def ray_offsets(lens, tan_x, tan_y, wavelengths_nm, *, pixel_pitch_um: float, pupil_rays: int = 48) -> np.ndarray:
+    """(nx, ny, L) object array: at each field direction (tan_x[i], tan_y[j]) and wavelength, the
+    (n, 2) detector offsets (px, u and v of the rig's image) of the rays of ``lens`` (a
+    :class:`rigsim.optics.star_lens.StarLens`, ``pupil_rays`` across the pupil) from the chief
+    ray at the lens's reference wavelength."""
+    tx, ty = np.asarray(tan_x, dtype=float), np.asarray(tan_y, dtype=float)
+    lams = np.asarray(wavelengths_nm, dtype=float)
+    pupil = lens.pupil_grid(int(pupil_rays))
+    pitch_mm = pixel_pitch_um * 1e-3
+    offs = np.empty((tx.size, ty.size, lams.size), dtype=object)
+    for i, x in enumerate(tx):
+        for j, y in enumerate(ty):
+            d = np.array([x, y, 1.0])
+            chief = lens.trace(d, np.zeros((1, 2)), lens.ref_nm)[0][0]
+            for k, lam in enumerate(lams):
+                h, ok = lens.trace(d, pupil, lam)
+                offs[i, j, k] = -(h[ok] - chief) / pitch_mm   # px in the rig's image (the lens inverts it)
+    return offs
+
+
 def psf_table(lens, *, tan_max_x: float, tan_max_y: float, wavelengths_nm, pixel_pitch_um: float,
               nodes: int = 9, pupil_rays: int = 48, oversample: int = 4) -> PSFTable:
     """Trace ``lens`` (a :class:`rigsim.optics.star_lens.StarLens`) at ``nodes`` × ``nodes`` field
@@ -93,20 +113,9 @@ def psf_table(lens, *, tan_max_x: float, tan_max_y: float, wavelengths_nm, pixel
     tx = np.linspace(-tan_max_x, tan_max_x, nodes)
     ty = np.linspace(-tan_max_y, tan_max_y, nodes)
     lams = np.asarray(wavelengths_nm, dtype=float)
-    pupil = lens.pupil_grid(int(pupil_rays))
-    pitch_mm = pixel_pitch_um * 1e-3
     f_number = lens.focal_length_mm / lens.epd_mm
-    offs = np.empty((nodes, nodes, lams.size), dtype=object)
-    rmax = 0.0
-    for i, x in enumerate(tx):
-        for j, y in enumerate(ty):
-            d = np.array([x, y, 1.0])
-            chief = lens.trace(d, np.zeros((1, 2)), lens.ref_nm)[0][0]
-            for lam_i, lam in enumerate(lams):
-                h, ok = lens.trace(d, pupil, lam)
-                o = -(h[ok] - chief) / pitch_mm        # px in the rig's image (the lens inverts it)
-                offs[i, j, lam_i] = o
-                rmax = max(rmax, float(np.abs(o).max()))
+    offs = ray_offsets(lens, tx, ty, lams, pixel_pitch_um=pixel_pitch_um, pupil_rays=pupil_rays)
+    rmax = max(float(np.abs(o).max()) for o in offs.flat)
     sig_max = 0.42 * lams.max() * 1e-3 * f_number / pixel_pitch_um
     R = math.ceil(rmax + 4.0 * sig_max + 0.5)
     os_ = int(oversample)
