@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-__all__ = ["PSFTable", "bv_temperature_k", "photon_spectrum_weights", "psf_table", "ray_offsets"]
+__all__ = ["PSFTable", "bv_temperature_k", "photon_spectrum_weights", "field_tangents", "psf_table", "ray_offsets"]
 
 _HC_OVER_K_UM_K = 14387.7688  # h c / k in µm·K (second radiation constant, CODATA 2018)
 
@@ -84,6 +84,14 @@ class PSFTable:
             out += np.einsum("nl,nlab->nab", wl, self.psf[i, j])
             cen += np.einsum("nl,nlk->nk", wl, self.centroid[i, j])
         return out, cen
+
+
+def field_tangents(camera, resolution_px, widen: float = 1.02) -> np.ndarray:
+    """(tan_x, tan_y) half-extents of the field that ``camera`` images on a detector of
+    ``resolution_px`` (W, H), through its corners, ``widen`` × wider (the PSFs' off-detector wings)."""
+    W, H = resolution_px
+    d = camera.unproject(np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]]))
+    return np.abs(d[:, :2] / d[:, 2:3]).max(axis=0) * widen
 
 
 def ray_offsets(lens, tan_x, tan_y, wavelengths_nm, *, pixel_pitch_um: float, pupil_rays: int = 48) -> np.ndarray:

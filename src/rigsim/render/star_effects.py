@@ -106,12 +106,10 @@ def _table(key: tuple):
 def traced_psf_table(rig):
     """The :class:`rigsim.optics.star_psf.PSFTable` of the rig's traced lens over its field (cached per
     lens, detector and ``[effects.traced_psf]`` values: the robustness trials share it)."""
+    from rigsim.optics.star_psf import field_tangents
+
     s, tp = rig.sensor, rig.effects.traced_psf
-    cam = s.camera()
-    W, H = s.resolution_px
-    corners = np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]])
-    d = cam.unproject(corners)
-    t = np.abs(d[:, :2] / d[:, 2:3]).max(axis=0) * 1.02   # the field's tangents, 2 % wider (off-detector wings)
+    t = field_tangents(s.camera(), s.resolution_px)   # 2 % wider than the detector (off-detector wings)
     key = (float(s.focal_length_mm), float(s.aperture_diameter_mm), float(s.psf.wavelength_nm), float(s.psf.defocus_um),
            float(s.pixel_pitch_um), round(float(t[0]), 6), round(float(t[1]), 6), float(tp.band_min_nm),
            float(tp.band_max_nm), int(tp.wavelengths), int(tp.field_nodes), int(tp.pupil_rays), int(tp.oversample))

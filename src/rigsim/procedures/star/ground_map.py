@@ -15,7 +15,7 @@ import numpy as np
 from rigsim.imaging.stars import extract_stars
 from rigsim.optics.star_centroid_map import CentroidMap
 from rigsim.optics.star_lens import StarLens
-from rigsim.optics.star_psf import bv_temperature_k, photon_spectrum_weights, psf_table
+from rigsim.optics.star_psf import bv_temperature_k, field_tangents, photon_spectrum_weights, psf_table
 from rigsim.rig.star import NominalStarRig
 
 __all__ = ["BENCH_SIGNAL_E", "MAP_NODES", "bench_centroids", "corrected_centroids", "fill_missing", "ground_centroid_map"]
@@ -107,9 +107,7 @@ def ground_centroid_map(nominal: NominalStarRig) -> CentroidMap | None:
         return _CACHE[key]
     lens = StarLens(focal_length_mm=s.focal_length_mm, epd_mm=spec.aperture_diameter_mm,
                     ref_nm=spec.reference_wavelength_nm, defocus_mm=-spec.defocus_um * 1e-3)
-    W, H = s.resolution_px
-    d = s.camera().unproject(np.array([[-0.5, -0.5], [W - 0.5, -0.5], [-0.5, H - 0.5], [W - 0.5, H - 0.5]]))
-    t = np.abs(d[:, :2] / d[:, 2:3]).max(axis=0) * 1.02
+    t = field_tangents(s.camera(), s.resolution_px)
     lams = np.linspace(spec.band_min_nm, spec.band_max_nm, spec.wavelengths)
     table = psf_table(lens, tan_max_x=float(t[0]), tan_max_y=float(t[1]), wavelengths_nm=lams,
                       pixel_pitch_um=s.pixel_pitch_um, nodes=MAP_NODES, pupil_rays=spec.pupil_rays,
