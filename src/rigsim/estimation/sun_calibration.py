@@ -10,6 +10,11 @@ Unknowns: the intrinsics and a small rotation δ with R_sun_from_mount = exp([δ
 (R₀ from a Kabsch/Wahba start), so the covariance of δ is directly the per-axis
 uncertainty of R(sun←rot) in the sensor frame. Solved with scipy.optimize.least_squares;
 covariance = s²(JᵀJ)⁻¹ with s² the residual variance (or a known centroid σ).
+
+Outliers (``outlier_sigma``): a frame whose residual, over its centroid's own 1σ and over the
+robust (MAD) scale of all such normalised residuals, exceeds the limit is left out and the fit is
+repeated until no frame does. The first judgement uses a Cauchy-loss fit, which an outlier with
+leverage cannot bend towards itself (docs/campaign.md, "Outliers in the sweep").
 """
 
 from __future__ import annotations
@@ -36,8 +41,10 @@ class SunCalibration:
     covariance: np.ndarray
     rms_px: float
     n_points: int
-    residuals_px: np.ndarray = field(repr=False)
-    uv: np.ndarray = field(repr=False)
+    residuals_px: np.ndarray = field(repr=False)  # of the frames used
+    uv: np.ndarray = field(repr=False)  # the frames used
+    outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # input rows left out as outliers
+    outside_field: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # input rows beyond the field
 
     @property
     def sigma(self) -> dict[str, float]:
@@ -115,19 +122,84 @@ def calibrate_sun_sensor(
     fit_k3: bool = False,
     fit_tangential: bool = True,
     centroid_sigma_px: float | None = None,
+    sigma_uv: np.ndarray | None = None,
+    outlier_sigma: float = 0.0,
+    max_field_deg: float = 90.0,
 ) -> SunCalibration:
     """Fit intrinsics and R(sun←rot) to observed sun-image centroids.
 
     ``poses_rad``: the turntable *readings* per observation (a :class:`~rigsim.rig.turntable.TurntableReading`
     of arrays, or a mapping {label: rad array}; a true pose is refused); ``uv``: (N, 2) centroids.
-    ``f_guess_px``: design focal length in pixels (a starting value only).
+    ``f_guess_px``: design focal length in pixels (a starting value only). ``sigma_uv``: each
+    centroid's 1σ (N, 2) or None (all equal); it only scales the outlier test, the fit is unweighted.
+    ``outlier_sigma`` > 0: leave out, and refit without, every frame whose normalised residual
+    (module docstring) exceeds it; 0 keeps every frame. ``max_field_deg`` < 90: leave out every frame
+    whose centroid lies farther than that from the axis, through the nominal camera (``f_guess_px``,
+    principal point at the detector's centre): the sensor's usable field.
     """
     uv = np.asarray(uv, float)
     m_dirs = sun_directions_in_mount(model, as_reading(poses_rad), d_rot)
-    n = len(uv)
+    inside = np.arange(len(uv))
+    if max_field_deg < 90.0:
+        r = np.hypot(uv[:, 0] - (width - 1) / 2, uv[:, 1] - (height - 1) / 2)
+        inside = np.flatnonzero(r <= f_guess_px * np.tan(np.radians(max_field_deg)))
+    n = len(inside)
     if n < 8:
-        raise ValueError(f"calibration needs at least 8 points on the detector, got {n}")
+        raise ValueError(f"calibration needs at least 8 points on the detector, got {n}"
+                         + (f" within {max_field_deg:g}° of the axis" if n < len(uv) else ""))
+    fit = _judge(m_dirs[inside], uv[inside], None if sigma_uv is None else np.asarray(sigma_uv, float)[inside],
+                 outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+    fit.outliers = inside[fit.outliers]
+    fit.outside_field = np.setdiff1d(np.arange(len(uv)), inside)
+    return fit
 
+
+def _judge(m_dirs, uv, sigma_uv, outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential,
+           centroid_sigma_px) -> SunCalibration:
+    """The fit with the outlier test of :func:`calibrate_sun_sensor` (``outliers`` index ``uv``)."""
+    n = len(uv)
+    fit = _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+    if outlier_sigma <= 0.0:
+        return fit
+    sig = np.ones_like(uv) if sigma_uv is None else np.array(np.broadcast_to(sigma_uv, uv.shape))
+    good = np.isfinite(sig) & (sig > 0.0)
+    sig[~good] = float(np.median(sig[good])) if good.any() else 1.0  # an unknown σ: the typical one
+    plain, used = fit, np.arange(n)
+    z = np.abs(_robust_residuals(fit, m_dirs, uv, sig)) / sig
+    for _ in range(10):  # every frame is judged against each new fit (a frame left out may come back)
+        scale = 1.4826 * float(np.median(z[used]))
+        if not scale > 0.0:
+            break
+        keep = np.flatnonzero(z.max(axis=1) <= outlier_sigma * scale)
+        if len(keep) < 8 or np.array_equal(keep, used):
+            break
+        used = keep
+        fit = _fit(m_dirs[used], uv[used], width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+        z = np.abs(fit.camera.project(m_dirs @ fit.R_sun_from_rot.T) - uv) / sig
+    if len(used) == n:
+        return plain
+    fit.outliers = np.setdiff1d(np.arange(n), used)
+    return fit
+
+
+def _robust_residuals(fit: SunCalibration, m_dirs, uv, sig) -> np.ndarray:
+    """Residuals (N, 2) of a fit that outliers cannot pull: the plain fit's model refitted with a
+    Cauchy loss on the residuals over each centroid's σ (scale 3σ). A frame far off at the field's
+    edge, where the distortion terms have leverage, bends a least-squares fit towards itself and
+    hides its own residual; here it does not."""
+    names = fit.param_names[:-3]
+    sm = SweepModel(m_dirs, uv, names)
+    R = fit.R_sun_from_rot
+    w = 1.0 / sig.ravel()
+    sol = least_squares(lambda x: sm.residual(x, R) * w, np.concatenate([fit.params[:-3], np.zeros(3)]),
+                        jac=lambda x: sm.jacobian(x, R) * w[:, None], loss="cauchy", f_scale=3.0, method="trf",
+                        x_scale="jac")
+    return sm.residual(sol.x, R).reshape(-1, 2)
+
+
+def _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px) -> SunCalibration:
+    """The least squares of :func:`calibrate_sun_sensor` on the given frames."""
+    n = len(uv)
     names = ["fx", "fy", "cx", "cy", "k1", "k2"] + (["p1", "p2"] if fit_tangential else []) + (["k3"] if fit_k3 else [])
     p0 = {"fx": f_guess_px, "fy": f_guess_px, "cx": (width - 1) / 2, "cy": (height - 1) / 2}
 

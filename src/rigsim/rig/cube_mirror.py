@@ -248,6 +248,12 @@ class CubeProcedure(_Model):
     command_resolution_deg: float = Field(0.0, ge=0.0, le=1.0, description="rendered campaign: turntable commands are "
                                           "rounded to this step (Table 1: 0.001°); 0 = continuous")
     max_search_iterations: int = Field(15, ge=1, le=200, description="rendered campaign: give up a null search after this many frames")
+    sweep_outlier_sigma: float = Field(
+        0.0, ge=0.0, le=1000.0, description="sweep fit: leave out a frame whose residual, over its centroid's 1σ, "
+        "exceeds this many times the robust (MAD) scale of all frames, and refit; 0 keeps every frame (docs/campaign.md)")
+    sweep_max_field_deg: float = Field(
+        90.0, gt=0.0, le=90.0, description="sweep fit: leave out a frame whose centroid is farther than this from the "
+        "axis (the nominal camera: design focal length, principal point at the detector's centre); 90 keeps every frame")
 
     @model_validator(mode="after")
     def _faces(self):

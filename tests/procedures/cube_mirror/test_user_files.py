@@ -171,7 +171,7 @@ def _sweep_export(tmp_path):
     fr.out_dir.mkdir()
     obs, _ = render_sweep(rig, realization_from_rig(rig), noise_from_rig(rig), 5, spp=16, on_frame=fr.sweep_frame)
     fr.write_logs([{"X": 3.1, "Y": 0.01}, {"X": 1.6, "Y": 0.0}], rig.procedure.faces)
-    return rig, fit_sun_sensor(rig, obs.readings, obs.uv, default_axis_order(rig)), obs
+    return rig, fit_sun_sensor(rig, obs.readings, obs.uv, default_axis_order(rig), sigma_uv=obs.sigma_uv), obs
 
 
 @pytest.mark.render
@@ -184,7 +184,8 @@ def test_sweep_frames_round_trip_fast(tmp_path, capsys):
     assert main(["calibrate", "sun-sensor", "--rig", RIGS["000"], "--angles", str(d / "angles.csv"),
                  "--centroids", str(d / "c.parquet"), "--out", str(d / "sun.json")]) == 0
     sun = json.loads((d / "sun.json").read_text())
-    assert sun["n_frames"] == len(obs.uv) == cal.n_points
+    assert sun["n_frames"] + sun["n_outliers"] == len(obs.uv) == cal.n_points + len(cal.outliers)
+    assert sun["n_outliers"] == len(sun["frames_outliers"]) == len(cal.outliers)
     _assert_rel(sun["R_sun_from_rot"]["matrix"], cal.R_sun_from_rot)
     _assert_rel([sun["intrinsics"][k] for k in ("fx_px", "fy_px", "cx_px", "cy_px")],
                 [cal.camera.fx, cal.camera.fy, cal.camera.cx, cal.camera.cy])
@@ -214,6 +215,10 @@ def test_sweep_frames_round_trip_fast(tmp_path, capsys):
      r"angles\.csv: line 6, column frame: 'img_004\.png' already on line 5; one row per frame"),
     (lambda d: (d / "c.csv").write_text((d / "c.csv").read_text().replace("u_px", "u_mm")),
      r"c\.csv: column u_mm: expected u_px \(pixels\), got millimetres"),
+    (lambda d: write_table(d / "c.csv", {"frame": [f"img_{k:03d}.png" for k in range(10)], "u_px": np.linspace(100, 900, 10),
+                                         "v_px": np.full(10, 511.5), "sigma_u_px": np.r_[np.full(9, 0.01), -0.5],
+                                         "sigma_v_px": np.full(10, 0.01)}),
+     r"c\.csv: line 11, column sigma_u_px: -0\.5; expected ≥ 0 px or empty"),
 ])
 def test_bad_logs_one_line(tmp_path, capsys, edit, message):
     d = tmp_path

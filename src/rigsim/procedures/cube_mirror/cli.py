@@ -180,7 +180,9 @@ def _run_cube_mirror_rendered(args) -> int:
     cal = camp.calibration
     print(f"\nStep 1/B  sun-sensor sweep ±{rig.procedure.sweep_range_deg:g}° every "
           f"{args.sweep_step or rig.procedure.sweep_step_deg:g}°: {camp.sweep.n_rendered} frames rendered, "
-          f"{cal.n_points} used, fit RMS {cal.rms_px:.4f} px; centroid − exact {camp.measured_noise['sun_centroid_rms_px']:.4f} px rms")
+          f"{cal.n_points} used" + (f" ({len(cal.outliers)} outliers left out)" if len(cal.outliers) else "")
+          + (f" ({len(cal.outside_field)} beyond the field)" if len(cal.outside_field) else "")
+          + f", fit RMS {cal.rms_px:.4f} px; centroid − exact {camp.measured_noise['sun_centroid_rms_px']:.4f} px rms")
     from rigsim.procedures.cube_mirror.concentricity import table1_text
 
     if camp.step_a is not None:

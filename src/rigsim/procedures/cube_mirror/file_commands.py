@@ -96,7 +96,9 @@ def cmd_calibrate_sun_sensor(args) -> int:
     if args.opencv:
         F.write_opencv_camera(args.opencv, cal.camera)
     i = res["intrinsics"]
-    print(f"sun-sensor calibration: {cal.n_points} frames ({len(inputs.rejected)} left out), residual rms {cal.rms_px:.4f} px")
+    print(f"sun-sensor calibration: {cal.n_points} frames ({len(inputs.rejected)} without a usable spot, "
+          f"{len(cal.outliers)} outliers and {len(cal.outside_field)} beyond the field left out), "
+          f"residual rms {cal.rms_px:.4f} px")
     print(f"fx {i['fx_px']:.3f} px, fy {i['fy_px']:.3f} px, principal point ({i['cx_px']:.3f}, {i['cy_px']:.3f}) px, "
           f"k1 {cal.camera.k1:+.3e}, k2 {cal.camera.k2:+.3e}")
     _print_rotation("R(sun←rot)", res["R_sun_from_rot"])

@@ -76,23 +76,32 @@ def read_angle_log(path, rig: CubeMirrorRig) -> tuple[list[str], TurntableReadin
     return frames, reading, t["__line__"]
 
 
-def read_spot_table(path) -> dict[str, tuple[float, float, int, int]]:
-    """A centroid table (``frame``, ``u_px``, ``v_px``, optional ``spot`` and ``flags``): per frame
-    its first spot (``spot`` 0, the brightest in ``rigsim centroid``'s tables), as (u, v, flags, line).
-    A NaN position is a failed measurement (kept, flagged INVALID)."""
+def read_spot_table(path) -> dict[str, tuple[float, float, int, int, float, float]]:
+    """A centroid table (``frame``, ``u_px``, ``v_px``, optional ``spot``, ``flags``, ``sigma_u_px``
+    and ``sigma_v_px``): per frame its first spot (``spot`` 0, the brightest in ``rigsim centroid``'s
+    tables), as (u, v, flags, line, σu, σv); σ is NaN when the table has none. A NaN position is a
+    failed measurement (kept, flagged INVALID)."""
     t = read_table(path, [Column("frame", kind="str"), Column("u", "px", allow_nan=True),
                           Column("v", "px", allow_nan=True), Column("spot", kind="int", required=False),
-                          Column("flags", kind="int", required=False)], what="centroid table")
+                          Column("flags", kind="int", required=False),
+                          Column("sigma_u", "px", required=False, allow_nan=True),
+                          Column("sigma_v", "px", required=False, allow_nan=True)], what="centroid table")
     n = len(t["__line__"])
     spot = t.get("spot", np.zeros(n, np.int64))
     flags = t.get("flags", np.zeros(n, np.int64))
-    out: dict[str, tuple[float, float, int, int]] = {}
+    nan = np.full(n, np.nan)
+    su, sv = t.get("sigma_u_px", nan), t.get("sigma_v_px", nan)
+    for key, s in (("sigma_u_px", su), ("sigma_v_px", sv)):
+        bad = np.flatnonzero(s < 0.0)
+        if bad.size:
+            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {key}: {s[bad[0]]}; expected ≥ 0 px or empty")
+    out: dict[str, tuple[float, float, int, int, float, float]] = {}
     for i in np.argsort(spot, kind="stable"):
         f = Path(str(t["frame"][i])).name
         if f in out:
             continue
         fl = int(flags[i]) | (int(REJECT) if not (np.isfinite(t["u_px"][i]) and np.isfinite(t["v_px"][i])) else 0)
-        out[f] = (float(t["u_px"][i]), float(t["v_px"][i]), fl, int(t["__line__"][i]))
+        out[f] = (float(t["u_px"][i]), float(t["v_px"][i]), fl, int(t["__line__"][i]), float(su[i]), float(sv[i]))
     return out
 
 
@@ -104,6 +113,7 @@ class SunSensorInputs:
     readings: TurntableReading
     uv: np.ndarray
     rejected: list[str] = field(default_factory=list)  # frames whose spot is flagged or missing
+    sigma_uv: np.ndarray | None = None  # the centroids' 1σ (N, 2), NaN where the table gives none
 
 
 def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSensorInputs:
@@ -113,10 +123,10 @@ def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSen
     frames, reading, _ = read_angle_log(angles_path, rig)
     spots = read_spot_table(centroids_path)
     known = set(frames)
-    for f, (_, _, _, line) in spots.items():
+    for f, (_, _, _, line, _, _) in spots.items():
         if f not in known:
             raise InputError(f"{centroids_path}: line {line}, column frame: {f!r} has no row in the angle log {angles_path}")
-    keep, uv, rejected = [], [], []
+    keep, uv, sig, rejected = [], [], [], []
     for i, f in enumerate(frames):
         s = spots.get(f)
         if s is None or s[2] & int(REJECT):
@@ -124,9 +134,10 @@ def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSen
             continue
         keep.append(i)
         uv.append(s[:2])
+        sig.append(s[4:6])
     keep = np.array(keep, dtype=int)
     return SunSensorInputs([frames[i] for i in keep], TurntableReading({k: v[keep] for k, v in reading.items()}),
-                           np.array(uv, float).reshape(-1, 2), rejected)
+                           np.array(uv, float).reshape(-1, 2), rejected, np.array(sig, float).reshape(-1, 2))
 
 
 def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, axis_order: str | None = None
@@ -136,7 +147,7 @@ def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, 
     inp = sun_sensor_inputs(rig, angles_path, centroids_path)
     if len(inp.frames) < 8:
         raise InputError(f"{centroids_path}: {len(inp.frames)} frames with a usable spot; the calibration needs at least 8")
-    return fit_sun_sensor(rig, inp.readings, inp.uv, order), inp
+    return fit_sun_sensor(rig, inp.readings, inp.uv, order, sigma_uv=inp.sigma_uv), inp
 
 
 def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: str, inputs: SunSensorInputs) -> dict:
@@ -157,6 +168,12 @@ def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: st
         "R_sun_from_rot": rotation_block(cal.R_sun_from_rot, cal.rotation_covariance_rad2),
         "residual_rms_px": cal.rms_px, "n_frames": cal.n_points, "n_rejected": len(inputs.rejected),
         "frames_rejected": inputs.rejected,
+        "n_outliers": len(cal.outliers),
+        "frames_outliers": [inputs.frames[i] for i in cal.outliers],
+        "outlier_sigma": rig.procedure.sweep_outlier_sigma,
+        "n_outside_field": len(cal.outside_field),
+        "frames_outside_field": [inputs.frames[i] for i in cal.outside_field],
+        "max_field_deg": rig.procedure.sweep_max_field_deg,
         "sigma_source": "residual scatter of the fit (σ² = RSS / dof)",
     }
 

@@ -35,23 +35,28 @@ class CubeMirrorEstimate:
         return None if R_sun is None else self.R_cube_from_rot @ R_sun.T
 
 
-def fit_sun_sensor(rig: CubeMirrorRig, readings, uv, axis_order: str, d_rot=NOMINAL_D) -> SunCalibration:
+def fit_sun_sensor(rig: CubeMirrorRig, readings, uv, axis_order: str, d_rot=NOMINAL_D, *,
+                   sigma_uv=None) -> SunCalibration:
     """Step 1 / B: intrinsics and R(sun←rot) by least squares from the sweep's turntable readings and
     sun-image centroids, with the nominal turntable (nesting ``axis_order``) and the design focal
-    length as the start."""
+    length as the start. Frames beyond ``procedure.sweep_max_field_deg`` from the axis or beyond
+    ``procedure.sweep_outlier_sigma`` are left out (``sigma_uv``: the centroids' 1σ, which scales the
+    outlier test; None: all equal)."""
     ss = rig.sun_sensor
     return calibrate_sun_sensor(readings, uv, TurntableModel.nominal(list(axis_order)), *ss.resolution_px,
-                                f_guess_px=ss.fx_px, d_rot=d_rot)
+                                f_guess_px=ss.fx_px, d_rot=d_rot, sigma_uv=sigma_uv,
+                                outlier_sigma=rig.procedure.sweep_outlier_sigma,
+                                max_field_deg=rig.procedure.sweep_max_field_deg)
 
 
 def estimate(rig: CubeMirrorRig, null_readings, axis_order: str, *, sweep_readings=None, sweep_uv=None,
-             calibration: SunCalibration | None = None, d_rot=NOMINAL_D) -> CubeMirrorEstimate:
+             calibration: SunCalibration | None = None, d_rot=NOMINAL_D, sweep_sigma_uv=None) -> CubeMirrorEstimate:
     """Steps 1/B, 4/C3 and 5/D from the observations and the nominal rig: the sweep (its readings and
     sun-image centroids, or an existing ``calibration``) and the readings at the two nulls (TRIAD
     with the nominal turntable of nesting ``axis_order``)."""
     cal = calibration
     if sweep_readings is not None:
-        cal = fit_sun_sensor(rig, sweep_readings, sweep_uv, axis_order, d_rot)
+        cal = fit_sun_sensor(rig, sweep_readings, sweep_uv, axis_order, d_rot, sigma_uv=sweep_sigma_uv)
     R_cr, _, _ = cube_from_rot_triad(null_readings, rig.procedure.faces, axis_order, d_rot)
     return CubeMirrorEstimate(axis_order, cal, list(null_readings), R_cr)
 

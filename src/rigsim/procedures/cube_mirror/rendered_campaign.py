@@ -128,7 +128,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
                                       on_frame=None if frames is None else frames.sweep_frame)
     times["sweep render + centroid"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    cal = fit_sun_sensor(rig, sweep.readings, sweep.uv, order)
+    cal = fit_sun_sensor(rig, sweep.readings, sweep.uv, order, sigma_uv=sweep.sigma_uv)
     times["sweep least squares"] = time.perf_counter() - t0
     res_px = sweep.uv - sweep_truth.uv_centre  # everything: rendering, detector, centroider
     measured["sun_centroid_rms_px"] = float(np.sqrt(np.mean(res_px**2)))

@@ -51,6 +51,12 @@ def plot_calibration_residuals(campaign, path: Path) -> Path:
     scale = 0.05 * W / max(float(np.max(np.hypot(*res.T))), 1e-12)
     ax.quiver(uv[:, 0], uv[:, 1], res[:, 0], res[:, 1], np.hypot(*res.T), angles="xy", scale_units="xy",
               scale=1.0 / scale, cmap="viridis", width=0.003)
+    marks = [(cal.outliers, "x", "tab:red", "outliers"), (cal.outside_field, "+", "tab:grey", "outside the field")]
+    for rows, marker, colour, what in marks:
+        if len(rows):
+            ax.plot(*sw.uv[rows].T, marker, color=colour, ms=7, ls="none", label=f"{len(rows)} left out: {what}")
+    if len(cal.outliers) or len(cal.outside_field):
+        ax.legend(loc="lower right", fontsize=8)
     ax.set_xlim(0, W)
     ax.set_ylim(H, 0)
     ax.set_aspect("equal")
@@ -245,7 +251,10 @@ def write_report(out: Path, campaign, rig, *, budget=None, rig_path: str | None 
     cal = campaign.calibration
     sd = np.sqrt(np.diag(cal.rotation_covariance_rad2)) * ARCSEC_PER_RAD
     L += ["", f"The sweep fit's own 1σ for R(sun←rot): {sd[0]:.3f}″, {sd[1]:.3f}″, {sd[2]:.3f}″ "
-          f"(fit rms {cal.rms_px:.4f} px over {cal.n_points} frames; {campaign.sweep.n_rejected} frames rejected).", ""]
+          f"(fit rms {cal.rms_px:.4f} px over {cal.n_points} frames; {campaign.sweep.n_rejected} frames rejected"
+          + (f", {len(cal.outliers)} left out of the fit as outliers" if len(cal.outliers) else "")
+          + (f", {len(cal.outside_field)} beyond {rig.procedure.sweep_max_field_deg:g}° of the axis"
+             if len(cal.outside_field) else "") + ").", ""]
     ss = rig.sun_sensor
     truth = {"fx": ss.fx_px, "fy": ss.fx_px * ss.fy_over_fx, "cx": ss.principal_point_px[0], "cy": ss.principal_point_px[1],
              "k1": ss.distortion.k1, "k2": ss.distortion.k2, "p1": ss.distortion.p1, "p2": ss.distortion.p2}

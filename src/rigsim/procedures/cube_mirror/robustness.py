@@ -63,17 +63,33 @@ def quantities(rig) -> tuple[Quantity, ...]:
     return tuple(q)
 
 
+SWEEP_GUARDS = {"sweep_outlier_sigma": 8.0, "sweep_max_field_deg": 62.0}
+"""The sweep fit's guards the robustness study tries when the rig has them off (docs/campaign.md)."""
+
+
 def pipeline_variants(rig) -> dict[str, object]:
-    """The pipelines a configuration's campaigns run (name → rig): as the rig configures them, and on
-    the 2-axis rig with the aiming camera's hole fit switched (``hole_background`` none ↔ plane).
-    Each variant is a campaign of its own: the null search goes where its measurements lead it."""
+    """The pipelines a configuration's campaigns run (name → rig): as the rig configures them, on
+    the 2-axis rig with the aiming camera's hole fit switched (``hole_background`` none ↔ plane), and,
+    when the rig's sweep fit keeps every frame, with :data:`SWEEP_GUARDS`. Each hole fit is a
+    campaign of its own (the null search goes where its measurements lead it); the guarded variant
+    refits the configured campaign's own sweep (:func:`_guarded`)."""
     out = {f"as configured{_describe(rig)}": rig}
     if rig.procedure.method == "diaphragm":
         ac = rig.aiming_camera
         other = "plane" if ac.hole_background == "none" else "none"
         alt = rig.model_copy(update={"aiming_camera": ac.model_copy(update={"hole_background": other})})
         out[_describe(alt).strip(" ()")] = alt
+    p = rig.procedure
+    if p.sweep_outlier_sigma == 0.0 and p.sweep_max_field_deg == 90.0:
+        g = rig.model_copy(update={"procedure": p.model_copy(update=SWEEP_GUARDS)})
+        out[f"sweep fit guarded (outliers beyond {SWEEP_GUARDS['sweep_outlier_sigma']:g}σ, field "
+            f"{SWEEP_GUARDS['sweep_max_field_deg']:g}°){_describe(rig)}"] = g
     return out
+
+
+def _guarded(v_rig, rig) -> bool:
+    """``v_rig`` is ``rig`` with only the sweep fit's guards changed: it needs no campaign of its own."""
+    return v_rig.model_copy(update={"procedure": rig.procedure}) == rig and v_rig.procedure != rig.procedure
 
 
 def _describe(rig) -> str:
@@ -89,15 +105,21 @@ def campaign_trial(rig, names, config: str, seed: int) -> dict:
     that does not converge scores NaN errors and ``converged_count`` 0."""
     out: dict = {}
     frames, wall = 0, 0.0
+    first = None  # the configured variant's campaign and rig instance
     for variant, v_rig in pipeline_variants(rig).items():
-        values, n, t = _one_campaign(rig_with(v_rig, config, names), seed, quantities(rig))
+        if _guarded(v_rig, rig):
+            out[variant] = _refit(rig_with(v_rig, config, names), *(first or (None, None)), quantities(rig))
+            continue
+        values, n, t, camp = _one_campaign(rig_with(v_rig, config, names), seed, quantities(rig))
+        first = first or camp
         out[variant] = values
         frames, wall = frames + n, wall + t
     out["_render_ms_per_frame"] = 1e3 * wall / max(1, frames)
     return out
 
 
-def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float]:
+def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float, tuple | None]:
+    """One rendered campaign: (its values, frames, seconds, (campaign, rig instance) or None)."""
     from rigsim.errors import SearchError
     from rigsim.procedures.cube_mirror.rendered_campaign import run_rendered_campaign
     from rigsim.truth.cube_mirror.realization import realization_from_rig
@@ -108,11 +130,34 @@ def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float]:
     try:
         camp = run_rendered_campaign(r, real, seed=int(seed), progress=counter)
     except SearchError:
-        out = {q.key: math.nan for q in qs}
-        out["converged_count"] = 0.0
-        return out, counter.n, time.perf_counter() - t0
+        return _failed(qs), counter.n, time.perf_counter() - t0, None
     wall = time.perf_counter() - t0
-    res, cal = camp.result, camp.calibration
+    return _values(r, camp.result, camp.calibration, camp), counter.n, wall, (camp, real)
+
+
+def _failed(qs) -> dict:
+    out = {q.key: math.nan for q in qs}
+    out["converged_count"] = 0.0
+    return out
+
+
+def _refit(r, camp, real, qs) -> dict:
+    """The configured campaign with its sweep fitted again by ``r``'s sweep fit (same frames, same
+    null readings): R(sun←rot), the intrinsics and R(cube←sun) change, the nulls do not."""
+    if camp is None:
+        return _failed(qs)
+    from rigsim.procedures.cube_mirror.campaign import compare
+    from rigsim.procedures.cube_mirror.pipeline import default_axis_order, estimate, fit_sun_sensor
+
+    order = default_axis_order(r)  # as the campaign's (run_rendered_campaign's default)
+    sw = camp.sweep
+    cal = fit_sun_sensor(r, sw.readings, sw.uv, order, sigma_uv=sw.sigma_uv)
+    est = estimate(r, [s.final_reading_rad for s in camp.searches], order, calibration=cal)
+    return _values(r, compare(r, est, real), cal, camp)
+
+
+def _values(r, res, cal, camp) -> dict:
+    """The errors and counts of :func:`quantities` of a campaign's result and sweep calibration."""
     ss = r.sun_sensor
     out = {f"cube_sun_{a}_arcsec": float(v) for a, v in zip(_AXES, res.error_arcsec)}
     out |= {f"sun_rot_{a}_arcsec": float(v) for a, v in zip(_AXES, res.sun_error_arcsec)}
@@ -122,7 +167,7 @@ def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float]:
             "sun_centroid_rms_px": camp.measured_noise["sun_centroid_rms_px"],
             "null_measurement_rms": camp.measured_noise["null_measurement_rms"],
             "sweep_points_count": float(cal.n_points), "converged_count": 1.0}
-    return out, counter.n, wall
+    return out
 
 
 class _Counter:

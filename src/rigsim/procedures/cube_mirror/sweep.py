@@ -32,6 +32,7 @@ class SweepObservation:
     n_rendered: int
     n_rejected: int  # frames whose spot was flagged (edge, saturated, …) and left out
     seconds: float
+    sigma_uv: np.ndarray | None = None  # the centroider's 1σ of each kept centroid (N, 2), px
 
 
 @dataclass
@@ -127,7 +128,7 @@ def render_sweep(
     noise_model = NoiseModel.from_detector(det)
     shape = (rig.sun_sensor.resolution_px[1], rig.sun_sensor.resolution_px[0])
     W = renderer.window_px
-    keep, uv = [], []
+    keep, uv, sig = [], [], []
     rejected = 0
     for j, i in enumerate(field_idx):
         fseed = frame_seeds[j]
@@ -158,11 +159,13 @@ def render_sweep(
         else:
             keep.append(int(i))
             uv.append([float(spots.u[k]), float(spots.v[k])])
+            sig.append([float(spots.sigma_u[k]), float(spots.sigma_v[k])])
         if progress:
             progress(1)
     keep = np.array(keep, dtype=int)
     readings = TurntableReading({ax: r[keep] for ax, r in read.items()})
-    obs = SweepObservation(readings, np.array(uv).reshape(-1, 2), len(field_idx), rejected, time.perf_counter() - t0)
+    obs = SweepObservation(readings, np.array(uv).reshape(-1, 2), len(field_idx), rejected, time.perf_counter() - t0,
+                           np.array(sig).reshape(-1, 2))
     truth = SweepTruth(TruePose({k: v[keep] for k, v in poses.items()}), c[keep].reshape(-1, 2), S[keep],
                        cam, scene.full_angle_rad, renderer.response)
     return obs, truth
@@ -172,4 +175,6 @@ def calibrate_from_sweep(rig: CubeMirrorRig, sweep: SweepObservation, axis_order
     order = list(axis_order) if axis_order else [a.label for a in rig.turntable.axes]
     ss = rig.sun_sensor
     return calibrate_sun_sensor(sweep.readings, sweep.uv, TurntableModel.nominal(order), *ss.resolution_px,
-                                f_guess_px=ss.fx_px, d_rot=NOMINAL_D)
+                                f_guess_px=ss.fx_px, d_rot=NOMINAL_D, sigma_uv=sweep.sigma_uv,
+                                outlier_sigma=rig.procedure.sweep_outlier_sigma,
+                                max_field_deg=rig.procedure.sweep_max_field_deg)
