@@ -64,9 +64,11 @@ def plot_calibration_residuals(campaign, path: Path) -> Path:
     ax.set_xlabel("u (px)")
     ax.set_ylabel("v (px)")
     ax = axs[1]
-    r = np.hypot(uv[:, 0] - W / 2, uv[:, 1] - H / 2)
-    ax.plot(r, np.hypot(*res.T), ".", ms=3, label="|fit residual|")
-    ax.plot(r, np.hypot(*err.T), ".", ms=3, alpha=0.6, label="|measured − exact sun-centre projection|")
+    ax.plot(np.hypot(uv[:, 0] - W / 2, uv[:, 1] - H / 2), np.hypot(*res.T), ".", ms=3, label="|fit residual|")
+    ax.plot(np.hypot(sw.uv[:, 0] - W / 2, sw.uv[:, 1] - H / 2), np.hypot(*err.T), ".", ms=3, alpha=0.6,
+            label="|measured − exact sun-centre projection|" + (", every frame" if len(err) > len(uv) else ""))
+    if len(err) > len(uv):
+        ax.set_yscale("log")
     ax.set_xlabel("distance from the detector centre (px)")
     ax.set_ylabel("px")
     ax.set_title("residual vs field position")
