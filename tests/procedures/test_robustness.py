@@ -87,6 +87,7 @@ def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_
     assert rc == 0
     for name in ("robustness.md", "robustness.json", "robustness.csv", "robustness.png", "frames.png"):
         assert (out / name).stat().st_size > 0
+    assert not (out / "robustness-trials").exists()                    # the kept trials go once the report is written
     d = json.loads((out / "robustness.json").read_text())
     assert d["configs"] == [IDEAL, "hot_pixels"]
     conf, no_filter, no_pattern, poor_kept, poor_frame, mapped = d["pipelines"]
@@ -154,3 +155,89 @@ def test_run_configs_gives_the_same_results_in_worker_processes():
     one = run_configs(_square_trial, ("ideal", "fx"), [0, 1, 2], workers=1)
     two = run_configs(_square_trial, ("ideal", "fx"), [0, 1, 2], workers=2)
     assert one == two and one[("fx", 2)] == {"v": 6.0}
+
+
+class _Crash(Exception):
+    pass
+
+
+def _crashing_trial(calls, crash_at):
+    def trial(config, seed):
+        calls.append((config, seed))
+        if len(calls) == crash_at:
+            raise _Crash
+        return _square_trial(config, seed)
+    return trial
+
+
+def test_a_killed_run_resumes_from_its_stored_trials(tmp_path):
+    from rigsim.procedures.robustness import run_configs
+    from rigsim.procedures.trial_store import TrialStore
+
+    store = TrialStore(tmp_path / "trials", "key-1")
+    calls: list = []
+    with pytest.raises(_Crash):
+        run_configs(_crashing_trial(calls, 4), ("ideal", "fx"), [0, 1, 2], store=store)
+    assert store.count(("ideal", "fx"), [0, 1, 2]) == 3                 # the three runs before the crash
+    calls.clear()
+    again = run_configs(_crashing_trial(calls, 0), ("ideal", "fx"), [0, 1, 2], store=store)
+    assert calls == [("fx", 0), ("fx", 1), ("fx", 2)]                   # only what was not finished
+    assert again == run_configs(_square_trial, ("ideal", "fx"), [0, 1, 2])
+    # another rig, source or version: nothing is reused, and the files are overwritten
+    other = TrialStore(tmp_path / "trials", "key-2")
+    assert other.count(("ideal", "fx"), [0, 1, 2]) == 0
+    (tmp_path / "trials" / "ideal-seed0.json").write_text("{not json")
+    assert store.get("ideal", 0) is None and store.get("ideal", 1) == {"v": 1.0 + 5}
+    store.clear()
+    assert not (tmp_path / "trials").exists()
+
+
+def test_the_trial_store_never_writes_through_a_link(tmp_path):
+    from rigsim.errors import InputError
+    from rigsim.procedures.trial_store import TrialStore
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (tmp_path / "report").mkdir()
+    (tmp_path / "report" / "trials").symlink_to(outside)
+    store = TrialStore(tmp_path / "report" / "trials", "k")
+    with pytest.raises(InputError, match="is a link"):
+        store.put("ideal", 0, {"v": 1.0})
+    with pytest.raises(InputError, match="is a link"):
+        store.clear()
+    assert store.get("ideal", 0) is None and list(outside.iterdir()) == [] and outside.is_dir()
+
+
+def test_the_run_key_changes_with_the_rig_and_the_effects(short_star_rig):
+    from rigsim.procedures.star.robustness import run_robustness
+    from rigsim.procedures.trial_store import run_key
+    from rigsim.rig.load import load_any_rig
+
+    rig = load_any_rig(short_star_rig)
+    k = run_key(rig, ("hot_pixels",), run_robustness)
+    assert k == run_key(load_any_rig(short_star_rig), ("hot_pixels",), run_robustness)
+    assert k != run_key(rig, ("hot_pixels", "stray_light"), run_robustness)
+    assert k != run_key(rig.model_copy(update={"name": "another"}), ("hot_pixels",), run_robustness)
+
+
+def test_the_command_resumes_from_the_trials_an_interrupted_run_kept(short_star_rig, tmp_path, capsys):
+    from rigsim.procedures.star.robustness import QUANTITIES, pipeline_variants, run_robustness
+    from rigsim.procedures.trial_store import FOLDER, TrialStore, run_key
+    from rigsim.rig.load import load_any_rig
+
+    rig = load_any_rig(short_star_rig)
+    out = tmp_path / "rob"
+    store = TrialStore(out / FOLDER, run_key(rig, ("hot_pixels",), run_robustness))
+    for c in (IDEAL, "hot_pixels"):
+        for s in (5, 6):  # every trial, as an interrupted run would have kept them: nothing is rendered again
+            values = {v: {q.key: 100.0 * s + (c == IDEAL) for q in QUANTITIES} for v in pipeline_variants(rig)}
+            store.put(c, s, values | {"_render_ms_per_frame": 7.0})
+    rc = main(["run", "robustness", str(short_star_rig), "--trials", "2", "--seed", "5", "--effects", "hot_pixels",
+               "--workers", "1", "--out", str(out), "--quiet"])
+    assert rc == 0
+    assert "resuming: 4 of 4 runs kept by an interrupted run" in capsys.readouterr().out
+    d = json.loads((out / "robustness.json").read_text())
+    assert d["pipelines"][0]["trials_values"]["hot_pixels"]["identified_count"] == [500.0, 600.0]
+    assert d["pipelines"][0]["trials_values"][IDEAL]["identified_count"] == [501.0, 601.0]
+    assert d["render_ms_per_frame"] == {IDEAL: 7.0, "hot_pixels": 7.0}
+    assert not (out / FOLDER).exists()

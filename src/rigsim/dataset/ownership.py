@@ -19,39 +19,41 @@ OWNER_FILE = "dataset.lock.owner.json"
 BOOKKEEPING = (LOCK_FILE, OWNER_FILE)
 
 
-def _holder(root: Path) -> str:
+def _holder(root: Path, owner_file: str = OWNER_FILE) -> str:
     try:
-        o = json.loads((root / OWNER_FILE).read_text())
+        o = json.loads((root / owner_file).read_text())
         return f"pid {int(o['pid'])} on {o['host']}, {o['command']}, since {o['since_utc']}"
     except (OSError, ValueError, KeyError, TypeError):
         return "holder unknown"
 
 
 @contextlib.contextmanager
-def dataset_lock(root, command: str):
-    """Hold ``root``'s lock for the block; another holder → one-line DatasetError naming it."""
+def dataset_lock(root, command: str, *, lock_file: str = LOCK_FILE, owner_file: str = OWNER_FILE):
+    """Hold ``root``'s lock for the block; another holder → one-line DatasetError naming it. Other
+    folders that one run must own (a robustness report's) name their own ``lock_file`` and
+    ``owner_file``."""
     from filelock import FileLock, Timeout
 
     root = Path(root)
-    path = root / LOCK_FILE
+    path = root / lock_file
     if path.is_symlink() or (path.exists() and not path.is_file()):
         raise DatasetError(f"{path}: is a link or not a regular file; remove it (rigsim creates its own lock file)")
     lock = FileLock(str(path), timeout=0, mode=0o644)
     try:
         lock.acquire()
     except Timeout:
-        raise DatasetError(f"{root}: in use by another run ({_holder(root)}); wait for it or choose another --out") \
+        raise DatasetError(f"{root}: in use by another run ({_holder(root, owner_file)}); wait for it or choose another --out") \
             from None
     except OSError as e:
         raise DatasetError(f"{path}: cannot lock the folder ({e.strerror or e})") from None
     try:
         note = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
                 "since_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
-        atomic_write_bytes(root / OWNER_FILE, (json.dumps(note) + "\n").encode())
+        atomic_write_bytes(root / owner_file, (json.dumps(note) + "\n").encode())
         yield
     finally:
         with contextlib.suppress(OSError):
-            (root / OWNER_FILE).unlink()
+            (root / owner_file).unlink()
         lock.release()
 
 

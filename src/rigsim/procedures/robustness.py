@@ -24,6 +24,7 @@ __all__ = [
     "BoundTrial",
     "Quantity",
     "RobustnessResult",
+    "collect_results",
     "configs_for",
     "rig_with",
     "run_configs",
@@ -93,16 +94,33 @@ class BoundTrial:
         return self.fn(self.rig, self.names, config, seed)
 
 
-def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None) -> dict:
+def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None, store=None) -> dict:
     """``trial(config, seed) -> dict`` for every config and seed (same seeds for every config), in
-    ``workers`` processes (spawned; results do not depend on the worker count)."""
-    jobs = [(c, s) for c in configs for s in seeds]
+    ``workers`` processes (spawned; results do not depend on the worker count). With a
+    :class:`~rigsim.procedures.trial_store.TrialStore`, the trials it holds are taken from it and
+    every new one is written to it as soon as it finishes."""
     out: dict = {}
-    if workers <= 1:
+    jobs = []
+    for c in configs:
+        for s in seeds:
+            kept = store.get(c, s) if store is not None else None
+            if kept is None:
+                jobs.append((c, s))
+            else:
+                out[(c, s)] = kept
+    if progress is not None and len(out):
+        progress.update(len(out))
+
+    def done(c, s, values):
+        out[(c, s)] = values
+        if store is not None:
+            store.put(c, s, values)
+        if progress is not None:
+            progress.update(1)
+
+    if workers <= 1 or len(jobs) <= 1:
         for c, s in jobs:
-            out[(c, s)] = trial(c, s)
-            if progress is not None:
-                progress.update(1)
+            done(c, s, trial(c, s))
         return out
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -114,9 +132,22 @@ def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None) -> di
                              initargs=(os.getpid(),)) as ex:
         futs = {ex.submit(trial, c, s): (c, s) for c, s in jobs}
         for f in as_completed(futs):
-            out[futs[f]] = f.result()
-            if progress is not None:
-                progress.update(1)
+            done(*futs[f], f.result())
+    return out
+
+
+def collect_results(family: str, rig, names, seeds, raw: dict, qs, variants, wall_s: float) -> list[RobustnessResult]:
+    """One :class:`RobustnessResult` per pipeline variant from :func:`run_configs`' trials (each a
+    {variant: {quantity: value}} with ``_render_ms_per_frame``)."""
+    configs = configs_for(names)
+    render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
+    effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
+    out = []
+    for v in variants:
+        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds], dtype=float) for q in qs}
+                  for c in configs}
+        out.append(RobustnessResult(family, rig.name, int(seeds[0]), len(seeds), tuple(qs), configs, values, render,
+                                    effects, {"wall": wall_s}, pipeline=v))
     return out
 
 

@@ -66,8 +66,10 @@ def family_module(rig):
 def cmd_run_robustness(args) -> int:
     from tqdm import tqdm
 
+    from rigsim.dataset.ownership import dataset_lock
     from rigsim.files.atomic import output_folder
     from rigsim.procedures.robustness import configs_for, verdicts, write_robustness_files
+    from rigsim.procedures.trial_store import FOLDER, TrialStore, run_key
     from rigsim.render.threads import cores
     from rigsim.rig.load import load_any_rig
 
@@ -87,11 +89,29 @@ def cmd_run_robustness(args) -> int:
     print(f"robustness of {fam.DESCRIPTION}, rig '{rig.name}': {', '.join(configs)}; {trials} trials each, "
           f"{workers} process{'es' if workers > 1 else ''}")
     t0 = time.perf_counter()
-    with tqdm(total=len(configs) * trials, desc="runs", unit="run", disable=True if args.quiet else None,
-              file=sys.stderr, dynamic_ncols=True) as bar:
-        res = fam.run_robustness(rig, trials=trials, seed=args.seed, names=names, workers=workers, progress=bar)
-    frames = fam.frames_figure(rig, out / "frames.png", seed=args.seed, names=names)
-    files = write_robustness_files(out, res, frames_png=frames)
+    store = TrialStore(out / FOLDER, run_key(rig, names, fam.run_robustness))
+    output_folder(store.folder, "robustness trials folder")
+    with dataset_lock(store.folder, "rigsim run robustness", lock_file="run.lock", owner_file="run.lock.owner.json"):
+        seeds = range(args.seed, args.seed + trials)
+        kept = store.count(configs, seeds)
+        if kept:
+            print(f"resuming: {kept} of {len(configs) * trials} runs kept by an interrupted run in {store.folder}")
+        # the frames first: a figure that cannot be drawn fails in seconds, not after hours of trials, and
+        # every module the report needs is loaded before the trials start
+        frames = fam.frames_figure(rig, out / "frames.png", seed=args.seed, names=names)
+        with tqdm(total=len(configs) * trials, desc="runs", unit="run", disable=True if args.quiet else None,
+                  file=sys.stderr, dynamic_ncols=True) as bar:
+            try:
+                res = fam.run_robustness(rig, trials=trials, seed=args.seed, names=names, workers=workers,
+                                         progress=bar, store=store)
+            except BaseException:
+                n = store.count(configs, seeds)
+                if n:
+                    print(f"rigsim: {n} finished runs are kept in {store.folder}; the same command resumes from them",
+                          file=sys.stderr)
+                raise
+        files = write_robustness_files(out, res, frames_png=frames)
+        store.clear()
     for r in res:
         print(f"pipeline {r.pipeline}:")
         for c, v in verdicts(r).items():

@@ -9,7 +9,17 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
+from rigsim.procedures.robustness import (
+    ALL,
+    IDEAL,
+    BoundTrial,
+    Quantity,
+    RobustnessResult,
+    collect_results,
+    configs_for,
+    rig_with,
+    run_configs,
+)
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "boresight_trial", "effect_names", "frames_figure", "pipeline_variants",
            "quantities", "run_robustness"]
@@ -113,25 +123,17 @@ def boresight_trial(rig, names, config: str, seed: int) -> dict:
 
 
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
-                   progress=None) -> list[RobustnessResult]:
+                   progress=None, store=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
     :class:`RobustnessResult` per :func:`pipeline_variants` centroider, the configured one first (DVAD
     and the simplified formulas are quantities of each)."""
     names = tuple(effect_names(rig) if names is None else names)
-    configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
-    qs = quantities(rig)
     t0 = time.perf_counter()
-    raw = run_configs(BoundTrial(boresight_trial, rig, names), configs, seeds, workers=workers, progress=progress)
-    render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
-    effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
-    results = []
-    for v in pipeline_variants(rig):
-        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds], dtype=float) for q in qs}
-                  for c in configs}
-        results.append(RobustnessResult("boresight", rig.name, int(seed), int(trials), qs, configs, values, render,
-                                        effects, {"wall": time.perf_counter() - t0}, pipeline=v))
-    return results
+    raw = run_configs(BoundTrial(boresight_trial, rig, names), configs_for(names), seeds, workers=workers, progress=progress,
+                      store=store)
+    return collect_results("boresight", rig, names, seeds, raw, quantities(rig), pipeline_variants(rig),
+                           time.perf_counter() - t0)
 
 
 def frames_figure(rig, path, *, seed: int = 0, names=None):

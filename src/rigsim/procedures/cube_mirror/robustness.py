@@ -12,7 +12,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
+from rigsim.procedures.robustness import (
+    ALL,
+    IDEAL,
+    BoundTrial,
+    Quantity,
+    RobustnessResult,
+    collect_results,
+    configs_for,
+    rig_with,
+    run_configs,
+)
 from rigsim.rig.effects_cube import cube_effect_names
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "angle_budget_arcsec", "campaign_trial", "effect_names", "frames_figure",
@@ -184,24 +194,16 @@ class _Counter:
 
 
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
-                   progress=None) -> list[RobustnessResult]:
+                   progress=None, store=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
     :class:`RobustnessResult` per :func:`pipeline_variants`, the configured pipeline first."""
     names = tuple(effect_names(rig) if names is None else names)
-    configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
     t0 = time.perf_counter()
-    raw = run_configs(BoundTrial(campaign_trial, rig, names), configs, seeds, workers=workers, progress=progress)
-    render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
-    effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
-    qs = quantities(rig)
-    family = "cube-mirror (" + rig.procedure.method + ")"
-    results = []
-    for v in pipeline_variants(rig):
-        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds]) for q in qs} for c in configs}
-        results.append(RobustnessResult(family, rig.name, int(seed), int(trials), qs, configs, values, render, effects,
-                                        {"wall": time.perf_counter() - t0}, pipeline=v))
-    return results
+    raw = run_configs(BoundTrial(campaign_trial, rig, names), configs_for(names), seeds, workers=workers, progress=progress,
+                      store=store)
+    return collect_results("cube-mirror (" + rig.procedure.method + ")", rig, names, seeds, raw, quantities(rig), pipeline_variants(rig),
+                           time.perf_counter() - t0)
 
 
 # ------------------------------------------------------------------ the frames figure

@@ -8,7 +8,17 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import ALL, IDEAL, BoundTrial, Quantity, RobustnessResult, configs_for, rig_with, run_configs
+from rigsim.procedures.robustness import (
+    ALL,
+    IDEAL,
+    BoundTrial,
+    Quantity,
+    RobustnessResult,
+    collect_results,
+    configs_for,
+    rig_with,
+    run_configs,
+)
 from rigsim.rig.effects import STAR_EFFECTS
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "QUANTITIES", "effect_names", "frames_figure", "pipeline_variants",
@@ -126,23 +136,16 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
 
 
 def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int = 1,
-                        progress=None) -> list[RobustnessResult]:
+                   progress=None, store=None) -> list[RobustnessResult]:
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
     :class:`RobustnessResult` per pipeline variant, the configured pipeline first."""
     names = tuple(STAR_EFFECTS if names is None else names)
-    configs = configs_for(names)
     seeds = list(range(int(seed), int(seed) + int(trials)))
     t0 = time.perf_counter()
-    raw = run_configs(BoundTrial(star_trial, rig, names), configs, seeds, workers=workers, progress=progress)
-    render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
-    effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
-    wall = time.perf_counter() - t0
-    results = []
-    for v in pipeline_variants(rig):
-        values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds]) for q in QUANTITIES} for c in configs}
-        results.append(RobustnessResult("star", rig.name, int(seed), int(trials), QUANTITIES, configs, values, render,
-                                        effects, {"wall": wall}, pipeline=v))
-    return results
+    raw = run_configs(BoundTrial(star_trial, rig, names), configs_for(names), seeds, workers=workers, progress=progress,
+                      store=store)
+    return collect_results("star", rig, names, seeds, raw, QUANTITIES, pipeline_variants(rig),
+                           time.perf_counter() - t0)
 
 
 def frames_figure(rig, path, *, seed: int = 0, names=None, crop: int = 256):
