@@ -205,6 +205,8 @@ def test_the_trial_store_never_writes_through_a_link(tmp_path):
         store.put("ideal", 0, {"v": 1.0})
     with pytest.raises(InputError, match="is a link"):
         store.clear()
+    with pytest.raises(InputError, match="is a link"):
+        store.create()
     assert store.get("ideal", 0) is None and list(outside.iterdir()) == [] and outside.is_dir()
 
 

@@ -90,7 +90,7 @@ def cmd_run_robustness(args) -> int:
           f"{workers} process{'es' if workers > 1 else ''}")
     t0 = time.perf_counter()
     store = TrialStore(out / FOLDER, run_key(rig, names, fam.run_robustness))
-    output_folder(store.folder, "robustness trials folder")
+    store.create()
     with dataset_lock(store.folder, "rigsim run robustness", lock_file="run.lock", owner_file="run.lock.owner.json"):
         seeds = range(args.seed, args.seed + trials)
         kept = store.count(configs, seeds)

@@ -83,9 +83,13 @@ class TrialStore:
             raise InputError(f"{self.folder}: is a link; rigsim keeps its robustness trials in a plain folder of the "
                              "report folder (remove the link)")
 
-    def put(self, config: str, seed: int, values: dict) -> None:
+    def create(self) -> Path:
+        """The folder, created if missing (a link is refused: nothing is written outside the report folder)."""
         self._refuse_link()
-        output_folder(self.folder, "robustness trials folder")
+        return output_folder(self.folder, "robustness trials folder")
+
+    def put(self, config: str, seed: int, values: dict) -> None:
+        self.create()
         doc = {"format": FORMAT, "key": self.key, "config": config, "seed": int(seed), "values": values}
         atomic_write_bytes(self._path(config, seed), (json.dumps(doc) + "\n").encode())
 
