@@ -7,6 +7,7 @@ frame at 60° is 3.25× noisier than one on the axis. Gross outliers are what a 
 fragmented diffracted spot gives (0.4 to 2.5 px)."""
 
 import numpy as np
+import pytest
 
 from rigsim.estimation.sun_calibration import calibrate_sun_sensor
 from rigsim.frames import ARCSEC_PER_RAD, small_angle_error
@@ -75,6 +76,33 @@ def test_gross_outliers_are_left_out_and_the_fit_recovers():
     sd_kept = np.sqrt(np.diag(kept.rotation_covariance_rad2)) * ARCSEC_PER_RAD
     assert _rot_error_arcsec(kept, R).max() > 10.0 * sd.max()
     assert sd_kept.max() > 5.0 * sd.max()  # the residual scatter that the outliers inflate
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_corner_full_of_outliers_cannot_hide_in_the_fit(seed, monkeypatch):
+    """The 60 frames farthest into one corner (a tenth of the sweep), each moved 0.3 to 0.9 px across
+    the radius: a common bias that the distortion and rotation terms can partly absorb. Judged on
+    the Cauchy-loss fit, all 60 are left out and the rotation comes back within 3σ. Judged on the
+    plain least squares (as a naive test would), they bend the fit towards themselves and mask each
+    other: fewer than a fifth are found and the rotation stays over 100″ off (143 to 163″)."""
+    import rigsim.estimation.sun_calibration as sc
+
+    readings, exact, sigma, R = _sweep(seed)
+    rng = np.random.default_rng(100 + seed)
+    uv = exact + rng.normal(size=exact.shape) * sigma
+    d = exact - SS.principal_point_px
+    corner = np.argsort(-(d @ np.array([1.0, 1.0])))[:60]
+    across = np.column_stack([-d[corner, 1], d[corner, 0]]) / np.hypot(*d[corner].T)[:, None]
+    uv[corner] += across * rng.uniform(0.3, 0.9, (60, 1))
+    cal = _fit(readings, uv, sigma, LIMIT)
+    np.testing.assert_array_equal(np.sort(cal.outliers), np.sort(corner))
+    sd = np.sqrt(np.diag(cal.rotation_covariance_rad2)) * ARCSEC_PER_RAD
+    assert np.all(_rot_error_arcsec(cal, R) < 3.0 * sd)
+    monkeypatch.setattr(sc, "_robust_residuals",
+                        lambda fit, m, uv, sig: fit.camera.project(m @ fit.R_sun_from_rot.T) - uv)
+    naive = _fit(readings, uv, sigma, LIMIT)
+    assert len(np.intersect1d(naive.outliers, corner)) < 12
+    assert _rot_error_arcsec(naive, R).max() > 100.0
 
 
 def test_a_noisy_frame_consistent_with_its_sigma_stays():
