@@ -333,6 +333,7 @@ MIRROR_PLUGIN = "rigsim_normal_mirror"
 
 
 _bsdfs_registered: set = set()
+_ideal_lens: dict = {}
 
 
 def register_plugins() -> None:
@@ -384,7 +385,9 @@ def register_plugins() -> None:
             self.m_flags = fl
             dr.make_opaque(self.f, self.C, self.e1, self.e2, self.e3)
 
-        def sample(self, ctx, si, sample1, sample2, active=True):
+        def _slopes(self, si):
+            """The ray leaving the thin lens: its transverse slopes along e1, e2 per unit travel along
+            e3, and the sign of that travel (a ray keeps its side: it crosses the lens)."""
             p = -si.to_world(si.wi)                      # propagation direction (world)
             px, py, pz = dr.dot(p, self.e1), dr.dot(p, self.e2), dr.dot(p, self.e3)
             r = si.p - self.C
@@ -392,9 +395,15 @@ def register_plugins() -> None:
             az = dr.abs(pz)
             qx = px / az - x / self.f                    # transverse slope per unit travel, minus r/f
             qy = py / az - y / self.f
+            return qx, qy, pz
+
+        def _leave(self, si, qx, qy, pz, active):
             sz = dr.select(pz >= 0, 1.0, -1.0)
             d = dr.normalize(qx * self.e1 + qy * self.e2 + sz * self.e3)
             return _delta_sample(si, d, mi.BSDFFlags.DeltaTransmission, active)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            return self._leave(si, *self._slopes(si), active)
 
         def traverse(self, cb):
             cb.put("focal_length", self.f, mi.ParamFlags.NonDifferentiable)
@@ -433,4 +442,12 @@ def register_plugins() -> None:
 
     mi.register_bsdf(LENS_PLUGIN, lambda props: IdealLens(props))
     mi.register_bsdf(MIRROR_PLUGIN, lambda props: NormalMirror(props))
+    _ideal_lens[variant] = IdealLens
     _bsdfs_registered.add(variant)
+
+
+def ideal_lens_class():
+    """The ideal thin lens's BSDF class for the current variant (registered first), for lenses that
+    add to it (:mod:`rigsim.render.aberrated_lens`)."""
+    register_plugins()
+    return _ideal_lens[ensure_variant()]

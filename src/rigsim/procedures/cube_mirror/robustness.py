@@ -263,8 +263,9 @@ def _bright_centre(img: np.ndarray) -> tuple[float, float]:
 
 def frames_figure(rig, path, *, seed: int = 0, names=None):
     """The rig's frames ideal and with every effect on, side by side: a sun-sensor frame at the
-    sweep's widest field angle, and the last null-search frame of the first face (same grey scale
-    per row)."""
+    sweep's widest field angle, and the last null-search frame of the first face. Each panel on its
+    own grey scale (a diffracted or vignetted spot would vanish on the ideal's); the sun row states
+    the peak above background relative to the ideal's."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -302,7 +303,7 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
 
     rows_spec = (("sun", f"sun sensor, {angle:.0f}° off axis", 40, True),
                  ("null", f"{null_kind}, face {rig.procedure.faces[0]}, last frame of its null search", 120, False))
-    for row, (key, label, half, shared) in enumerate(rows_spec):
+    for row, (key, label, half, peaks) in enumerate(rows_spec):
         imgs = rows[key]
         if imgs[0] is None:
             for ax in axs[row]:
@@ -310,17 +311,19 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
             continue
         centre = centres[key] or _bright_centre(imgs[0])
         crops = [_crop(im, centre, half) if im is not None else (None, (0, 0)) for im in imgs]
+        peak0 = float(crops[0][0].max() - np.median(crops[0][0]))
         for k, (ax, (im, (u0, v0))) in enumerate(zip(axs[row], crops)):
             if im is None:
                 ax.set_axis_off()
                 continue
-            ref = crops[0][0] if shared else im  # the sun row on the ideal's scale; the null row each on its own
-            lo = float(np.percentile(ref, 1))
-            hi = max(float(ref.max()), lo + 1.0)
+            lo = float(np.percentile(im, 1))
+            hi = max(float(im.max()), lo + 1.0)
             h, w = im.shape
             ax.imshow(im, cmap="gray", norm=PowerNorm(0.5, vmin=lo, vmax=hi, clip=True),
                       extent=(u0 - 0.5, u0 + w - 0.5, v0 + h - 0.5, v0 - 0.5))
-            scale = "the ideal's grey scale" if shared else f"own grey scale, DN {lo:.0f}–{hi:.0f}"
+            scale = f"own grey scale, DN {lo:.0f}–{hi:.0f}"
+            if peaks and k > 0 and peak0 > 0:
+                scale += f"; peak {100.0 * float(im.max() - np.median(im)) / peak0:.0f} % of the ideal's"
             ax.set_title(f"{label}\n{'ideal' if k == 0 else 'every effect on'} ({scale})", fontsize=9)
             ax.set_xlabel("u (px)")
             ax.set_ylabel("v (px)")
