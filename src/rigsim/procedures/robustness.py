@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,10 +25,10 @@ __all__ = [
     "BoundTrial",
     "Quantity",
     "RobustnessResult",
-    "collect_results",
     "configs_for",
     "rig_with",
     "run_configs",
+    "run_family",
     "summarise",
     "verdicts",
     "write_robustness_files",
@@ -136,18 +137,25 @@ def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None, store
     return out
 
 
-def collect_results(family: str, rig, names, seeds, raw: dict, qs, variants, wall_s: float) -> list[RobustnessResult]:
-    """One :class:`RobustnessResult` per pipeline variant from :func:`run_configs`' trials (each a
-    {variant: {quantity: value}} with ``_render_ms_per_frame``)."""
+def run_family(family: str, trial_fn, rig, names, seeds, qs, variants, *, workers: int = 1, progress=None,
+               store=None) -> list[RobustnessResult]:
+    """A family's robustness run: ``trial_fn(rig, names, config, seed)`` (module level, picklable;
+    it returns {variant: {quantity key: value}} and ``_render_ms_per_frame``) for every configuration
+    of :func:`configs_for` and every seed, through :func:`run_configs`; one
+    :class:`RobustnessResult` per pipeline variant, in the order of ``variants``."""
+    names, seeds = tuple(names), [int(s) for s in seeds]
     configs = configs_for(names)
+    t0 = time.perf_counter()
+    raw = run_configs(BoundTrial(trial_fn, rig, names), configs, seeds, workers=workers, progress=progress, store=store)
+    wall = time.perf_counter() - t0
     render = {c: float(np.mean([raw[(c, s)]["_render_ms_per_frame"] for s in seeds])) for c in configs}
     effects = {n: getattr(rig.effects, n).model_dump(exclude={"enabled"}) for n in names}
     out = []
     for v in variants:
         values = {c: {q.key: np.array([raw[(c, s)][v][q.key] for s in seeds], dtype=float) for q in qs}
                   for c in configs}
-        out.append(RobustnessResult(family, rig.name, int(seeds[0]), len(seeds), tuple(qs), configs, values, render,
-                                    effects, {"wall": wall_s}, pipeline=v))
+        out.append(RobustnessResult(family, rig.name, seeds[0], len(seeds), tuple(qs), configs, values, render,
+                                    effects, {"wall": wall}, pipeline=v))
     return out
 
 

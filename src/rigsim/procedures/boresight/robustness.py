@@ -9,17 +9,7 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import (
-    ALL,
-    IDEAL,
-    BoundTrial,
-    Quantity,
-    RobustnessResult,
-    collect_results,
-    configs_for,
-    rig_with,
-    run_configs,
-)
+from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, rig_with, run_family
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "boresight_trial", "effect_names", "frames_figure", "pipeline_variants",
            "quantities", "run_robustness"]
@@ -128,12 +118,9 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     :class:`RobustnessResult` per :func:`pipeline_variants` centroider, the configured one first (DVAD
     and the simplified formulas are quantities of each)."""
     names = tuple(effect_names(rig) if names is None else names)
-    seeds = list(range(int(seed), int(seed) + int(trials)))
-    t0 = time.perf_counter()
-    raw = run_configs(BoundTrial(boresight_trial, rig, names), configs_for(names), seeds, workers=workers, progress=progress,
-                      store=store)
-    return collect_results("boresight", rig, names, seeds, raw, quantities(rig), pipeline_variants(rig),
-                           time.perf_counter() - t0)
+    seeds = range(int(seed), int(seed) + int(trials))
+    return run_family("boresight", boresight_trial, rig, names, seeds, quantities(rig), pipeline_variants(rig),
+                      workers=workers, progress=progress, store=store)
 
 
 def frames_figure(rig, path, *, seed: int = 0, names=None):

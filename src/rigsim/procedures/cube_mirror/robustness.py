@@ -12,17 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.procedures.robustness import (
-    ALL,
-    IDEAL,
-    BoundTrial,
-    Quantity,
-    RobustnessResult,
-    collect_results,
-    configs_for,
-    rig_with,
-    run_configs,
-)
+from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, rig_with, run_family
 from rigsim.rig.effects_cube import cube_effect_names
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "angle_budget_arcsec", "campaign_trial", "effect_names", "frames_figure",
@@ -198,12 +188,10 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
     :class:`RobustnessResult` per :func:`pipeline_variants`, the configured pipeline first."""
     names = tuple(effect_names(rig) if names is None else names)
-    seeds = list(range(int(seed), int(seed) + int(trials)))
-    t0 = time.perf_counter()
-    raw = run_configs(BoundTrial(campaign_trial, rig, names), configs_for(names), seeds, workers=workers, progress=progress,
-                      store=store)
-    return collect_results("cube-mirror (" + rig.procedure.method + ")", rig, names, seeds, raw, quantities(rig), pipeline_variants(rig),
-                           time.perf_counter() - t0)
+    seeds = range(int(seed), int(seed) + int(trials))
+    family = "cube-mirror (" + rig.procedure.method + ")"
+    return run_family(family, campaign_trial, rig, names, seeds, quantities(rig), pipeline_variants(rig),
+                      workers=workers, progress=progress, store=store)
 
 
 # ------------------------------------------------------------------ the frames figure

@@ -8,17 +8,7 @@ import time
 
 import numpy as np
 
-from rigsim.procedures.robustness import (
-    ALL,
-    IDEAL,
-    BoundTrial,
-    Quantity,
-    RobustnessResult,
-    collect_results,
-    configs_for,
-    rig_with,
-    run_configs,
-)
+from rigsim.procedures.robustness import ALL, IDEAL, Quantity, RobustnessResult, rig_with, run_family
 from rigsim.rig.effects import STAR_EFFECTS
 
 __all__ = ["DEFAULT_TRIALS", "DESCRIPTION", "QUANTITIES", "effect_names", "frames_figure", "pipeline_variants",
@@ -140,12 +130,9 @@ def run_robustness(rig, *, trials: int, seed: int = 0, names=None, workers: int 
     """Every configuration of :func:`configs_for` over ``trials`` seeds (``seed`` …): one
     :class:`RobustnessResult` per pipeline variant, the configured pipeline first."""
     names = tuple(STAR_EFFECTS if names is None else names)
-    seeds = list(range(int(seed), int(seed) + int(trials)))
-    t0 = time.perf_counter()
-    raw = run_configs(BoundTrial(star_trial, rig, names), configs_for(names), seeds, workers=workers, progress=progress,
-                      store=store)
-    return collect_results("star", rig, names, seeds, raw, QUANTITIES, pipeline_variants(rig),
-                           time.perf_counter() - t0)
+    seeds = range(int(seed), int(seed) + int(trials))
+    return run_family("star", star_trial, rig, names, seeds, QUANTITIES, pipeline_variants(rig),
+                      workers=workers, progress=progress, store=store)
 
 
 def frames_figure(rig, path, *, seed: int = 0, names=None, crop: int = 256):
