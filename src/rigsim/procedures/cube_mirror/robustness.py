@@ -210,9 +210,14 @@ class _NullFrames:
             self.frames.append((kind, np.asarray(dn, dtype=float)))
 
 
-def _wide_pose(rig, real):
-    """The sweep pose whose sun direction is farthest from the sensor's axis with the spot still
-    8 px inside the detector."""
+MID_FIELD_DEG = 45.0
+"""The frames figure's second sun-sensor row: the widest sweep pose within this angle of the axis,
+where a diffracted or vignetted spot is still well above the noise."""
+
+
+def _wide_pose(rig, real, max_angle_deg: float = 90.0):
+    """The sweep pose whose sun direction is farthest from the sensor's axis, up to ``max_angle_deg``,
+    with the spot still 8 px inside the detector."""
     from rigsim.procedures.cube_mirror.sweep import sweep_poses
     from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 
@@ -228,7 +233,7 @@ def _wide_pose(rig, real):
         c, ok = scene.camera.project_valid(s[None, :])
         if ok[0] and scene.camera.on_detector(c, margin_px=8.0)[0]:
             angle = math.degrees(math.acos(min(1.0, abs(float(s[2])))))
-            if angle > best_angle:
+            if best_angle < angle <= max_angle_deg:
                 best, best_angle = pose, angle
     return best, best_angle
 
@@ -250,10 +255,10 @@ def _bright_centre(img: np.ndarray) -> tuple[float, float]:
 
 
 def frames_figure(rig, path, *, seed: int = 0, names=None):
-    """The rig's frames ideal and with every effect on, side by side: a sun-sensor frame at the
-    sweep's widest field angle, and the last null-search frame of the first face. Each panel on its
-    own grey scale (a diffracted or vignetted spot would vanish on the ideal's); the sun row states
-    the peak above background relative to the ideal's."""
+    """The rig's frames ideal and with every effect on, side by side: sun-sensor frames at the
+    sweep's widest field angle and at the widest within ``MID_FIELD_DEG``, and the last null-search
+    frame of the first face. Each panel on its own grey scale (a diffracted or vignetted spot would
+    vanish on the ideal's); the sun rows state the peak above background relative to the ideal's."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -266,19 +271,21 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
     from rigsim.truth.cube_mirror.realization import realization_from_rig
 
     names = tuple(effect_names(rig) if names is None else names)
-    rows: dict[str, list] = {"sun": [], "null": []}
-    centres: dict[str, tuple | None] = {"sun": None, "null": None}
-    pose = angle = None
+    rows: dict[str, list] = {"sun": [], "mid": [], "null": []}
+    centres: dict[str, tuple | None] = {"sun": None, "mid": None, "null": None}
+    poses: dict = {}
     for config in (IDEAL, ALL):
         r = rig_with(rig, config, names)
         real = realization_from_rig(r)
-        if pose is None:
-            pose, angle = _wide_pose(r, real)
-        fr = SunSensorScene(r, real, spp=256).render(pose, seed=int(seed), truth_points=20_000)
-        rows["sun"].append(fr.dn.astype(float))
-        spot = fr.sidecar["truth"]["spot"]
-        if centres["sun"] is None and spot.get("valid", True) and "center_uv" in spot:
-            centres["sun"] = tuple(spot["center_uv"])  # the exact spot centre: the crop's middle
+        if not poses:
+            poses = {"sun": _wide_pose(r, real), "mid": _wide_pose(r, real, MID_FIELD_DEG)}
+        scene = SunSensorScene(r, real, spp=256)
+        for key in ("sun", "mid"):
+            fr = scene.render(poses[key][0], seed=int(seed), truth_points=20_000)
+            rows[key].append(fr.dn.astype(float))
+            spot = fr.sidecar["truth"]["spot"]
+            if centres[key] is None and spot.get("valid", True) and "center_uv" in spot:
+                centres[key] = tuple(spot["center_uv"])  # the exact spot centre: the crop's middle
         keep = _NullFrames(rig.procedure.faces[0])
         try:
             run_rendered_campaign(r, real, seed=int(seed), frames=keep)
@@ -286,10 +293,11 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
             pass  # a search that does not converge still shows its frames
         rows["null"].append(keep.frames[-1][1] if keep.frames else None)
     null_kind = "aiming camera (spot frame)" if rig.procedure.method == "diaphragm" else "autocollimator"
-    fig, axs = plt.subplots(2, 2, figsize=(10, 10.4))
+    fig, axs = plt.subplots(3, 2, figsize=(10, 15.2))
     from matplotlib.colors import PowerNorm
 
-    rows_spec = (("sun", f"sun sensor, {angle:.0f}° off axis", 40, True),
+    rows_spec = (("sun", f"sun sensor, {poses['sun'][1]:.0f}° off axis (the sweep's widest)", 40, True),
+                 ("mid", f"sun sensor, {poses['mid'][1]:.0f}° off axis", 40, True),
                  ("null", f"{null_kind}, face {rig.procedure.faces[0]}, last frame of its null search", 120, False))
     for row, (key, label, half, peaks) in enumerate(rows_spec):
         imgs = rows[key]
@@ -320,7 +328,7 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
     on = ", ".join(n.replace("_", " ") for n in names)
     fig.suptitle(f"{rig.name}, seed {seed}: ideal (left) and every effect on (right); square-root grey scales, "
                  "crops centred on the ideal spot\n" + "\n".join(textwrap.wrap("effects: " + on, 110)), fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.955))
     out = save_figure(fig, path, dpi=100)
     plt.close(fig)
     return out
