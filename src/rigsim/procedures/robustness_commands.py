@@ -26,7 +26,9 @@ def add_cli(groups: dict) -> None:
         description="Run the rig's whole pipeline on rendered frames, ideal and with each effect of the rig file's "
                     "[effects] table switched on alone and all together (the same seeds for every configuration), "
                     "compare every recovered quantity with the truth and say which effects the pipeline must handle "
-                    "to keep its accuracy. Writes robustness.md, .json, .csv, .png and frames.png.")
+                    "to keep its accuracy. Writes robustness.md, .json, .csv, .png and frames.png. Each finished run "
+                    "is kept in robustness-trials/ of the report folder until the report is written: the same "
+                    "command after a kill resumes from them.")
     p.add_argument("rig", nargs="?", default="star_sensor", help="rig file (path or default name)")
     p.add_argument("--trials", type=integer(2, 10_000), default=None,
                    help="runs per configuration (default: 8 for star sensors, 4 for the slower rigs)")
