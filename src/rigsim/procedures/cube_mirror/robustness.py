@@ -215,9 +215,10 @@ MID_FIELD_DEG = 45.0
 where a diffracted or vignetted spot is still well above the noise."""
 
 
-def _wide_pose(rig, real, max_angle_deg: float = 90.0):
-    """The sweep pose whose sun direction is farthest from the sensor's axis, up to ``max_angle_deg``,
-    with the spot still 8 px inside the detector."""
+def _wide_poses(rig, real, limits_deg) -> list[tuple]:
+    """For each limit, the sweep pose whose sun direction is farthest from the sensor's axis within
+    that angle, with the spot still 8 px inside the detector: [(pose, angle in degrees)], one pass
+    over the sweep."""
     from rigsim.procedures.cube_mirror.sweep import sweep_poses
     from rigsim.render.cube_mirror.sun_sensor import SunSensorScene
 
@@ -226,16 +227,15 @@ def _wide_pose(rig, real, max_angle_deg: float = 90.0):
     poses = sweep_poses(proc.sweep_axes, proc.sweep_range_deg, proc.sweep_step_deg, fixed)
     scene = SunSensorScene(rig, real, spp=256)
     n = len(next(iter(poses.values())))
-    best, best_angle = None, -1.0
+    best = [(None, -1.0) for _ in limits_deg]
     for i in range(n):
         pose = {k: float(v[i]) for k, v in poses.items()}
         s = scene.sun_dir_cam(pose)
         c, ok = scene.camera.project_valid(s[None, :])
         if ok[0] and scene.camera.on_detector(c, margin_px=8.0)[0]:
             angle = math.degrees(math.acos(min(1.0, abs(float(s[2])))))
-            if best_angle < angle <= max_angle_deg:
-                best, best_angle = pose, angle
-    return best, best_angle
+            best = [(pose, angle) if b[1] < angle <= lim else b for b, lim in zip(best, limits_deg)]
+    return best
 
 
 def _crop(img: np.ndarray, centre, half: int) -> tuple[np.ndarray, tuple[int, int]]:
@@ -278,7 +278,7 @@ def frames_figure(rig, path, *, seed: int = 0, names=None):
         r = rig_with(rig, config, names)
         real = realization_from_rig(r)
         if not poses:
-            poses = {"sun": _wide_pose(r, real), "mid": _wide_pose(r, real, MID_FIELD_DEG)}
+            poses = dict(zip(("sun", "mid"), _wide_poses(r, real, (90.0, MID_FIELD_DEG))))
         scene = SunSensorScene(r, real, spp=256)
         for key in ("sun", "mid"):
             fr = scene.render(poses[key][0], seed=int(seed), truth_points=20_000)
