@@ -120,3 +120,16 @@ def test_run_robustness_on_the_diaphragm_rig_finds_what_the_gradient_and_room_li
     assert mean(plane, "ambient_light", "converged_count") == 1.0
     assert mean(plane, "ambient_light", "null_measurement_rms") < 0.3
     assert (out / "frames.png").stat().st_size > 0
+
+
+def test_the_frames_figure_shows_the_widest_pose_and_one_within_45_degrees(diaphragm_rig):
+    """The widest pose with the spot 8 px inside the detector is the sweep's corner X = 50°, Y = 55°:
+    for two perpendicular turns from the axis, cos θ = cos X cos Y, θ = 68.4° (the rig's small
+    misalignments aside). The second row's pose is the widest within 45°, and no wider."""
+    from rigsim.procedures.cube_mirror.robustness import MID_FIELD_DEG, _wide_poses
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
+
+    (wide, a_wide), (mid, a_mid) = _wide_poses(diaphragm_rig, realization_from_rig(diaphragm_rig),
+                                               (90.0, MID_FIELD_DEG))
+    assert a_wide == pytest.approx(math.degrees(math.acos(math.cos(math.radians(50)) * math.cos(math.radians(55)))), abs=0.1)
+    assert MID_FIELD_DEG - 1.0 < a_mid <= MID_FIELD_DEG and wide != mid
