@@ -48,7 +48,7 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
                   repair_single_pixels: bool = False, poor_fit: str = "model") -> Observations:
     """Detect and centroid every star of a frame (``find_spots`` with the detector's noise model).
 
-    ``saturation`` defaults to the ADC's top code. For the Gaussian fit σ starts at ``sigma_px``
+    ``saturation`` defaults to the ADC's top code (in the frame's DN). For the Gaussian fit σ starts at ``sigma_px``
     and is fitted (smeared spots are slightly wider than the static PSF). ``repair_single_pixels``:
     first replace the pixels no PSF could have lit alone (hot pixels, particle hits:
     :func:`rigsim.imaging.cosmetics.single_pixel_events`) by their neighbours' mean.
@@ -63,7 +63,7 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
         from rigsim.imaging.cosmetics import repair_pixels, single_pixel_events
 
         dn = repair_pixels(dn, single_pixel_events(dn, noise, sigma_px))
-    sat = float(2 ** detector.adc_bits - 1) if saturation is None else float(saturation)
+    sat = float(detector.saturation_dn) if saturation is None else float(saturation)
     kw = {}
     if method == "gauss":
         kw["fit_sigma"] = True
