@@ -97,7 +97,8 @@ def cmd_rig_import_camera(args) -> int:
     if out.exists() and out.resolve() == src.resolve():
         raise CliError(f"--out {out}: is the rig file itself; write a new file (the original stays as it was)")
     cam = read_opencv_camera(args.camera)
-    text, changes = import_camera(read_rig_text(src), src, cam, pixel_pitch_um=args.pixel_pitch_um, source=args.camera)
+    text, changes, left = import_camera(read_rig_text(src), src, cam, pixel_pitch_um=args.pixel_pitch_um,
+                                        source=args.camera)
     data = parse_rig_text(text, out)  # the new rig is checked as `rig check` would, before anything is written
     rig = parse_model(RIG_MODELS.get(str(data.get("seed_document", "")), CubeMirrorRig), data, out)
     if isinstance(rig, CubeMirrorRig):
@@ -105,7 +106,11 @@ def cmd_rig_import_camera(args) -> int:
 
         check_geometry(rig, out)
     atomic_write_text(out, text)
+    print("changed:")
     for c in changes:
+        print(f"  {c}")
+    print("left as it was:")
+    for c in left:
         print(f"  {c}")
     print(f"wrote {out}: {src.name} with the camera of {args.camera}; check it: rigsim rig check {out}")
     return 0
