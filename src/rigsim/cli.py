@@ -34,6 +34,8 @@ examples:
   rigsim star calibrate frames/*.fits --attitudes attitudes.csv --out cal                docs/user-data.md
   rigsim render target --target chessboard:10x7:20 --poses poses.csv --out board   a target through the true camera
   rigsim rig check scenes/my_rig.toml           validate a rig file (and print its geometry)
+  rigsim rig copy star_sensor my.toml           a packaged rig as the start of your own
+  rigsim rig new star-sensor --resolution 1024x768 --pixel-pitch-um 6.9 --focal-length-mm 35 --out my.toml
   rigsim doctor                                 versions, libLLVM and Mitsuba variant
 
 Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
