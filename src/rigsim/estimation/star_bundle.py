@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from rigsim.estimation.star_calibration import THETA_NAMES, FrameObs
@@ -102,7 +101,7 @@ def _project(p, params):
 
 
 def _solve(frames, sig, camera0, est_idx, prior_sigma, R0, theta_start):
-    """Weighted Gauss–Newton (scipy's trust region) over θ[est_idx] and one rotation vector per frame."""
+    """Weighted least squares (Levenberg–Marquardt) over θ[est_idx] and one rotation vector per frame."""
     base = camera0.params().astype(float)
     th0 = _theta0(camera0)
     nf = len(frames)
@@ -136,17 +135,45 @@ def _solve(frames, sig, camera0, est_idx, prior_sigma, R0, theta_start):
         J[r0:r0 + ne, :ne] = np.diag(prior_w)
         return np.where(np.isfinite(J), J, 0.0)
 
-    x0 = np.concatenate([theta_start[est_idx], np.zeros(3 * nf)])
-    sol = least_squares(fun, x0, jac=jac, method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                        max_nfev=200)
-    th, rv = unpack(sol.x)
+    x = np.concatenate([theta_start[est_idx], np.zeros(3 * nf)])
+    r = fun(x)
+    cost = float(r @ r)
+    lam, ok, message = 1e-6, False, "iteration limit"
+    for _ in range(100):  # Levenberg–Marquardt on the (small) normal equations
+        J = jac(x)
+        A, g = J.T @ J, J.T @ r
+        D = np.diag(np.maximum(np.diag(A), 1e-30))
+        while True:
+            try:
+                step = -np.linalg.solve(A + lam * D, g)
+            except np.linalg.LinAlgError:
+                step = None
+            if step is not None:
+                r_new = fun(x + step)
+                c_new = float(r_new @ r_new)
+                if c_new <= cost:
+                    break
+            lam *= 10.0
+            if lam > 1e12:
+                step = None
+                break
+        if step is None:
+            ok, message = True, "no step lowers the cost"
+            break
+        x, r, cost = x + step, r_new, c_new
+        lam = max(lam / 10.0, 1e-12)
+        scale = np.sqrt(np.maximum(np.diag(np.linalg.pinv(A)), 0.0))
+        if np.all(np.abs(step) <= 1e-6 * np.maximum(scale, 1e-30)):
+            ok, message = True, "converged"
+            break
+    th, rv = unpack(x)
     Rs = [Rotation.from_rotvec(rv[k]).as_matrix() @ R0[k] for k in range(nf)]
-    J = sol.jac
+    J = jac(x)
     try:
         cov_all = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
         cov_all = np.linalg.pinv(J.T @ J)
-    return th, Rs, cov_all, sol
+    return th, Rs, cov_all, ok, message
 
 
 def bundle_adjust(frames: list[FrameObs], camera0: PinholeBrown, R0: list, *,
@@ -182,25 +209,25 @@ def bundle_adjust(frames: list[FrameObs], camera0: PinholeBrown, R0: list, *,
         if dof <= 0:
             break
         sig_model = [f.sigma_uv for f in fr]
-        th, Rs, cov_all, sol = _solve(fr, sig_model, camera0, est_idx, ps, R_start, th_start)
+        th, Rs, cov_all, ok, msg = _solve(fr, sig_model, camera0, est_idx, ps, R_start, th_start)
         resid = [f.uv - uv for f, (uv, _, _) in zip(fr, _model(th, np.zeros((len(fr), 3)), fr, camera0.params(), Rs))]
         chi2_model = sum(float(np.sum((r / s) ** 2)) for r, s in zip(resid, sig_model)) / dof
         if sigma_floor_px == "estimate":
             floor = _floor_for_unit_chi2(resid, sig_model, dof) if chi2_model > 1.0 + 2.0 * np.sqrt(2.0 / dof) else 0.0
         sig = [np.sqrt(s ** 2 + floor ** 2) for s in sig_model]
         if floor > 0:
-            th, Rs, cov_all, sol = _solve(fr, sig, camera0, est_idx, ps, Rs, th)
+            th, Rs, cov_all, ok, msg = _solve(fr, sig, camera0, est_idx, ps, Rs, th)
             resid = [f.uv - uv for f, (uv, _, _) in zip(fr, _model(th, np.zeros((len(fr), 3)), fr, camera0.params(), Rs))]
         chi2 = sum(float(np.sum((r / s) ** 2)) for r, s in zip(resid, sig)) / dof
-        # reject the worst star beyond reject_sigma (one per frame per round), then refit
+        # leave out every star beyond reject_sigma (keeping 3 per frame), then refit
         changed = False
         for j, (r, s) in enumerate(zip(resid, sig)):
             z = np.sqrt(np.sum((r / s) ** 2, axis=1) / 2.0)
-            w = int(np.argmax(z)) if len(z) else -1
-            if w >= 0 and z[w] > reject_sigma and used[j].sum() > 3:
-                idx = np.flatnonzero(used[j])[w]
-                used[j][idx] = False
-                n_rej += 1
+            bad = np.flatnonzero(z > reject_sigma)
+            bad = bad[np.argsort(-z[bad])][:max(0, int(used[j].sum()) - 3)]
+            if bad.size:
+                used[j][np.flatnonzero(used[j])[bad]] = False
+                n_rej += int(bad.size)
                 changed = True
         R_start, th_start = Rs, th
         if not changed:
@@ -226,7 +253,7 @@ def bundle_adjust(frames: list[FrameObs], camera0: PinholeBrown, R0: list, *,
     allr = np.concatenate(resid)
     return BundleResult(th, names, cov, R_full, Rc_full, float(floor), float(chi2_model), float(chi2), int(dof),
                         int(sum(len(f) for f in fr)), n_rej, float(np.sqrt(np.mean(allr ** 2))), used_full, res_full,
-                        bool(sol.success), str(sol.message))
+                        bool(ok), str(msg))
 
 
 def _floor_for_unit_chi2(resid, sig, dof) -> float:
