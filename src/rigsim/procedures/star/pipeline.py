@@ -122,7 +122,8 @@ class StarPipeline:
         t0 = time.perf_counter()
         c = self.nominal.calibration
         found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, method=c.centroid_method,
-                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference)
+                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference,
+                              background=c.background)
         keep = found.usable
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
