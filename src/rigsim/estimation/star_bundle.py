@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 from rigsim.estimation.star_calibration import THETA_NAMES, FrameObs
 from rigsim.optics.camera import PinholeBrown
 
-__all__ = ["BundleResult", "HeldOut", "bundle_adjust", "held_out_check", "predict_frame"]
+__all__ = ["BundleResult", "HeldOut", "bundle_adjust", "field_of_view_deg", "held_out_check", "predict_frame"]
 
 # θ = (f, u0, v0, k1, k2) → the camera's 9 parameters (fx, fy, cx, cy, k1, k2, p1, p2, k3)
 _T9 = np.zeros((9, 5))
@@ -67,6 +67,16 @@ class BundleResult:
     def camera(self, nominal: PinholeBrown) -> PinholeBrown:
         f, u0, v0, k1, k2 = self.theta
         return nominal.with_params(fx=f, fy=f, cx=u0, cy=v0, k1=k1, k2=k2)
+
+
+def field_of_view_deg(camera: PinholeBrown) -> tuple[float, float]:
+    """(horizontal, vertical) field of view in degrees: the angle between the rays through the middles
+    of the detector's outer edges, on the row and the column of the principal point (pixel edges at
+    −0.5 and W − 0.5). Distortion included: the angle the sky subtends across the detector."""
+    W, H = camera.width, camera.height
+    d = camera.unproject(np.array([[-0.5, camera.cy], [W - 0.5, camera.cy], [camera.cx, -0.5], [camera.cx, H - 0.5]]))
+    return (float(np.degrees(np.arccos(np.clip(d[0] @ d[1], -1, 1)))),
+            float(np.degrees(np.arccos(np.clip(d[2] @ d[3], -1, 1)))))
 
 
 def _theta0(camera: PinholeBrown) -> np.ndarray:
@@ -160,10 +170,10 @@ def _solve(frames, sig, camera0, est_idx, prior_sigma, R0, theta_start):
         if step is None:
             ok, message = True, "no step lowers the cost"
             break
+        gained = cost - c_new
         x, r, cost = x + step, r_new, c_new
         lam = max(lam / 10.0, 1e-12)
-        scale = np.sqrt(np.maximum(np.diag(np.linalg.pinv(A)), 0.0))
-        if np.all(np.abs(step) <= 1e-6 * np.maximum(scale, 1e-30)):
+        if gained <= 1e-10 * max(cost, 1.0):  # χ² no longer moves (Gauss–Newton converges quadratically)
             ok, message = True, "converged"
             break
     th, rv = unpack(x)
@@ -309,16 +319,19 @@ def predict_frame(fo: FrameObs, cal: BundleResult, camera0: PinholeBrown, R0):
     return r, np.sqrt(var)
 
 
-def held_out_check(frames: list[FrameObs], camera0: PinholeBrown, R0: list, **kw) -> list[HeldOut]:
-    """Leave each frame out in turn: calibrate on the others (:func:`bundle_adjust` with ``kw``) and
-    predict the left-out frame's stars (:func:`predict_frame`)."""
+def held_out_check(frames: list[FrameObs], camera0: PinholeBrown, R0: list, *, max_folds: int = 8, **kw) -> list[HeldOut]:
+    """Leave frames out in turn (each frame alone when there are at most ``max_folds``, else
+    ``max_folds`` groups of consecutive frames): calibrate on the others (:func:`bundle_adjust` with
+    ``kw``) and predict each left-out frame's stars (:func:`predict_frame`)."""
     out = []
     ok = [k for k, fo in enumerate(frames) if len(fo) >= 3]
-    for k in ok:
-        rest = [j for j in ok if j != k]
-        if not rest:
-            break
+    if len(ok) < 2:
+        return out
+    for group in np.array_split(np.array(ok), min(len(ok), max_folds)):
+        rest = [j for j in ok if j not in set(group.tolist())]
         cal = bundle_adjust([frames[j] for j in rest], camera0, [R0[j] for j in rest], **kw)
-        r, s = predict_frame(frames[k], cal, camera0, R0[k])
-        out.append(HeldOut(k, len(frames[k]), float(np.sqrt(np.mean(r ** 2))), float(np.sqrt(np.mean((r / s) ** 2)))))
+        for k in group:
+            r, s = predict_frame(frames[k], cal, camera0, R0[k])
+            out.append(HeldOut(int(k), len(frames[k]), float(np.sqrt(np.mean(r ** 2))),
+                               float(np.sqrt(np.mean((r / s) ** 2)))))
     return out

@@ -206,6 +206,9 @@ class Calibration(_Model):
     ads_variant: Literal["exact", "improved"] = "exact"
     process_noise_px: float = Field(0.0, ge=0.0, le=100.0, description="EKF process noise per frame (1σ)")
     centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
+    distortion_terms: Literal["auto", "none", "k1", "k1,k2"] = Field(
+        "auto", description="distortion fitted with the intrinsics and attitudes together (the joint fit): 'auto' "
+                            "= k1, and k2 when the data support it (χ² lower by more than 9)")
     background: Literal["model", "map"] = Field(
         "model", description="the sky background the stars are found against: 'model' = one level, the detector "
                              "model's offset and noise; 'map' = a level and noise map measured on each frame (sky "
