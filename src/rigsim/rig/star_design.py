@@ -239,8 +239,8 @@ HEADER = """\
 """
 
 FOOTER = """
-# [effects.*] (hot pixels, cosmic rays, stray light, a traced lens's PSF) are all off here; the packaged
-# rig has every one with its source: rigsim rig copy star_sensor star_sensor.toml
+# [effects.*] (what a real sensor shows beyond the ideal frame: hot pixels, cosmic rays, stray light, ...)
+# are all off here; the packaged rig lists every one with its source: rigsim rig copy star_sensor s.toml
 """
 
 
