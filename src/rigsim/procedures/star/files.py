@@ -271,11 +271,16 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
             rec["R_cam_from_icrs"] = rotation_block(R, cov, true_k)
             rec["R_cam_from_icrs_nominal"] = rotation_block(ident.R_cam_from_icrs, attitude_covariance_rad2(
                 fo.dirs_icrs @ ident.R_cam_from_icrs.T, fo.sigma_uv.mean(axis=1) / out.nominal.sensor.theta[0]), true_k)
+            if out.joint is not None and np.all(np.isfinite(out.joint.bundle.R[k])):
+                jb = out.joint.bundle
+                rec["R_cam_from_icrs_joint"] = rotation_block(jb.R[k], jb.R_cov[k], true_k)
         else:
             rec["identified"] = False
         att.append(rec)
     res["attitudes"] = att
-    res["attitude_note"] = ("R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
+    res["attitude_note"] = ("R_cam_from_icrs_joint: each frame's R(cam←ICRS) from the joint fit (intrinsics and attitudes "
+                            "together), its covariance the joint fit's marginal; "
+                            "R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
                             "(weighted Wahba), covariance = centroid noise + the batch θ covariance propagated; "
                             "R_cam_from_icrs_nominal: the identification's with the nominal camera, covariance from the "
                             "centroid noise only (it is biased by the nominal intrinsics' error). Covariances in arcsec² "
