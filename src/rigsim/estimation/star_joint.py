@@ -82,8 +82,9 @@ def joint_calibration(usable: list, ident: list, sky: SkyCatalogue, camera0: Pin
             dk2 = fit.chi2_reduced * fit.dof - fit2.chi2_reduced * fit2.dof
             if fit2.success and dk2 > K2_DELTA_CHI2:
                 fit = _fit(frames, camera0, R0, est + ("k2",), prior_sigma)
-        if fit.success:
+        if fit.success:  # the next round predicts with this round's camera and attitudes
             cam = fit.camera(camera0)
+            cur = [replace(i, R_cam_from_icrs=R) if i.ok and np.all(np.isfinite(R)) else i for i, R in zip(cur, fit.R)]
     estimated = fit.names
     ho = held_out_check(frames, camera0, R0, estimate=estimated, prior_sigma=prior_sigma) if held_out else []
     return JointCalibration(fit, cur, frames, ho, estimated, dk2)

@@ -68,6 +68,9 @@ def add_cli(groups: dict) -> None:
                    help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
                         "frame and time_s). Default: commanded with --attitudes, else lost-in-space")
     c.set_defaults(func=cmd_star_calibrate)
+    from rigsim.procedures.star import twin_commands
+
+    twin_commands.add_cli(sts)
     p.set_defaults(func=cmd_run_star_calibration)
     from rigsim.procedures.star import render_commands
 
