@@ -69,7 +69,7 @@ def test_the_description_gives_back_the_rendered_camera(night):
     assert abs(desc.psf_sigma_px - 0.7) < 0.035
     # log10 of an Hp = 0 star's DN on the axis, from the rig's radiometry
     zp = math.log10(d.gain_dn_per_e * d.quantum_efficiency * float(sky.photons(0.0)))
-    assert abs(desc.zero_point_log10_dn - zp) < 0.05
+    assert abs(desc.zero_point_log10_dn - zp) < 0.02, (desc.zero_point_log10_dn, zp)
 
 
 def test_the_twin_of_rendered_frames_agrees_with_them(night):
