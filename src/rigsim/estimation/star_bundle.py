@@ -212,11 +212,17 @@ def bundle_adjust(frames: list[FrameObs], camera0: PinholeBrown, R0: list, *,
     R_start = [np.asarray(R0[k], float) for k in keep_frames]
     floor = 0.0 if sigma_floor_px == "estimate" else float(sigma_floor_px)
     n_rej = 0
+    n0 = sum(2 * len(frames[k]) for k in keep_frames) - 3 * len(keep_frames) - len(names)
+    if n0 <= 0:
+        return BundleResult(th_start, names, np.full((len(names), len(names)), np.nan), [nan_R] * len(frames),
+                            [nan_R] * len(frames), float("nan"), float("nan"), float("nan"), int(n0), 0, 0, float("nan"),
+                            success=False, message=f"{n0} degrees of freedom: too few stars for "
+                                                   f"{len(names)} intrinsics and {len(keep_frames)} attitudes")
     for _ in range(max_rounds):
         fr = [FrameObs(frames[k].uv[m], frames[k].sigma_uv[m], frames[k].dirs_icrs[m]) for k, m in zip(keep_frames, used)]
         n_obs = sum(2 * len(f) for f in fr)
         dof = n_obs - 3 * len(fr) - len(names)
-        if dof <= 0:
+        if dof <= 0:  # (rejections never take a frame below 3 stars, so only after a first solve)
             break
         sig_model = [f.sigma_uv for f in fr]
         th, Rs, cov_all, ok, msg = _solve(fr, sig_model, camera0, est_idx, ps, R_start, th_start)
@@ -330,6 +336,8 @@ def held_out_check(frames: list[FrameObs], camera0: PinholeBrown, R0: list, *, m
     for group in np.array_split(np.array(ok), min(len(ok), max_folds)):
         rest = [j for j in ok if j not in set(group.tolist())]
         cal = bundle_adjust([frames[j] for j in rest], camera0, [R0[j] for j in rest], **kw)
+        if not (cal.success and np.all(np.isfinite(cal.cov))):
+            continue  # nothing to predict with (too few stars in the rest)
         for k in group:
             r, s = predict_frame(frames[k], cal, camera0, R0[k])
             out.append(HeldOut(int(k), len(frames[k]), float(np.sqrt(np.mean(r ** 2))),

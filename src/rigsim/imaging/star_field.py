@@ -77,8 +77,8 @@ def sky_map(img, *, mesh_px: int = DEFAULT_MESH_PX, filter_meshes: int = 3, satu
     mesh = int(mesh_px)
     if not 8 <= mesh <= max(8, min(h, w)):
         raise ValueError(f"mesh_px = {mesh_px}: allowed 8 to the frame's shorter side ({min(h, w)} px)")
-    bad = ~np.isfinite(a)
-    if saturation is not None:
+    bad = np.zeros(a.shape, bool) if np.issubdtype(np.asarray(img).dtype, np.integer) else ~np.isfinite(a)
+    if saturation is not None and float(np.nanmax(a)) >= float(saturation):
         bad |= a >= float(saturation)
     if mask is not None:
         bad |= np.asarray(mask, bool)
@@ -86,7 +86,18 @@ def sky_map(img, *, mesh_px: int = DEFAULT_MESH_PX, filter_meshes: int = 3, satu
     if any_bad:
         a = np.where(bad, 0.0, a).astype(np.float32)
     fm = max(1, int(filter_meshes)) | 1  # odd
-    level = sep.Background(a, mask=bad if any_bad else None, bw=mesh, bh=mesh, fw=fm, fh=fm).back()
+    if h >= 4 * mesh and w >= 4 * mesh:
+        # the level on 2 × 2 bins (a quarter of the pixels; the level varies over meshes, not pixels)
+        h2, w2 = h // 2 * 2, w // 2 * 2
+        b = (a[0:h2:2, 0:w2:2] + a[1:h2:2, 0:w2:2] + a[0:h2:2, 1:w2:2] + a[1:h2:2, 1:w2:2]) * np.float32(0.25)
+        bbad = (bad[0:h2:2, 0:w2:2] | bad[1:h2:2, 0:w2:2] | bad[0:h2:2, 1:w2:2] | bad[1:h2:2, 1:w2:2]) if any_bad else None
+        half = sep.Background(np.ascontiguousarray(b), mask=bbad, bw=mesh // 2, bh=mesh // 2, fw=fm, fh=fm).back()
+        # bin centres sit at 2j + 0.5: resize maps them onto the full-resolution pixel grid
+        level = cv2.resize(half, (w2, h2), interpolation=cv2.INTER_LINEAR)
+        if (h2, w2) != (h, w):
+            level = np.pad(level, ((0, h - h2), (0, w - w2)), mode="edge")
+    else:
+        level = sep.Background(a, mask=bad if any_bad else None, bw=mesh, bh=mesh, fw=fm, fh=fm).back()
     d = np.ascontiguousarray((a[::2, 1:] - a[::2, :-1]) * np.float32(1.0 / math.sqrt(2.0)))
     dbad = (bad[::2, 1:] | bad[::2, :-1]) if any_bad else None
     rms_half = sep.Background(d, mask=dbad, bw=mesh, bh=max(4, mesh // 2), fw=fm, fh=fm).rms()
@@ -238,8 +249,8 @@ def extract_star_field(img, *, psf_sigma_px: float = 1.0, threshold_sigma: float
     ``psf_sigma_px``: the PSF's σ, for the matched filter and as the fits' start. ``fit_psf``:
     ``"frame"`` (default) fits σ on the frame's bright clean stars (significance ≥ 20) and then every
     star with their median σ (a faint star's own σ is poorly measured and its noise leaks into the
-    position); ``"star"`` fits each star's σ; ``"fixed"`` uses ``psf_sigma_px``. ``saturation``: raw DN of a saturated pixel (default: the dtype's top for integer
-    frames). ``gain_dn_per_e``: K for the stars' own shot noise (default 1 DN/e-; the sky's noise
+    position); ``"star"`` fits each star's σ; ``"fixed"`` uses ``psf_sigma_px``. ``saturation``:
+    raw DN of a saturated pixel (default: the dtype's top for integer frames). ``gain_dn_per_e``: K for the stars' own shot noise (default 1 DN/e-; the sky's noise
     comes from the map). ``sky``: a map made beforehand (default :func:`sky_map`). ``max_stars``:
     keep the most significant N. Stars are returned brightest (largest flux) first."""
     raw = np.asarray(img)
@@ -254,26 +265,25 @@ def extract_star_field(img, *, psf_sigma_px: float = 1.0, threshold_sigma: float
         raise ValueError(f"psf_sigma_px = {psf_sigma_px}: allowed 0.2 to 20 px")
     a = raw.astype(np.float32, copy=False)
     h, w = a.shape
-    finite = np.isfinite(a)
-    sat = (a >= saturation) if saturation is not None else np.zeros(a.shape, bool)
+    all_finite = np.issubdtype(raw.dtype, np.integer) or bool(np.isfinite(a).all())
+    any_sat = saturation is not None and float(np.nanmax(a)) >= saturation
+    sat = (a >= saturation) if any_sat else None
     sky = sky if sky is not None else sky_map(a, mesh_px=mesh_px, saturation=saturation, mask=mask)
-    resid = a - sky.level.astype(np.float32, copy=False)
-    if not finite.all():
-        resid[~finite] = 0.0
+    resid = a - sky.level.astype(np.float32, copy=False)  # NaN stays NaN: the fits leave such pixels out
+    finite_resid = resid if all_finite else np.nan_to_num(resid, nan=0.0, posinf=0.0, neginf=0.0)
     k1 = _gauss_kernel_1d(max(s_psf, 0.5))
     box = max(7, 2 * int(math.ceil(5.0 * s_psf)) + 1)
     # the PSF less its local mean (a zero-sum kernel, as DAOFIND's): a level or a linear gradient left
     # by the sky map does not reach the significance, at a few % of the matched filter's SNR
-    filt = cv2.sepFilter2D(resid, cv2.CV_32F, k1, k1, borderType=cv2.BORDER_REFLECT)
-    filt -= cv2.blur(resid, (box, box), borderType=cv2.BORDER_REFLECT)
+    filt = cv2.sepFilter2D(finite_resid, cv2.CV_32F, k1, k1, borderType=cv2.BORDER_REFLECT)
+    filt -= cv2.blur(finite_resid, (box, box), borderType=cv2.BORDER_REFLECT)
     kern = np.zeros((box, box))
     r1 = k1.size // 2
     kern[box // 2 - r1:box // 2 + r1 + 1, box // 2 - r1:box // 2 + r1 + 1] = np.outer(k1, k1)
     kern -= 1.0 / box**2
-    noise = sky.rms.astype(np.float32, copy=False) * np.float32(math.sqrt(float(np.sum(kern**2))))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sig = filt / noise
-    sig[~(noise > 0)] = 0.0
+    inv_noise = np.float32(1.0 / math.sqrt(float(np.sum(kern**2)))) / np.maximum(sky.rms.astype(np.float32, copy=False),
+                                                                                 np.float32(1e-30))
+    sig = filt * inv_noise
     pv, pu = _local_maxima(sig, threshold_sigma)
     order = np.argsort(-sig[pv, pu], kind="stable")
     pv, pu = pv[order], pu[order]
@@ -290,7 +300,7 @@ def extract_star_field(img, *, psf_sigma_px: float = 1.0, threshold_sigma: float
             if not (keep[i] and keep[j]):
                 continue
             hi, lo = (i, j) if i < j else (j, i)
-            if sat[pv[hi], pu[hi]] and sat[pv[lo], pu[lo]]:
+            if sat is not None and sat[pv[hi], pu[hi]] and sat[pv[lo], pu[lo]]:
                 keep[lo] = False  # one saturated plateau
             elif _dip_separates(sig, (pv[hi], pu[hi]), (pv[lo], pu[lo]), dip_sigma):
                 blended[hi] = blended[lo] = True
@@ -306,12 +316,11 @@ def extract_star_field(img, *, psf_sigma_px: float = 1.0, threshold_sigma: float
         return StarField(z, z, z, z, z, z, z, z, z, z, np.zeros(0, np.int64), sky, float(threshold_sigma))
     # each star is fitted on the frame less the sky map (a gradient under the star would pull a fit with
     # a constant background), a constant left free; saturated pixels are left out of the fit
-    level = sky.level.astype(np.float32, copy=False)
-    rois = extract_rois(a - level, pu.astype(float), pv.astype(float), size)
+    rois = extract_rois(resid, pu.astype(float), pv.astype(float), size)
     fl = rois.flags.copy()
     fl[blended] |= int(Flag.BLENDED)
     sat_roi = None
-    if sat.any():
+    if sat is not None:
         sat_roi = extract_rois(sat.astype(np.float32), pu.astype(float), pv.astype(float), size, fill=0.0).stack > 0.5
         fl[sat_roi.any(axis=(1, 2))] |= int(Flag.SATURATED)
     kw = dict(background=np.zeros(n), background_sd=sky.rms[pv, pu].astype(float), gain=gain_dn_per_e,
@@ -331,11 +340,11 @@ def extract_star_field(img, *, psf_sigma_px: float = 1.0, threshold_sigma: float
     psf_each = res.extra["sigma_px"] if fit_psf == "star" else np.full(n, psf)
     flags = np.asarray(res.flags, np.int64)
     only_outside = (rois.flags & int(Flag.EDGE)) != 0
-    if only_outside.any() and bool(finite.all()):
+    if only_outside.any() and all_finite:
         flags[only_outside] &= ~int(Flag.NAN)
     valid = ((flags & int(Flag.INVALID)) == 0) & np.isfinite(res.flux)
     o = np.argsort(-np.where(valid, res.flux, -np.inf), kind="stable")
-    background = res.background + level[pv, pu]
+    background = res.background + sky.level[pv, pu]
     return StarField(res.u[o], res.v[o], res.sigma_u[o], res.sigma_v[o], res.flux[o], res.extra["sigma_flux"][o],
                      psf_each[o], significance[o], background[o], res.extra["chi2_red"][o], flags[o],
                      sky, float(threshold_sigma))

@@ -94,15 +94,25 @@ def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, att
     return [StarObservation(k, t, dn, R) for k, (t, _, dn, R) in enumerate(rows)], [r[1] for r in rows]
 
 
-def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, identification: str = "commanded"
-                         ) -> tuple[PipelineOutput, list[str]]:
+def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, identification: str = "commanded",
+                         site=None, utc=None) -> tuple[PipelineOutput, list[str]]:
     """The whole pipeline on files: (its output, the frame names in time order). ``identification``:
     ``"commanded"`` (the log's attitude is the prior) or ``"lost-in-space"`` (no prior; the log
-    needs only frame and time_s, and may be None: the frames alone). Raises InputError when no frame
-    can be identified (each frame's reason in the message)."""
+    needs only frame and time_s, and may be None: the frames alone). ``site``
+    (:class:`rigsim.optics.refraction.Site`) and ``utc`` (the first frame's time; the others follow by
+    their time_s): the stars are refracted by the air before the joint fit. Raises InputError when no
+    frame can be identified (each frame's reason in the message)."""
     obs, names = star_observations(paths, log_path, nominal, attitude=identification == "commanded")
     sky = SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year)
-    pipe = StarPipeline(nominal, sky, identification=identification)
+    refraction = None
+    if site is not None:
+        import astropy.units as u
+        from astropy.time import Time
+
+        t0 = Time(utc, scale="utc")
+        times = [t0 + (o.time_s - obs[0].time_s) * u.s for o in obs]
+        refraction = (site, lambda k: times[k])
+    pipe = StarPipeline(nominal, sky, identification=identification, refraction=refraction)
     if nominal.calibration.fixed_pattern == "sequence" and identification == "commanded":
         pipe.set_sequence_pattern(obs)
     elif nominal.calibration.fixed_pattern == "sequence":
@@ -271,11 +281,16 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
             rec["R_cam_from_icrs"] = rotation_block(R, cov, true_k)
             rec["R_cam_from_icrs_nominal"] = rotation_block(ident.R_cam_from_icrs, attitude_covariance_rad2(
                 fo.dirs_icrs @ ident.R_cam_from_icrs.T, fo.sigma_uv.mean(axis=1) / out.nominal.sensor.theta[0]), true_k)
+            if out.joint is not None and np.all(np.isfinite(out.joint.bundle.R[k])):
+                jb = out.joint.bundle
+                rec["R_cam_from_icrs_joint"] = rotation_block(jb.R[k], jb.R_cov[k], true_k)
         else:
             rec["identified"] = False
         att.append(rec)
     res["attitudes"] = att
-    res["attitude_note"] = ("R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
+    res["attitude_note"] = ("R_cam_from_icrs_joint: each frame's R(cam←ICRS) from the joint fit (intrinsics and attitudes "
+                            "together), its covariance the joint fit's marginal; "
+                            "R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
                             "(weighted Wahba), covariance = centroid noise + the batch θ covariance propagated; "
                             "R_cam_from_icrs_nominal: the identification's with the nominal camera, covariance from the "
                             "centroid noise only (it is biased by the nominal intrinsics' error). Covariances in arcsec² "
