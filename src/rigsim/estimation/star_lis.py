@@ -84,8 +84,8 @@ def _scaled(camera, f: float):
 
 def settings_for(camera, focal_length_tolerance: float) -> PatternSettings:
     """The pattern-database settings of a camera: its inscribed circle about the principal point at
-    the longest focal length allowed."""
-    cam_hi = _scaled(camera, camera.fx * (1.0 + focal_length_tolerance))
+    the longest focal length allowed, f / (1 − tolerance)."""
+    cam_hi = _scaled(camera, camera.fx / (1.0 - focal_length_tolerance))
     W, H, cx, cy = camera.width, camera.height, camera.cx, camera.cy
     edges = np.array([[-0.5, cy], [W - 0.5, cy], [cx, -0.5], [cx, H - 0.5]])
     d = cam_hi.unproject(edges)
@@ -138,7 +138,14 @@ class _Frame:
         self.verify = np.arange(min(int(verify_stars), uv.shape[0]))  # the brightest stars verify
         self.area = float(camera.width * camera.height)
         half_diag = math.hypot(camera.width, camera.height) / 2.0
-        self.cone = math.atan(half_diag / (self.f0 * (1.0 - tol))) + math.radians(0.5)
+        # the true f may be f0 / (1 ± tol) (the nominal off by ± tol); a little slack for the pattern's estimate
+        self.f_lo, self.f_hi = self.f0 / (1.0 + tol), self.f0 / (1.0 - tol)
+        self.cone = math.atan(half_diag / self.f_lo) + math.radians(0.5)
+
+    def f_ok(self, f) -> np.ndarray:
+        """True where a focal length lies in the allowed range (0.5 % slack)."""
+        f = np.asarray(f, float)
+        return np.isfinite(f) & (f >= 0.995 * self.f_lo) & (f <= 1.005 * self.f_hi)
 
     def predict(self, R: np.ndarray, f: float):
         """Catalogue stars whose images fall on the detector for attitude R and focal length f:
@@ -185,11 +192,13 @@ class _Frame:
         pred = _scaled(self.camera, f).project(r @ R.T)
         return R, f, np.linalg.norm(uv - pred, axis=1)
 
-    def match(self, R, f, obs_idx: np.ndarray, radius: float, *, unambiguous: bool = False, max_cat: int | None = None):
+    def match(self, R, f, obs_idx: np.ndarray, radius: float, *, ambiguity: float | None = None,
+              max_cat: int | None = None):
         """Mutual nearest neighbours between the observed stars ``obs_idx`` and the predicted catalogue
-        stars, within ``radius`` px; ``unambiguous`` also drops a pair when another predicted star
-        lies within 2 × radius of the observed one or another observed star within 2 × radius of the
-        predicted one; ``max_cat``: only the brightest predicted stars. Returns (obs, cat, predicted count)."""
+        stars, within ``radius`` px. With ``ambiguity`` (px) a pair is also dropped when another
+        predicted star lies within ``ambiguity`` of the observed one, or another observed star within
+        ``ambiguity`` of the predicted one (unresolved doubles, blends). ``max_cat``: only the
+        brightest predicted stars. Returns (obs, cat, predicted count)."""
         cat, pred = self.predict(R, f)
         if max_cat is not None:
             cat, pred = cat[:max_cat], pred[:max_cat]
@@ -203,11 +212,11 @@ class _Frame:
         back_d, back = cKDTree(uvo).query(pred[j[:, 0]], k=min(2, len(uvo)))
         back_d, back = back_d.reshape(len(uvo), -1), back.reshape(len(uvo), -1)
         ok = (d[:, 0] <= radius) & (back[:, 0] == np.arange(len(uvo)))
-        if unambiguous:
+        if ambiguity is not None:
             if k > 1:
-                ok &= d[:, 1] > 2.0 * radius
+                ok &= d[:, 1] > ambiguity
             if back_d.shape[1] > 1:
-                ok &= back_d[:, 1] > 2.0 * radius
+                ok &= back_d[:, 1] > ambiguity
         return obs_idx[ok], cat[j[ok, 0]], int(cat.size)
 
     def false_probability(self, n_matched: int, n_observed: int, n_predicted: int, radius: float) -> float:
@@ -247,7 +256,7 @@ def identify_lost_in_space(obs_uv, sky: SkyCatalogue, camera, *,
 
     ``obs_uv``: centroids (N, 2) px, brightest first; ``sky``: the catalogue at the observation epoch;
     ``camera``: the *nominal* camera, whose focal length may be off by ``focal_length_tolerance``
-    (relative). ``match_tolerance_px``: largest residual of an identified star; ``min_matches``: fewest
+    (relative: the true f lies in f / (1 ± tolerance)). ``match_tolerance_px``: largest residual of an identified star; ``min_matches``: fewest
     stars identified; ``false_match_probability``: the largest accepted chance that the identification
     is a coincidence; ``pattern_tolerance_px``: centroid error allowed in a pattern's edges (noise,
     distortion left after the nominal model); ``pattern_stars``: brightest stars that form patterns;
@@ -282,16 +291,22 @@ def identify_lost_in_space(obs_uv, sky: SkyCatalogue, camera, *,
     if isinstance(found, str):
         return _empty(np.eye(3), found)
     R, f, prob, n_verified = found
-    # 4. identify every observed star, refit on all matches
+    # 4. identify every observed star, refit on all matches; then keep the matches within 4.5 σ of the
+    # residual scatter (σ from the median residual), at most the match tolerance: a detection that is
+    # not a star (noise, a hot pixel) rarely falls that close to an undetected catalogue star
     every = np.arange(uv.shape[0])
-    for _ in range(2):
-        mo, mc, _n = fr.match(R, f, every, fr.match_tol, unambiguous=True)
+    amb = 2.0 * fr.match_tol
+    radius = fr.match_tol
+    for _ in range(3):
+        mo, mc, _n = fr.match(R, f, every, radius, ambiguity=amb)
         if mo.size < 3:
             break
         R, f, res = fr.fit(R, f, mo, mc)
-    mo, mc, _n = fr.match(R, f, every, fr.match_tol, unambiguous=True)
+        sigma = float(np.median(res)) / 1.1774  # per axis: the median of a Rayleigh distribution is 1.1774 σ
+        radius = min(fr.match_tol, max(4.5 * sigma, 0.5))
+    mo, mc, _n = fr.match(R, f, every, radius, ambiguity=amb)
     if mo.size < max(int(min_matches), 3):
-        return _empty(R, f"{mo.size} stars matched within {fr.match_tol:g} px (need {min_matches})", n_verified)
+        return _empty(R, f"{mo.size} stars matched within {radius:.2g} px (need {min_matches})", n_verified)
     R, f, res = fr.fit(R, f, mo, mc)
     o = np.argsort(mo, kind="stable")
     mo, mc, res = mo[o], mc[o], res[o]
@@ -304,7 +319,7 @@ def _search(fr: _Frame, settings: PatternSettings, pattern_tol_px: float, n_patt
             min_matches: int):
     """Steps 1–3: (R, f, false-match probability, stars verified) of the first verified hypothesis, or
     the reason none was found."""
-    cam, tol, f0 = fr.camera, fr.tol, fr.f0
+    cam, f0 = fr.camera, fr.f0
     xy0 = cam.pixel_to_normalized(fr.uv)                    # at the nominal f
     ok = np.all(np.isfinite(xy0), axis=1)
     b0 = _normalized_dirs(xy0[ok], 1.0)
@@ -315,8 +330,8 @@ def _search(fr: _Frame, settings: PatternSettings, pattern_tol_px: float, n_patt
     P = cand.size
     xy = xy0[cand]
     B0 = _normalized_dirs(xy, 1.0)
-    Blo = _normalized_dirs(xy, 1.0 / (1.0 - tol))        # longest field: shortest f
-    Bhi = _normalized_dirs(xy, 1.0 / (1.0 + tol))
+    Blo = _normalized_dirs(xy, f0 / fr.f_lo)             # the widest field: the shortest f
+    Bhi = _normalized_dirs(xy, f0 / fr.f_hi)
     eps = pattern_tol_px / f0                            # edge error allowed (rad)
     combos = _combos(P)
     ends = np.searchsorted(combos[:, 3], [6, 8, 10, 12, 15, 18, 21, 25, 30, 40, 1000], side="left")
@@ -347,7 +362,7 @@ def _search(fr: _Frame, settings: PatternSettings, pattern_tol_px: float, n_patt
         cost = np.sum((ei[:, None, :] * scale[:, None, None] - ec[:, _PERM_EDGES]) ** 2, axis=2)
         best = np.argmin(cost, axis=1)
         f = f0 / scale
-        keep = np.abs(f / f0 - 1.0) <= tol + 0.01
+        keep = fr.f_ok(f)
         if not keep.any():
             continue
         q, pat, best, f, scale = q[keep], pat[keep], best[keep], f[keep], scale[keep]
@@ -381,7 +396,7 @@ def _verify(fr: _Frame, R, f, pattern_obs, p_max: float, min_matches: int):
         if mo.size < 4:
             return None
         R, f, _res = fr.fit(R, f, mo, mc)
-        if not (math.isfinite(f) and abs(f / fr.f0 - 1.0) <= fr.tol + 0.01):
+        if not fr.f_ok(f):
             return None
         radius = fr.match_tol
     mo, mc, n_pred = fr.match(R, f, obs, radius, max_cat=deep)
