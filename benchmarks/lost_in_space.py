@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -33,11 +32,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "estimation"))
 from _compare import REPO, old_src  # noqa: E402
+from real_frames import FRAMES, H, W, cedar_f_px, cedar_solutions, compare_with_cedar, sep_centroids  # noqa: E402
 
 BASE = "441788c"  # the last commit with the geometric-voting identifier
-FRAMES = REPO / "docs" / "examples" / "real-star-frames"
-W, H = 1024, 768
 
 _CHILD = r"""
 import json, math, sys, time
@@ -78,18 +77,6 @@ print("@@RESULT@@" + json.dumps(out))
 """
 
 
-def sep_centroids(path: Path) -> np.ndarray:
-    import sep
-
-    from rigsim.files import read_image
-
-    img = np.ascontiguousarray(read_image(path), dtype=np.float64) / 16.0
-    bkg = sep.Background(img)
-    objs = sep.extract(img - bkg.back(), 5, err=bkg.rms(), minarea=3)
-    o = np.argsort(-objs["flux"], kind="stable")
-    return np.stack([objs["x"][o], objs["y"][o]], axis=1)
-
-
 def run_side(src: Path, new: bool, cents: str, names: list, cases: dict, repeat: int, env: dict) -> dict:
     code = _CHILD.format(new=new, cents=cents, names=json.dumps(names), cases=json.dumps(cases), repeat=int(repeat),
                          f0=cases["exact"], cx=(W - 1) / 2.0, cy=(H - 1) / 2.0, W=W, H=H)
@@ -102,28 +89,10 @@ def run_side(src: Path, new: bool, cents: str, names: list, cases: dict, repeat:
 
 
 def against_cedar(res: dict, uv: np.ndarray, sol: dict) -> dict:
-    from scipy.spatial import cKDTree
-
-    from rigsim.optics.camera import PinholeBrown
-    from rigsim.optics.sky import radec_to_unit
-
     if not res["ok"]:
         return {}
-    obs = np.asarray(res["obs"], int)
-    hip = np.asarray(res["hip"], int)
-    cuv = np.array(sol["matched_centroids"], float)[:, ::-1] - 0.5  # cedar: (y, x), (0.5, 0.5) = first pixel's centre
-    d, j = cKDTree(cuv).query(uv[obs])
-    same = d < 1.0
-    wrong = int(np.sum(np.array(sol["matched_catID"])[j[same]] != hip[same]))
-    f_ced = (W / 2.0) / math.tan(math.radians(sol["FOV"]) / 2.0)
-    f = res["f"] if math.isfinite(res["f"]) else f_ced
-    R = np.array(res["R"])
-    centre = R.T @ PinholeBrown(f, f, (W - 1) / 2.0, (H - 1) / 2.0, width=W, height=H).unproject(
-        np.array([(W - 1) / 2.0, (H - 1) / 2.0]))
-    ref = radec_to_unit(math.radians(sol["RA"]), math.radians(sol["Dec"]))
-    return {"common": int(same.sum()), "cedar": len(cuv), "wrong": wrong,
-            "boresight": math.degrees(math.acos(min(1.0, float(centre @ ref)))) * 60.0,
-            "f_ppm": (res["f"] / f_ced - 1.0) * 1e6 if math.isfinite(res["f"]) else float("nan")}
+    c = compare_with_cedar(sol, uv, res["obs"], res["hip"], np.array(res["R"]), res["f"])
+    return dict(c, boresight=c["boresight_arcmin"], f_ppm=c["f_rel"] * 1e6)
 
 
 def main(argv=None) -> int:
@@ -134,14 +103,12 @@ def main(argv=None) -> int:
     ap.add_argument("--base", default=BASE, help=f"the old side's commit (default {BASE})")
     a = ap.parse_args(argv)
     frames = sorted(a.frames or FRAMES.glob("*.tiff"))
-    cedar = {}
-    for p in a.cedar or [FRAMES / "cedar_solutions.json"]:
-        cedar.update(json.loads(Path(p).read_text()))
+    cedar = cedar_solutions(*(a.cedar or []))
     names = [f.name for f in frames if f.name in cedar]
     missing = [f.name for f in frames if f.name not in cedar]
     if missing:
         print(f"no cedar solution for {', '.join(missing)}: left out", file=sys.stderr)
-    f_exact = float(np.mean([(W / 2.0) / math.tan(math.radians(cedar[n]["FOV"]) / 2.0) for n in names]))
+    f_exact = float(np.mean([cedar_f_px(cedar[n]) for n in names]))
     cases = {"exact": f_exact, "+5%": 1.05 * f_exact, "-5%": 0.95 * f_exact, "lens": 35.0e3 / 6.9}
     cents = {f.name: sep_centroids(f) for f in frames if f.name in cedar}
     with tempfile.TemporaryDirectory(prefix="rigsim-lis-bench-") as tmp:

@@ -9,64 +9,21 @@ than the focal length cedar finds), principal point at the detector centre, no d
 
 from __future__ import annotations
 
-import json
-import math
-from pathlib import Path
-
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
+from real_frames import (EPOCH, FRAMES, MAGNITUDE_LIMIT, cedar_solutions, compare_with_cedar, real_camera,
+                         sep_centroids)
 
 from rigsim.estimation.star_lis import identify_lost_in_space
-from rigsim.files import read_image
-from rigsim.optics.camera import PinholeBrown
-from rigsim.optics.sky import SkyCatalogue, radec_to_unit
+from rigsim.optics.sky import SkyCatalogue
 
-FRAMES = Path(__file__).resolve().parents[2] / "docs" / "examples" / "real-star-frames"
-CEDAR = json.loads((FRAMES / "cedar_solutions.json").read_text())
-NAMES = sorted(k for k in CEDAR if not k.startswith("_"))
-W, H = 1024, 768
-F_NOMINAL = 35.0e3 / 6.9  # px: the lens's 35 mm on the binned 6.9 µm pixels
-
-
-def real_camera(f: float = F_NOMINAL) -> PinholeBrown:
-    return PinholeBrown(f, f, (W - 1) / 2.0, (H - 1) / 2.0, width=W, height=H)
-
-
-def sep_centroids(path: Path) -> np.ndarray:
-    """sep's centroids of a frame, brightest first (12-bit data stored × 16)."""
-    import sep
-
-    img = np.ascontiguousarray(read_image(path), dtype=np.float64) / 16.0
-    bkg = sep.Background(img)
-    objs = sep.extract(img - bkg.back(), 5, err=bkg.rms(), minarea=3)
-    o = np.argsort(-objs["flux"], kind="stable")
-    return np.stack([objs["x"][o], objs["y"][o]], axis=1)
-
-
-def cedar_f_px(name: str) -> float:
-    """cedar's focal length: its horizontal field of view spans the detector's width."""
-    return (W / 2.0) / math.tan(math.radians(CEDAR[name]["FOV"]) / 2.0)
-
-
-def compare_with_cedar(name: str, uv: np.ndarray, res) -> dict:
-    """Wrong stars (another HIP than cedar's for a centroid within 1 px of one of cedar's), stars in
-    common, the boresight's offset from cedar's (arcmin) and the focal length's from cedar's (relative)."""
-    c = CEDAR[name]
-    cedar_uv = np.array(c["matched_centroids"], float)[:, ::-1] - 0.5  # (y, x), (0.5, 0.5) → rigsim's (u, v)
-    d, j = cKDTree(cedar_uv).query(uv[res.obs_index])
-    same = d < 1.0
-    wrong = int(np.sum(np.array(c["matched_catID"])[j[same]] != res.hip[same]))
-    centre = res.R_cam_from_icrs.T @ real_camera(res.f_px).unproject(np.array([(W - 1) / 2.0, (H - 1) / 2.0]))
-    ref = radec_to_unit(math.radians(c["RA"]), math.radians(c["Dec"]))
-    off = math.degrees(math.acos(min(1.0, float(centre @ ref)))) * 60.0
-    return {"wrong": wrong, "common": int(same.sum()), "cedar": len(cedar_uv), "boresight_arcmin": off,
-            "f_rel": res.f_px / cedar_f_px(name) - 1.0}
+CEDAR = cedar_solutions()
+NAMES = sorted(CEDAR)
 
 
 @pytest.fixture(scope="module")
 def sky_2019():
-    return SkyCatalogue.load(8.0, 2019.58)  # the frames show stars to about Hp 8; taken 2019-07-29
+    return SkyCatalogue.load(MAGNITUDE_LIMIT, EPOCH)
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +43,7 @@ def test_real_frame_identified_as_cedar_does(name, sky_2019, centroids):
     uv = centroids[name]
     res = identify_lost_in_space(uv, sky_2019, real_camera())
     assert res.ok, res.reason
-    cmp = compare_with_cedar(name, uv, res)
+    cmp = compare_with_cedar(CEDAR[name], uv, res.obs_index, res.hip, res.R_cam_from_icrs, res.f_px)
     assert cmp["wrong"] == 0, cmp
     assert cmp["common"] >= 0.9 * cmp["cedar"], cmp  # the stars cedar matched are found too (sep finds them all)
     assert cmp["boresight_arcmin"] < 1.0, cmp

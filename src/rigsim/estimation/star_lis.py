@@ -46,6 +46,7 @@ from rigsim.estimation.star_patterns import (
     pattern_database,
     pattern_settings,
 )
+from rigsim.optics.camera import project
 from rigsim.optics.sky import SkyCatalogue
 
 __all__ = ["LIS_DEFAULTS", "database_for", "identify_lost_in_space", "settings_for"]
@@ -141,21 +142,29 @@ class _Frame:
         # the true f may be f0 / (1 ± tol) (the nominal off by ± tol); a little slack for the pattern's estimate
         self.f_lo, self.f_hi = self.f0 / (1.0 + tol), self.f0 / (1.0 - tol)
         self.cone = math.atan(half_diag / self.f_lo) + math.radians(0.5)
+        self.chord = 2.0 * math.sin(self.cone / 2.0)
+        self.p0 = camera.params()
+        self.fy_ratio = camera.fy / camera.fx
 
     def f_ok(self, f) -> np.ndarray:
         """True where a focal length lies in the allowed range (0.5 % slack)."""
         f = np.asarray(f, float)
         return np.isfinite(f) & (f >= 0.995 * self.f_lo) & (f <= 1.005 * self.f_hi)
 
+    def params(self, f: float) -> np.ndarray:
+        """The camera's parameter vector (``PARAM_NAMES`` order) with its focal length set to f."""
+        p = self.p0.copy()
+        p[0], p[1] = f, f * self.fy_ratio
+        return p
+
     def predict(self, R: np.ndarray, f: float):
         """Catalogue stars whose images fall on the detector for attitude R and focal length f:
         (catalogue indices in magnitude order, their pixels)."""
-        idx = np.asarray(_sky_tree(self.sky).query_ball_point(R[2], 2.0 * math.sin(self.cone / 2.0)), np.int64)
+        idx = np.asarray(_sky_tree(self.sky).query_ball_point(R[2], self.chord), np.int64)
         if idx.size == 0:
             return idx, np.zeros((0, 2))
-        cam = _scaled(self.camera, f)
-        uv = cam.project(self.sky.vectors[idx] @ R.T)
-        on = cam.on_detector(uv)
+        uv = project(self.sky.vectors[idx] @ R.T, self.params(f))
+        on = self.camera.on_detector(uv)
         idx, uv = idx[on], uv[on]
         o = np.argsort(self.sky.hp_mag[idx], kind="stable")
         return idx[o], uv[o]
@@ -165,11 +174,9 @@ class _Frame:
         cat → catalogue stars); Gauss–Newton on a small rotation and f. Returns (R, f, residuals px)."""
         r = self.sky.vectors[cat]
         uv = self.uv[obs]
-        ratio = self.camera.fy / self.camera.fx
         for _ in range(iterations):
-            cam = _scaled(self.camera, f)
             d = r @ R.T
-            pred, du_dd, du_dk = cam.project(d, get_gradients=True)
+            pred, du_dd, du_dk = project(d, self.params(f), get_gradients=True)
             res = (uv - pred).reshape(-1)
             if not np.all(np.isfinite(res)):
                 break
@@ -177,9 +184,13 @@ class _Frame:
             dx = np.zeros((d.shape[0], 3, 3))
             dx[:, 0, 1], dx[:, 0, 2], dx[:, 1, 2] = d[:, 2], -d[:, 1], d[:, 0]
             dx[:, 1, 0], dx[:, 2, 0], dx[:, 2, 1] = -d[:, 2], d[:, 1], -d[:, 0]
-            J = np.concatenate([du_dd @ dx, (du_dk[..., 0] + ratio * du_dk[..., 1])[..., None]], axis=2).reshape(-1, 4)
+            J = np.concatenate([du_dd @ dx, (du_dk[..., 0] + self.fy_ratio * du_dk[..., 1])[..., None]],
+                               axis=2).reshape(-1, 4)
             J[:, 3] *= f  # solve for a relative change of f (better conditioned)
-            step, *_ = np.linalg.lstsq(J, res, rcond=None)
+            try:
+                step = np.linalg.solve(J.T @ J, J.T @ res)
+            except np.linalg.LinAlgError:
+                break
             w = step[:3]
             th = float(np.linalg.norm(w))
             if th > 0:
@@ -187,9 +198,9 @@ class _Frame:
                 Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
                 R = (np.eye(3) + math.sin(th) * Kx + (1 - math.cos(th)) * Kx @ Kx) @ R
             f = f * (1.0 + step[3])
-            if th < 1e-10 and abs(step[3]) < 1e-10:
+            if th < 1e-9 and abs(step[3]) < 1e-9:
                 break
-        pred = _scaled(self.camera, f).project(r @ R.T)
+        pred = project(r @ R.T, self.params(f))
         return R, f, np.linalg.norm(uv - pred, axis=1)
 
     def match(self, R, f, obs_idx: np.ndarray, radius: float, *, ambiguity: float | None = None,
