@@ -175,7 +175,7 @@ class Identification(_Model):
     match_tolerance_px: float = Field(2.0, gt=0.0, le=50.0, description="final residual tolerance after the attitude fit")
     min_matches: int = Field(4, ge=3, le=1000)
     focal_length_tolerance: float = Field(0.05, ge=0.0, le=0.3, description="lost in space: the nominal focal length's "
-                                          "largest relative error (the pattern search covers f × (1 ± this))")
+                                          "largest relative error (the true f is searched in f / (1 ± this))")
     pattern_tolerance_px: float = Field(1.0, gt=0.0, le=10.0, description="lost in space: centroid error allowed in "
                                         "a 4-star pattern's edges (noise and distortion the nominal model leaves)")
     false_match_probability: float = Field(1e-9, gt=0.0, le=1e-3, description="lost in space: the largest accepted "
