@@ -15,7 +15,7 @@ identification time (median of ``--repeat`` runs, after extraction). The new sid
 pattern database's build time (a fresh cache folder) and its load time from the cache.
 
 Run:  .venv/bin/python benchmarks/lost_in_space.py [FRAMES…] [--cedar JSON…] [--repeat 5] [--base COMMIT]
-(default: the four frames of docs/examples/real-star-frames and their cedar_solutions.json)
+(default: the four frames of docs/examples/real-star-frames and their cedar-solve-solutions.json)
 """
 
 from __future__ import annotations

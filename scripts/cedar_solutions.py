@@ -1,5 +1,5 @@
 """cedar-solve's solutions of star frames, as JSON: the independent reference the lost-in-space
-tests compare with (docs/examples/real-star-frames/cedar_solutions.json).
+tests compare with (docs/examples/real-star-frames/cedar-solve-solutions.json).
 
 cedar-solve (PyPI ``cedar-solve``, a maintained fork of ESA's tetra3 plate solver) pins an older
 numpy than rigsim, so this script runs in its OWN virtualenv, never in rigsim's:
@@ -7,7 +7,7 @@ numpy than rigsim, so this script runs in its OWN virtualenv, never in rigsim's:
     python3 -m venv /tmp/cedar-venv
     /tmp/cedar-venv/bin/pip install cedar-solve==0.5.1 tifffile
     /tmp/cedar-venv/bin/python scripts/cedar_solutions.py docs/examples/real-star-frames/*.tiff \\
-        --out docs/examples/real-star-frames/cedar_solutions.json
+        --out docs/examples/real-star-frames/cedar-solve-solutions.json
 
 It imports nothing of rigsim. Each frame is read as it is (16-bit TIFF), centroided with cedar's own
 ``get_centroids_from_image`` and solved with ``solve_from_centroids`` on cedar's bundled default

@@ -25,7 +25,7 @@ MAGNITUDE_LIMIT = 8.0     # the frames show catalogue stars to about Hp 8
 def cedar_solutions(*paths) -> dict:
     """Frame name → cedar's solution (``scripts/cedar_solutions.py``); default: the committed one."""
     out = {}
-    for p in paths or (FRAMES / "cedar_solutions.json",):
+    for p in paths or (FRAMES / "cedar-solve-solutions.json",):
         out.update({k: v for k, v in json.loads(Path(p).read_text()).items() if not k.startswith("_")})
     return out
 
