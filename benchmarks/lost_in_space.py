@@ -72,7 +72,8 @@ for case, f in json.loads({cases!r}).items():
         out[case + "|" + n] = {{"ok": bool(r.ok), "obs": r.obs_index.tolist(), "hip": r.hip.tolist(),
                                "R": np.asarray(r.R_cam_from_icrs).tolist(), "reason": r.reason,
                                "f": float(getattr(r, "f_px", float("nan"))),
-                               "p": float(getattr(r, "false_match_probability", float("nan"))), "seconds": float(np.median(times))}}
+                               "p": float(getattr(r, "false_match_probability", float("nan"))),
+                               "seconds": float(np.median(times))}}
 print("@@RESULT@@" + json.dumps(out))
 """
 

@@ -267,13 +267,14 @@ def identify_lost_in_space(obs_uv, sky: SkyCatalogue, camera, *,
 
     ``obs_uv``: centroids (N, 2) px, brightest first; ``sky``: the catalogue at the observation epoch;
     ``camera``: the *nominal* camera, whose focal length may be off by ``focal_length_tolerance``
-    (relative: the true f lies in f / (1 ± tolerance)). ``match_tolerance_px``: largest residual of an identified star; ``min_matches``: fewest
-    stars identified; ``false_match_probability``: the largest accepted chance that the identification
-    is a coincidence; ``pattern_tolerance_px``: centroid error allowed in a pattern's edges (noise,
-    distortion left after the nominal model); ``pattern_stars``: brightest stars that form patterns;
-    ``verify_stars``: brightest stars that verify a hypothesis. Returns an :class:`IdentResult` with
-    ``f_px`` (the focal length the matches imply) and ``false_match_probability``; ``ok=False`` with a
-    reason when the frame cannot be identified."""
+    (relative: the true f lies in f / (1 ± tolerance)). ``match_tolerance_px``: largest residual of
+    an identified star; ``min_matches``: fewest stars identified; ``false_match_probability``: the
+    largest accepted chance that the identification is a coincidence; ``pattern_tolerance_px``:
+    centroid error allowed in a pattern's edges (noise, distortion left after the nominal model);
+    ``pattern_stars``: brightest stars that form patterns; ``verify_stars``: brightest stars that
+    verify a hypothesis. Returns an :class:`IdentResult` with ``f_px`` (the focal length the matches
+    imply) and ``false_match_probability``; ``ok=False`` with a reason when the frame cannot be
+    identified."""
     if not isinstance(sky, SkyCatalogue):
         raise TypeError(f"sky must be a rigsim.optics.sky.SkyCatalogue (catalogue only), got {type(sky).__name__}")
     t0 = time.perf_counter()
