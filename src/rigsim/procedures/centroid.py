@@ -79,7 +79,7 @@ class DetectorSettings:
             return self.noise
         med, sd = frame_background(img)
         g = self.noise.gain_dn_per_e
-        return NoiseModel(g, sd / g, med, self.noise.extra_variance_dn2)
+        return replace(self.noise, read_noise_e=sd / g, offset_dn=med)
 
 
 def detector_settings(rig=None, camera: str | None = None, *, offset_dn=None, gain_dn_per_e=None, read_noise_e=None,
@@ -100,14 +100,10 @@ def detector_settings(rig=None, camera: str | None = None, *, offset_dn=None, ga
                 raise CliError(f"--camera = {camera!r}: this rig ({rig.name}) has {', '.join(have)}")
             det = part.detector
             shape = tuple(part.resolution_px[::-1])
-    def pick(value, attr, default):
-        if value is not None:
-            return float(value)
-        return float(getattr(det, attr)) if det is not None else default
-
-    noise = NoiseModel(pick(gain_dn_per_e, "gain_dn_per_e", 1.0), pick(read_noise_e, "read_noise_e", 0.0),
-                       pick(offset_dn, "offset_dn", 0.0), 1.0 / 12.0)
-    sat = float(saturation_dn) if saturation_dn is not None else (float(det.max_dn) if det is not None else None)
+    base = NoiseModel.from_detector(det) if det is not None else NoiseModel(1.0, 0.0, 0.0, 1.0 / 12.0)  # in frame DN
+    noise = replace(base, **{k: float(v) for k, v in (("gain_dn_per_e", gain_dn_per_e), ("read_noise_e", read_noise_e),
+                                                      ("offset_dn", offset_dn)) if v is not None})
+    sat = float(saturation_dn) if saturation_dn is not None else (float(det.saturation_dn) if det is not None else None)
     return DetectorSettings(noise, sat, shape, estimate_background=det is None and offset_dn is None)
 
 
@@ -203,7 +199,7 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--offset-dn", type=number(0, 1e6), default=None, help="black level (default the rig's, else 0)")
     c.add_argument("--gain-dn-per-e", type=number(1e-6, 1e3), default=None, help="system gain (default the rig's, else 1)")
     c.add_argument("--read-noise-e", type=number(0, 1e5), default=None, help="read noise (default the rig's, else 0)")
-    c.add_argument("--saturation-dn", type=number(1, 1e9), default=None, help="raw DN of a saturated pixel (default the rig's ADC top)")
+    c.add_argument("--saturation-dn", type=number(1, 1e9), default=None, help="raw DN of a saturated pixel (default the rig's: its ADC's top code, in the frame's DN)")
     c.add_argument("--threshold-dn", type=number(1e-3, 1e6), default=None, help="detection threshold above the offset (default 5σ read noise, ≥ 3 DN)")
     c.add_argument("--max-spots", type=integer(1, 1_000_000), default=None, help="keep the N brightest spots per frame")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
