@@ -118,6 +118,22 @@ def test_a_failure_at_any_step_leaves_the_old_file_and_no_temporary(target):
         assert sorted(p.name for p in t.parent.iterdir()) == ([t.name] if old is not None else []), n
 
 
+def test_a_failed_clean_up_does_not_hide_the_writes_own_error(tmp_path):
+    """The rename fails, and so does the removal of the temporary: the rename's error is the one raised."""
+    t = tmp_path / "r.json"
+    t.write_bytes(OLD)
+
+    def hook(event, phase):
+        if phase == 0 and event[0] == "rename":
+            raise OSError(5, "Input/output error (injected at the rename)")
+        if phase == 0 and event[0] == "unlink":
+            raise OSError(2, "No such file (injected at the clean-up)")
+
+    with pytest.raises(OSError, match="injected at the rename"), steps(hook):
+        atomic_write_bytes(t, NEW)
+    assert t.read_bytes() == OLD
+
+
 # -- a dataset frame: the image, then the sidecar holding its checksum ---------------------------------------
 def _frame(root: Path, index: int, value: int, seed: int):
     from rigsim.dataset.store import write_frame_atomic
