@@ -149,6 +149,14 @@ def main(argv=None) -> int:
         env = {**os.environ, "PYTHONPATH": str(tree / "src")}
         run = lambda *c: subprocess.run(c, cwd=tree, env=env, check=True)  # noqa: E731
         bin_ = Path(sys.executable).parent
+        # the baseline: the module's tests must pass unmutated, or every mutant would look killed
+        module, tests = MODULES[a.module]
+        base = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:xdist", "-p", "no:cacheprovider",
+                               "-o", "addopts=", *tests], cwd=tree, env=env, capture_output=True, text=True)
+        if base.returncode != 0:
+            print(base.stdout[-3000:], base.stderr[-2000:], sep="\n")
+            print(f"{a.module}: the tests fail on the unmutated module; no mutation run", file=sys.stderr)
+            return 1
         run(str(bin_ / "cosmic-ray"), "init", str(cfg), str(session))
         run(str(bin_ / "cr-filter-operators"), str(session), str(cfg))
         run(str(bin_ / "cosmic-ray"), "exec", str(cfg), str(session))
