@@ -40,10 +40,16 @@ def test_images_round_trip_bit_exact(tmp_path, fmt):
 def test_bad_images_are_refused(tmp_path):
     with pytest.raises(ValueError, match="2-D uint16"):
         store.encode_image(IMG.astype(np.uint8), "png")
-    with pytest.raises(ValueError, match="2-D uint16"):
-        store.encode_image(IMG[None], "png")
+    for bad in (IMG[None], IMG.ravel()):
+        with pytest.raises(ValueError, match="2-D uint16"):
+            store.encode_image(bad, "png")
+    for fmt in ("bmp", "fit", "tif"):
+        with pytest.raises(ValueError, match="must be 'png' or 'fits'"):
+            store.encode_image(IMG, fmt)
     with pytest.raises(ValueError, match="'tif': must be 'png' or 'fits'"):
         store.encode_image(IMG, "tif")
+    (tmp_path / "frame.a").write_bytes(store.encode_image(IMG, "png"))  # read by its content, not its name
+    assert np.array_equal(store.decode_image(tmp_path / "frame.a"), IMG)
     (tmp_path / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
     with pytest.raises(DatasetError, match=r"x\.png: not a readable image"):
         store.decode_image(tmp_path / "x.png")
@@ -76,7 +82,7 @@ def test_when_a_frame_is_not_trusted(tmp_path):
     _write(tmp_path, params=params)
     ip, jp = store.frame_files(tmp_path, 7, "png")
     good = jp.read_text()
-    assert store.sidecar_problem(jp, 8) == "written for frame 7"
+    assert store.sidecar_problem(jp, 8) == store.sidecar_problem(jp, 6) == "written for frame 7"
     assert store.sidecar_problem(jp, 7, {"seed": 4}) == "written for another plan (pose, seed or options differ)"
     assert not store.frame_complete(tmp_path, 7, "png", params={"seed": 4})
     assert not store.frame_complete(tmp_path, 8, "png")
