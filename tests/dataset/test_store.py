@@ -38,8 +38,9 @@ def test_images_round_trip_bit_exact(tmp_path, fmt):
 
 
 def test_bad_images_are_refused(tmp_path):
-    with pytest.raises(ValueError, match="2-D uint16"):
-        store.encode_image(IMG.astype(np.uint8), "png")
+    for dtype in (np.uint8, np.int32, np.float64):
+        with pytest.raises(ValueError, match="2-D uint16"):
+            store.encode_image(IMG.astype(dtype), "png")
     for bad in (IMG[None], IMG.ravel()):
         with pytest.raises(ValueError, match="2-D uint16"):
             store.encode_image(bad, "png")
@@ -86,10 +87,16 @@ def test_when_a_frame_is_not_trusted(tmp_path):
     assert store.sidecar_problem(jp, 7, {"seed": 4}) == "written for another plan (pose, seed or options differ)"
     assert not store.frame_complete(tmp_path, 7, "png", params={"seed": 4})
     assert not store.frame_complete(tmp_path, 8, "png")
-    sc = json.loads(good)
-    sc["truth"]["u"] = 2.5
-    jp.write_text(json.dumps(sc))
-    assert store.sidecar_problem(jp, 7) == "edited after it was written (its own checksum does not match)"
+    want = json.loads(good)["dataset"]["sidecar_sha256"]
+    order = set()
+    for u in np.arange(2.5, 12.5):  # edits whose checksums fall on both sides of the written one
+        sc = json.loads(good)
+        sc["truth"]["u"] = float(u)
+        jp.write_text(json.dumps(sc))
+        assert store.sidecar_problem(jp, 7) == "edited after it was written (its own checksum does not match)"
+        sc["dataset"].pop("sidecar_sha256")
+        order.add(store.canonical_sha256(sc) < want)
+    assert order == {True, False}
     for text in ("{", "[]", '{"dataset": {}}', '{"dataset": {"sidecar_sha256": 1, "image_sha256": "a"}}',
                  '{"dataset": {"sidecar_sha256": "a"}}'):
         jp.write_text(text)
