@@ -36,7 +36,7 @@ MODULES = {
     "detector": ("src/rigsim/detector/model.py", ["tests/detector/test_detector_distribution.py", "tests/detector/test_detector_model.py",
                                                   "tests/detector/test_detector_blocks.py"]),
     "poisson": ("src/rigsim/detector/poisson.py", ["tests/detector/test_detector_poisson_inverse.py"]),
-    "triad": ("src/rigsim/estimation/triad.py", ["tests/estimation/test_rotation_check.py", "tests/test_cli.py::test_triad_table1",
+    "triad": ("src/rigsim/estimation/triad.py", ["tests/estimation/test_triad.py", "tests/test_cli.py::test_triad_table1",
                                                  "tests/procedures/cube_mirror/test_campaign.py"]),
     "cube_attitude": ("src/rigsim/estimation/cube_attitude.py", ["tests/procedures/cube_mirror/test_campaign.py",
                                                                  "tests/procedures/cube_mirror/test_user_files.py::test_triad_3axis_and_compose_covariance"]),
