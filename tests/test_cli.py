@@ -99,6 +99,26 @@ def test_render_sun_sensor_cli(tmp_path):
     side = json.loads((tmp_path / "sun_sensor.json").read_text())
     assert side["pose"] == {"X": 10.0, "Y": -5.0} and side["render"]["spp"] == 256
     assert (tmp_path / "sun_sensor.png").exists() and (tmp_path / "p.png").exists()
+    # the frame itself: its spot where the rig file's sun sensor sees the sun at that pose (the truth layer's
+    # realisation, projected by OpenCV), to the rendering and detector noise
+    import cv2
+
+    from rigsim.rig import load_rig
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
+
+    rig = load_rig("sun_sensor_2axis_diaphragm")
+    real = realization_from_rig(rig)
+    pose = {"X": np.radians(10.0), "Y": np.radians(-5.0)}
+    s = real.R_sun_from_mount @ (real.turntable.R_rot_from_mount(pose).T @ real.d_sun_rot)
+    cam = rig.sun_sensor.camera()
+    uv, _ = cv2.projectPoints(s.reshape(1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix(), cam.dist_coeffs())
+    dn = cv2.imread(str(tmp_path / "sun_sensor.png"), cv2.IMREAD_UNCHANGED).astype(float) - rig.sun_sensor.detector.offset_dn
+    u0, v0 = (int(round(x)) - 8 for x in uv.ravel())
+    w = dn[v0:v0 + 17, u0:u0 + 17]
+    w[w < 20] = 0
+    vv, uu = np.indices(w.shape)
+    got = np.array([(uu * w).sum() / w.sum() + u0, (vv * w).sum() / w.sum() + v0])
+    assert np.hypot(*(got - uv.ravel())) < 0.15, (got, uv)  # the disk's pixel-phase bias on a 2.5 px spot < 0.1 px
 
 
 @pytest.mark.parametrize("args,expected", [

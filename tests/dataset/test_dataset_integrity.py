@@ -98,6 +98,39 @@ def test_a_sidecar_from_another_plan_is_rendered_again(base, tmp_path):
     assert _files(d)["frames/frame_000002.png"] == _files(base)["frames/frame_000002.png"]
 
 
+def test_info_and_verify_print_what_the_folder_holds(base, capsys):
+    """The two read-only commands on a known dataset: four PNG frames of seed 5 from this rig, every truth
+    column of a frame's sidecar listed, and a whole folder."""
+    from rigsim.cli import main
+
+    assert main(["dataset", "info", str(base)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith(f"{base}: {N} PNG frames, generator ") and out[0].endswith(", seed 5")
+    assert RIG in out[0]
+    row = json.loads((base / "frames" / "frame_000000.json").read_text())["dataset"]["truth_row"]
+    assert out[1].startswith("truth columns: ") and set(row) <= set(out[1].removeprefix("truth columns: ").split(", "))
+    assert main(["dataset", "verify", str(base)]) == 0
+    assert capsys.readouterr().out.strip() == f"{base}: every file matches the manifest"
+
+
+def test_an_image_changed_after_its_sidecar_was_written_is_rendered_again(base, tmp_path):
+    """A whole, readable PNG whose pixels differ from those its sidecar's checksum names (a frame overwritten
+    after its sidecar, or a kill between a re-render's image and its sidecar): resume hashes the image and
+    renders the frame again."""
+    from rigsim.dataset.store import decode_image, encode_image
+
+    d = _copy(base, tmp_path)
+    ip = d / "frames" / "frame_000002.png"
+    original = ip.read_bytes()
+    img = decode_image(ip)
+    img[0, 0] ^= 1
+    ip.write_bytes(encode_image(img, "png"))
+    assert "frames/frame_000002.png: checksum mismatch (corrupt or modified)" in verify(d)
+    r = _gen(d)
+    assert r.n_rendered == 1 and r.n_resumed == N - 1
+    assert ip.read_bytes() == original and verify(d) == []
+
+
 @pytest.mark.parametrize("manifest,expect", [
     ({}, "manifest.json: format = None"),
     ([], "manifest.json: a JSON object expected, found list"),

@@ -93,3 +93,32 @@ def test_batch_covariance_matches_monte_carlo(star_rig, star_sky):
         e = b.theta - th
         m.append(e @ np.linalg.solve(b.cov, e))
     assert abs(np.mean(m) - 5.0) < 3 * np.sqrt(10 / 60)
+
+
+def test_batch_recovers_a_camera_that_opencv_projected_with_tangential_terms(star_rig, star_sky):
+    """A known answer computed another way: the rig's sky through a camera with tangential distortion, projected
+    by OpenCV's cv2.projectPoints (not rigsim's camera, which the estimator shares), noise-free. The batch must
+    return that camera's θ: a tangential term applied to the wrong axis in rigsim's model (which simulation and
+    fit would share, passing every round trip) moves the fitted principal point by ~3 px."""
+    import cv2
+
+    from rigsim.optics import attitude as att
+
+    th = np.array([2886.7, 514.3, 508.6, -0.06, 0.10])
+    p12 = (4e-4, -3e-4)  # 0.3 px at the detector's corner
+    K = np.array([[th[0], 0.0, th[1]], [0.0, th[0], th[2]], [0.0, 0.0, 1.0]])
+    dist = np.array([th[3], th[4], *p12, 0.0])
+    seq = att.from_rig(star_rig.sequence)
+    frames = []
+    for k in range(0, len(seq), max(1, len(seq) // 12)):
+        R = seq.R_cam_from_icrs[k]
+        tr = star_sky.field(R)
+        d = tr.dirs_icrs @ R.T
+        uv, _ = cv2.projectPoints(d.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, dist)
+        uv = uv.reshape(-1, 2)
+        inside = np.flatnonzero((uv >= 5).all(1) & (uv[:, 0] < 1019) & (uv[:, 1] < 1019) & (d[:, 2] > 0))
+        idx = inside[np.argsort(-tr.photons[inside])][:20]
+        frames.append(FrameObs(uv[idx], np.full((idx.size, 2), 1e-4), tr.dirs_icrs[idx], tr.photons[idx]))
+    start = np.array([th[0] + 3.0, 511.5, 511.5, 0.0, 0.0])
+    b = batch_lsq(frames, start, p12=p12)
+    assert np.all(np.abs(b.theta - th) < [1e-3, 1e-3, 1e-3, 1e-6, 1e-5]), b.theta - th

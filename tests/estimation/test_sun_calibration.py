@@ -143,3 +143,35 @@ def test_analytic_jacobian_fit_equals_the_finite_difference_fit():
         z_int = np.abs(cal.params[:-3] - x_fd) / sig[:-3]
         z_rot = np.abs(small_angle_error(cal.R_sun_from_rot, R_fd)) / sig[-3:]
         assert z_int.max() < tol and z_rot.max() < tol, (z_int, z_rot, tol)
+
+
+def test_fit_recovers_a_sweep_made_by_scipy_and_opencv():
+    """A known answer computed without rigsim's turntable or camera: the sun fixed along the rot frame's z, the
+    2-axis table's documented chain R(rot←mount) = Rx(θx)·Ry(θy) (scipy's intrinsic "XY"), a sensor rotated by a
+    chosen R(sun←mount), centroids by OpenCV's cv2.projectPoints with tangential terms. The fit must return that
+    camera and rotation: a wrong axis order, a transposed chain or a tangential term on the wrong axis in the
+    model the simulation and the fit share (test_noise_free_fit_is_exact's round trip) fails here."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from rigsim.rig.turntable import TurntableReading
+
+    fx, fy, cx, cy, W, H = 272.7, 272.9, 515.3, 508.7, 1024, 1024
+    dist = np.array([-0.021, 0.0012, 2e-3, -1.5e-3, 0.0])
+    R_sun = Rotation.from_euler("xyz", [0.35, -0.6, 12.0], degrees=True).as_matrix()
+    g = np.radians(np.arange(-60.0, 60.1, 6.0))
+    tx, ty = (a.ravel() for a in np.meshgrid(g, g))
+    R_rot_from_mount = Rotation.from_euler("XY", np.column_stack([tx, ty])).as_matrix()
+    s_sensor = (R_rot_from_mount.transpose(0, 2, 1) @ np.array([0.0, 0.0, 1.0])) @ R_sun.T
+    uv, _ = cv2.projectPoints(s_sensor.reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                              np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), dist)
+    uv = uv.reshape(-1, 2)
+    keep = (s_sensor[:, 2] > 0.3) & (uv >= 3).all(1) & (uv[:, 0] <= W - 4) & (uv[:, 1] <= H - 4)
+    assert keep.sum() > 300
+    cal = calibrate_sun_sensor(TurntableReading({"X": tx[keep], "Y": ty[keep]}), uv[keep],
+                               TurntableModel.nominal(["X", "Y"]), W, H, f_guess_px=270.0)
+    got = dict(zip(cal.param_names, cal.params))
+    want = {"fx": fx, "fy": fy, "cx": cx, "cy": cy, "k1": dist[0], "k2": dist[1], "p1": dist[2], "p2": dist[3]}
+    for k, v in want.items():
+        assert got[k] == pytest.approx(v, abs=1e-6 * max(1.0, abs(v))), (k, got[k], v)
+    assert np.abs(small_angle_error(cal.R_sun_from_rot, R_sun)).max() < 1e-8 and cal.rms_px < 1e-6

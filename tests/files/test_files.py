@@ -126,12 +126,68 @@ def test_writes_are_atomic_and_never_follow_a_planted_symlink(tmp_path):
                   and not p.is_symlink()) == []
 
 
-def test_written_files_take_the_umask_like_any_other_file(tmp_path):
-    """Not mkstemp's private 0o600: a result shared with a group is readable by it."""
-    old = os.umask(0o027)
+@pytest.mark.parametrize("umask, mode", [(0o027, 0o640), (0o000, 0o666), (0o077, 0o600)])
+def test_written_files_take_the_umask_like_any_other_file(tmp_path, umask, mode):
+    """Not mkstemp's private 0o600: a result shared with a group is readable by it; the umask in force before
+    the write is in force after it."""
+    old = os.umask(umask)
     try:
         write_json(tmp_path / "r.json", {"a": 1})
         write_image(tmp_path / "f.png", np.zeros((4, 4), np.uint16))
+        assert os.umask(umask) == umask
     finally:
         os.umask(old)
-    assert {(p.name, p.stat().st_mode & 0o777) for p in tmp_path.iterdir()} == {("r.json", 0o640), ("f.png", 0o640)}
+    assert {(p.name, p.stat().st_mode & 0o777) for p in tmp_path.iterdir()} == {("r.json", mode), ("f.png", mode)}
+
+
+def test_an_output_folder_that_cannot_be_one_is_one_line(tmp_path):
+    from rigsim.files.atomic import output_folder
+
+    (tmp_path / "file").write_text("x")
+    os.symlink(tmp_path / "nowhere", tmp_path / "dangling")
+    assert output_folder(tmp_path / "new" / "deep", "--out") == tmp_path / "new" / "deep" and (tmp_path / "new" / "deep").is_dir()
+    with pytest.raises(InputError, match=r"^--out .*file: is a file, not a folder$"):
+        output_folder(tmp_path / "file", "--out")
+    with pytest.raises(InputError, match=r"^--out .*dangling: is a file, not a folder$"):
+        output_folder(tmp_path / "dangling", "--out")
+    with pytest.raises(InputError, match=r"^--out .*dangling/sub: a part of the path is a file, not a folder$"):
+        output_folder(tmp_path / "dangling" / "sub", "--out")  # mkdir meets the link it cannot enter
+    with pytest.raises(InputError, match=r"^--out .*file/sub: cannot create the folder \(Not a directory\)$"):
+        output_folder(tmp_path / "file" / "sub", "--out")
+    with pytest.raises(InputError, match=r"^output folder .*: cannot create the folder \(File name too long\)$"):
+        output_folder(tmp_path / ("x" * 300))
+    with pytest.raises(InputError, match=r"r\.json: is a folder; expected a file name"):
+        (tmp_path / "r.json").mkdir()
+        write_json(tmp_path / "r.json", {"a": 1})
+
+
+def test_save_figure_writes_the_format_its_suffix_names(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rigsim.files.atomic import save_figure
+
+    fig = plt.figure(figsize=(1, 1))
+    save_figure(fig, tmp_path / "f.svg")
+    save_figure(fig, tmp_path / "f.png")
+    plt.close(fig)
+    assert (tmp_path / "f.svg").read_bytes().lstrip().startswith((b"<?xml", b"<svg"))
+    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+
+def test_cache_dir_follows_rigsim_then_xdg_then_home(tmp_path, monkeypatch):
+    from pathlib import Path
+
+    from rigsim.files import cache_dir
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("RIGSIM_CACHE_DIR", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    assert cache_dir() == Path(tmp_path / "home" / ".cache" / "rigsim")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == tmp_path / "xdg" / "rigsim"
+    monkeypatch.setenv("RIGSIM_CACHE_DIR", str(tmp_path / "mine"))
+    assert cache_dir() == tmp_path / "mine"

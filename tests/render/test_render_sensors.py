@@ -58,6 +58,39 @@ def _img(x):
 
 
 # ---------------------------------------------------------------------------------------------
+# the sensor's own Brown model against OpenCV, ray by ray
+# ---------------------------------------------------------------------------------------------
+# Strong tangential terms (p1, p2 ~ 1e-2: 1.5 px at r = 0.5) so that a term applied to the wrong axis moves
+# rays by pixels, not by the 0.1 px the rigs' own coefficients would; a fit that shares the renderer's model
+# would not see it (a round trip), OpenCV's projectPoints / undistortPoints do.
+STRONG = PinholeBrown(fx=300.0, fy=302.0, cx=205.3, cy=190.7, width=400, height=380,
+                      k1=-0.12, k2=0.015, p1=0.012, p2=-0.009, k3=-0.001)
+
+
+def test_sensor_rays_and_projections_are_opencvs_with_strong_tangential_distortion():
+    cam = STRONG
+    s = mi.load_dict(_pinhole_dict(cam, cam.width, cam.height, 1, sampler="independent"))
+    rng = np.random.default_rng(1)
+    uv = rng.uniform([0, 0], [cam.width - 1, cam.height - 1], (2000, 2))
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
+    ref = cv2.undistortPoints(uv.reshape(-1, 1, 2), cam.camera_matrix(), cam.dist_coeffs(), criteria=crit).reshape(-1, 2)
+    # sample_ray: the film position of each pixel centre -> the ray's direction, undistorted
+    ray, w = s.sample_ray(0.0, 0.5, mi.Point2f((uv[:, 0] + 0.5) / cam.width, (uv[:, 1] + 0.5) / cam.height),
+                          mi.Point2f(0.5, 0.5))
+    d = np.array(ray.d, dtype=np.float64).reshape(3, -1)
+    assert np.all(np.array(w).ravel() > 0)
+    np.testing.assert_allclose((d[:2] / d[2]).T * [cam.fx, cam.fy], ref * [cam.fx, cam.fy], atol=2e-3)  # px
+    # sample_direction (ptracer): points along those directions at random depths -> film position
+    P = np.column_stack([ref, np.ones(len(ref))]) * rng.uniform(10.0, 100.0, (len(ref), 1))
+    it = dr.zeros(mi.Interaction3f, len(P))
+    it.p = mi.Point3f(P[:, 0], P[:, 1], P[:, 2])
+    ds, wt = s.sample_direction(it, mi.Point2f(0.5, 0.5))
+    assert np.all(np.array(wt).ravel() > 0)
+    proj, _ = cv2.projectPoints(P.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix(), cam.dist_coeffs())
+    np.testing.assert_allclose(np.array(ds.uv, dtype=np.float64).reshape(2, -1).T - 0.5, proj.reshape(-1, 2), atol=2e-3)
+
+
+# ---------------------------------------------------------------------------------------------
 # dot target
 # ---------------------------------------------------------------------------------------------
 PLANE_TILT_DEG = 25.0

@@ -11,7 +11,8 @@ from rigsim.render.frame import read_frame
 from rigsim.rig import load_rig
 from rigsim.truth.cube_mirror.realization import realization_from_rig
 
-RIG = load_rig("sun_sensor_2axis_diaphragm")
+RIG_NAME = "sun_sensor_2axis_diaphragm"
+RIG = load_rig(RIG_NAME)
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +42,17 @@ def test_rendered_spot_matches_analytic_model(scene, x_deg, y_deg, tight):
     # and is within the (documented) disk + pixel-phase bias of the projected sun centre
     bias = np.linalg.norm(np.array(truth["pixel_centroid_uv"]) - np.array(truth["center_uv"]))
     assert np.linalg.norm(c - np.array(truth["center_uv"])) <= bias + 0.01
+
+
+@pytest.mark.parametrize("x_deg,y_deg", POSES_DEG[:3])
+def test_the_rendered_sun_is_the_rig_files_32_arcmin_disk(scene, x_deg, y_deg):
+    """The window's spot against the image derived from the rig file's numbers alone (the file's 32′, its
+    camera through OpenCV, an independent quadrature: tests/render/sun_image_truth.py), not from the
+    attribute the scene reads: a sun 1 % wider fails."""
+    from sun_image_truth import assert_same_disk, binned_disk_image, rig_file_sun
+
+    win = scene.renderer.render(scene.sun_dir_cam({"X": math.radians(x_deg), "Y": math.radians(y_deg)}), seed=3)
+    assert_same_disk(win.image, binned_disk_image(rig_file_sun(RIG_NAME), win.sun_dir_cam, win.origin_uv, win.image.shape))
 
 
 def test_frame_is_reproducible_and_written(scene, tmp_path):

@@ -439,7 +439,12 @@ def _solve_spd(A: np.ndarray, g: np.ndarray | None):
     ok &= finite
     inv = np.full_like(A, np.nan)
     if ok.any():
-        inv[ok] = np.linalg.inv(A[ok])
+        try:
+            inv[ok] = np.linalg.inv(A[ok])
+        except np.linalg.LinAlgError:  # positive by the factorisation, singular to LAPACK: take the factorisation's
+            L, ok2 = _chol(np.where(ok[:, None, None], A, np.eye(A.shape[1])))
+            inv[ok] = _chol_inverse(L)[ok]
+            ok &= ok2 & np.isfinite(inv).all(axis=(1, 2))
     x = None if g is None else np.einsum("nij,nj->ni", inv, g)
     return x, inv, ok
 

@@ -291,6 +291,34 @@ def test_triad_3axis_and_compose_covariance(tmp_path, capsys):
     assert "R_sun_from_rot.matrix is not a rotation (det -1.000000)" in capsys.readouterr().err
 
 
+def test_compose_returns_a_known_cube_from_sun(tmp_path):
+    """A known answer: R(cube←sun) chosen, R(sun←rot) chosen, and R(cube←rot) = R(cube←sun)·R(sun←rot) built from
+    them (scipy's composition); `compose` must give back the chosen R(cube←sun) and, with exact inputs, a
+    covariance Σ_cube + R·Σ_sun·Rᵀ whose trace is the two traces' sum. The rotations do not commute (the
+    product in the wrong order, R(sun←rot)ᵀ·R(cube←rot), is 23° away), and a vector of the sun sensor's frame
+    lands where both rotations applied one after the other put it."""
+    from scipy.spatial.transform import Rotation
+
+    cube_from_sun = Rotation.from_euler("ZYX", [40.0, -25.0, 10.0], degrees=True)
+    sun_from_rot = Rotation.from_euler("xyz", [0.35, -0.6, 12.0], degrees=True) * Rotation.from_euler("y", 30, degrees=True)
+    cube_from_rot = cube_from_sun * sun_from_rot
+    Cc, Cs = np.diag([4.0, 9.0, 1.0]), np.diag([400.0, 2500.0, 25.0])
+    (tmp_path / "c.json").write_text(json.dumps({"R_cube_from_rot": {"matrix": cube_from_rot.as_matrix().tolist(),
+                                                                     "covariance": {"matrix": Cc.tolist()}}}))
+    (tmp_path / "s.json").write_text(json.dumps({"R_sun_from_rot": {"matrix": sun_from_rot.as_matrix().tolist(),
+                                                                    "covariance": {"matrix": Cs.tolist()}}}))
+    assert main(["compose", "--cube-from-rot", str(tmp_path / "c.json"), "--sun-from-rot", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "cs.json")]) == 0
+    got = json.loads((tmp_path / "cs.json").read_text())["R_cube_from_sun"]
+    R = np.array(got["matrix"])
+    np.testing.assert_allclose(R, cube_from_sun.as_matrix(), atol=1e-12)
+    v_sun = np.array([0.3, -0.2, 0.93])
+    np.testing.assert_allclose(R @ v_sun, cube_from_rot.apply(sun_from_rot.inv().apply(v_sun)), atol=1e-12)
+    wrong = sun_from_rot.inv() * cube_from_rot
+    assert np.degrees((wrong * cube_from_sun.inv()).magnitude()) > 20.0
+    assert np.trace(np.array(got["covariance"]["matrix"])) == pytest.approx(np.trace(Cc) + np.trace(Cs), rel=1e-12)
+
+
 @pytest.mark.render
 def test_null_commands_equal_the_campaign_measurers(tmp_path, capsys):
     """One aiming-camera pair and one autocollimator frame as the campaign's measurers render and

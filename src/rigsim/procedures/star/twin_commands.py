@@ -114,7 +114,7 @@ def cmd_star_twin(args) -> int:
         scatter_twin = float(tw.joint.bundle.residual_rms_px) if tw.joint is not None else float("nan")
     rows = compare(real_s, twin_s, ident_real=rate_real, ident_twin=rate_twin, scatter_real=scatter_real,
                    scatter_twin=scatter_twin)
-    figs = {"frames": frames_figure(out / "frames.png", names, images, twins),
+    figs = {"frames": frames_figure(out / "frames.png", names, images, twins, bin_px=2),
             "frames_crop": frames_figure(out / "frames_crop.png", names, images, twins,
                                          crop=(H // 2 - 96, H // 2 + 96, W // 2 - 128, W // 2 + 128)),
             "profiles": profiles_figure(out / "profiles.png", real_s, twin_s)}
@@ -133,7 +133,7 @@ def cmd_star_twin(args) -> int:
           f"- stars beyond the catalogue's completeness: {desc.faint_density_per_deg2_per_mag:.2f} per deg² per magnitude "
           "at 9 mag (fitted to the detections with no catalogue star)",
           *[f"- {n}" for n in desc.notes], "",
-          "![frames](frames.png)", "", "![frames, centre at full resolution](frames_crop.png)", "",
+          "![frames (2 × 2 means)](frames.png)", "", "![frames, centre at full resolution](frames_crop.png)", "",
           "![profiles](profiles.png)", ""]
     atomic_write_bytes(out / "twin.md", "\n".join(md).encode())
     print(table_markdown(rows))

@@ -17,9 +17,17 @@ def _stretch(img, lo, hi):
     return np.clip((np.asarray(img, float) - lo) / max(hi - lo, 1e-9), 0, 1)
 
 
-def frames_figure(path, names, reals, twins, *, crop=None) -> Path:
+def _bin(a: np.ndarray, k: int) -> np.ndarray:
+    if k <= 1:
+        return a
+    h, w = a.shape[0] // k * k, a.shape[1] // k * k
+    return a[:h, :w].reshape(h // k, k, w // k, k).mean(axis=(1, 3))
+
+
+def frames_figure(path, names, reals, twins, *, crop=None, bin_px: int = 1) -> Path:
     """One row per frame: real, twin (same grey scale), and real − twin (±5σ of the sky noise).
-    ``crop``: (v0, v1, u0, u1) to show a part of every frame at full resolution."""
+    ``crop``: (v0, v1, u0, u1) to show a part of every frame at full resolution; ``bin_px``: show
+    k × k means (a whole frame's noise does not compress)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -32,12 +40,14 @@ def frames_figure(path, names, reals, twins, *, crop=None) -> Path:
         if crop is not None:
             v0, v1, u0, u1 = crop
             r, t = r[v0:v1, u0:u1], t[v0:v1, u0:u1]
+        r, t = _bin(r, bin_px), _bin(t, bin_px)
         lo, hi = np.percentile(r, [1, 99.7])
         d = r - t
         s = 1.4826 * np.median(np.abs(d - np.median(d)))
         for ax, im, title, kw in ((axes[k, 0], _stretch(r, lo, hi), f"real: {name}", {"cmap": "gray"}),
                                   (axes[k, 1], _stretch(t, lo, hi), "rendered twin (same grey scale)", {"cmap": "gray"}),
-                                  (axes[k, 2], d, f"real − twin (±5σ = ±{5 * s:.0f} DN)",
+                                  (axes[k, 2], d, f"real − twin (±5σ = ±{5 * s:.0f} DN"
+                                   + (f", {bin_px}×{bin_px} means)" if bin_px > 1 else ")"),
                                    {"cmap": "RdBu_r", "vmin": -5 * s, "vmax": 5 * s})):
             ax.imshow(im, interpolation="nearest", **kw)
             ax.set_title(title, fontsize=9)
@@ -45,7 +55,7 @@ def frames_figure(path, names, reals, twins, *, crop=None) -> Path:
             ax.set_yticks([])
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=80)
+    fig.savefig(path, dpi=60)
     plt.close(fig)
     return path
 
