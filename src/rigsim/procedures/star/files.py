@@ -171,6 +171,10 @@ POOR_FIT_CHI2 = 25.0
 (the σ floor the joint fit needed is then many times the centroid σ)."""
 
 
+def _finite(x):
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
 def joint_verdict(b) -> str:
     """One sentence on how well the noise model explains the joint fit."""
     dof = max(b.dof, 1)
@@ -287,7 +291,13 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
     att = []
     for k, (name, ident, fo) in enumerate(zip(names, out.ident, out.frames_obs)):
         rec = {"frame": name, "identified": bool(ident.ok), "n_stars": len(fo),
-               "residual_rms_px": float(ident.residual_rms_px) if ident.ok else None}
+               "residual_rms_px": float(ident.residual_rms_px) if ident.ok else None,
+               "reason": None if ident.ok else ident.reason}
+        lis = out.lis[k] if k < len(out.lis) else None
+        if lis is not None:  # what the frame's lost-in-space solution said before the joint fit
+            rec["lost_in_space"] = {"identified": bool(lis.ok), "f_px": _finite(getattr(lis, "f_px", None)),
+                                    "false_match_probability": _finite(getattr(lis, "false_match_probability", None)),
+                                    "stars": len(lis) if lis.ok else 0, "reason": None if lis.ok else lis.reason}
         true_k = None if true_R is None else true_R[k]
         if ident.ok and len(fo) >= 3:
             sig = fo.sigma_uv.mean(axis=1) / th[0]

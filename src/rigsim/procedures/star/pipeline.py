@@ -87,6 +87,7 @@ class PipelineOutput:
     observability: dict = field(default_factory=dict)
     times: dict = field(default_factory=dict)
     joint: object = None                       # JointCalibration: intrinsics and attitudes fitted together
+    lis: list = field(default_factory=list)    # per frame: the lost-in-space IdentResult (empty with a prior attitude)
 
     @property
     def R_est(self) -> list:
@@ -174,6 +175,7 @@ class StarPipeline:
         p12 = (s.p1, s.p2)
         t0 = time.perf_counter()
         joint = None
+        lis_ident = []
         frames_obs = self.frames_obs
         if any(i.ok for i in self.ident):
             # intrinsics and every attitude fitted together; without a prior attitude the frames are
@@ -186,6 +188,7 @@ class StarPipeline:
                                       match_tolerance_px=self.nominal.identification.match_tolerance_px,
                                       reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
             if lis:
+                lis_ident = list(self.ident)
                 self.ident = joint.ident
             # every estimator below takes the centroid σ with the noise floor the joint fit found
             floor = joint.bundle.sigma_floor_px if np.isfinite(joint.bundle.sigma_floor_px) else 0.0
@@ -205,7 +208,7 @@ class StarPipeline:
                            self.refraction[0].latitude_deg, self.refraction[0].longitude_deg, self.refraction[0].height_m,
                            self.refraction[0].pressure, self.refraction[0].temperature_c)}
         out = PipelineOutput(self.nominal, self.usable, self.ident, frames_obs, ident_stats, times=dict(self.times),
-                             joint=joint)
+                             joint=joint, lis=lis_ident)
         t0 = time.perf_counter()
         for case in PIPELINE_CASES:
             th0, est, ps = pipeline_case_setup(self.nominal, case)
