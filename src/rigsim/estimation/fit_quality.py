@@ -80,7 +80,7 @@ class FitQuality:
     def describe(self) -> str:
         """One phrase: χ²/dof, against what, the rms ratio, the verdict."""
         if self.dof <= 0:
-            head = f"no redundancy to judge ({self.noise_source})"
+            head = self.noise_source
         else:
             head = f"χ²/dof {_num(self.chi2_dof)} ({self.dof} dof, against {self.noise_source})"
             if math.isfinite(self.residual_rms) and math.isfinite(self.noise_rms) and self.noise_rms > 0:
@@ -89,8 +89,8 @@ class FitQuality:
         v = self.verdict
         tail = {"good": "fits within the noise",
                 "scaled": f"above the noise beyond chance: covariance scaled ×{_num(self.covariance_scale)}",
-                "poor": f"POOR FIT (limit χ²/dof {_num(self.limit)})",
-                "not judged": "not judged"}[v]
+                "poor": f"POOR FIT (limit χ²/dof {_num(self.limit)})" if self.dof > 0 else "POOR FIT",
+                "not judged": "no χ² to judge"}[v]
         probs = "; ".join(self.problems)
         return f"{head}: {tail}" + (f"; {probs}" if probs else "")
 

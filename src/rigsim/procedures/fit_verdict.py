@@ -49,7 +49,7 @@ class Cause:
         return {"cause": self.name, "chi2_dof": _finite(self.quality.chi2_dof), "verdict": self.quality.verdict}
 
     def text(self) -> str:
-        return f"{self.name} (χ²/dof {self.quality.chi2_dof:.3g})"
+        return f"{self.name} (χ²/dof {self.quality.chi2_dof:.3g})" if self.quality.dof > 0 else self.name
 
 
 @dataclass(frozen=True)
@@ -108,14 +108,14 @@ def diagnose(quality: FitQuality, alternatives: Iterable[Alternative]) -> list[C
             q = refit()
         except (ValueError, ArithmeticError, InputError, FloatingPointError, IndexError):
             continue
-        if q is None or q.poor or not math.isfinite(q.chi2_dof):
+        if q is None or q.poor or (q.dof > 0 and not math.isfinite(q.chi2_dof)):
             continue
-        if math.isfinite(quality.chi2_dof) and not q.chi2_dof * IMPROVEMENT <= quality.chi2_dof:
+        if q.dof > 0 and math.isfinite(quality.chi2_dof) and not q.chi2_dof * IMPROVEMENT <= quality.chi2_dof:
             continue
         found.append(Cause(name, q))
     # equal fits (to 6 digits) are the same explanation read several ways (one reflection is another
     # up to a rotation the fit absorbs): best first, equals in the order they were tested
-    return sorted(found, key=lambda c: float(f"{c.quality.chi2_dof:.6g}"))
+    return sorted(found, key=lambda c: float(f"{c.quality.chi2_dof:.6g}") if c.quality.dof > 0 else 0.0)
 
 
 def judge(quality: FitQuality, alternatives: Iterable[Alternative] = (), *, accept: bool, what: str,
@@ -155,7 +155,7 @@ def _causes_sentence(causes, tested) -> str:
     if causes:
         groups: dict[str, list[Cause]] = {}
         for c in causes:
-            groups.setdefault(f"{c.quality.chi2_dof:.6g}", []).append(c)
+            groups.setdefault(f"{c.quality.chi2_dof:.6g}" if c.quality.dof > 0 else c.name, []).append(c)
         parts = []
         for g in groups.values():
             if len(g) == 1:

@@ -14,11 +14,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from rigsim.errors import CliError, InputError
+from rigsim.estimation.fit_quality import FitQuality, not_judged
 from rigsim.estimation.null_search import numerical_jacobian, offset_model
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.imaging.screen import hole_spot_offset
 from rigsim.imaging.spot import THRESHOLD_SIGMA, SpotMeasurement, measure_spot
 from rigsim.optics.aiming import nominal_screen_homography
+from rigsim.procedures.fit_verdict import add_accept_option, judge
 from rigsim.rig.cube_mirror import Autocollimator, CubeMirrorRig
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -130,6 +132,47 @@ def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
     return m, sig, sm
 
 
+# ------------------------------------------------------------------------------ what one frame can judge
+
+NOISE_LIMIT = 5.0  # a frame whose background noise is this many times the detector model's is not of this camera
+HOLE_LIMIT = 2.0   # a hole whose size is off the rig's by more than this factor is not the diaphragm's hole
+
+
+def frame_noise_problems(rig: CubeMirrorRig, camera: str, frames: Mapping[str, np.ndarray]) -> tuple[list[str], str]:
+    """The frames whose background noise (clipped rms) exceeds :data:`NOISE_LIMIT` times the
+    rig's detector model at their level (the σ of every measurement on them rests on that model),
+    and a phrase with the largest ratio."""
+    from rigsim.procedures.centroid import detector_settings, frame_background
+
+    n = detector_settings(rig, camera).noise
+    out, worst = [], 0.0
+    for name, img in frames.items():
+        med, sd = frame_background(img)
+        model = float(np.sqrt(n.variance(max(med, n.offset_dn))))
+        ratio = sd / model if model > 0 else math.inf
+        worst = max(worst, ratio)
+        if not ratio <= NOISE_LIMIT:
+            out.append(f"{name}: background noise {sd:.3g} DN, {ratio:.3g}× the rig's {camera} model ({model:.3g} DN): "
+                       "a frame of another camera, or the rig's detector is not this camera's")
+    return out, f"background noise {worst:.3g}× the rig's {camera} model at most"
+
+
+def concentricity_quality(rig: CubeMirrorRig, m: dict, hole_dn: np.ndarray, spot_dn: np.ndarray,
+                          names=("HOLE", "SPOT")) -> FitQuality:
+    """What a hole/spot pair can judge (one measurement: no χ²): the frames' noise against the
+    aiming camera's model (:func:`frame_noise_problems`) and the hole's size against the rig's
+    diaphragm (its equivalent diameter, from the pixels above half its peak, within a factor
+    :data:`HOLE_LIMIT` of ``diaphragm_screen.hole_diameter_mm``)."""
+    problems, noise = frame_noise_problems(rig, "aiming-camera", dict(zip(names, (hole_dn, spot_dn))))
+    d = 2.0 * math.sqrt(max(m["hole_pixels"], 0) / math.pi) * rig.aiming_camera.object_pixel_mm
+    d0 = rig.diaphragm_screen.hole_diameter_mm
+    if not (d0 / HOLE_LIMIT <= d <= d0 * HOLE_LIMIT):
+        problems.append(f"{names[0]}: the hole is {d:.3g} mm across, the rig's is {d0:g} mm: not a frame of the lit "
+                        "hole with the return blocked")
+    return not_judged(f"one hole/spot pair, no χ²: hole {d:.3g} mm across (the rig's {d0:g} mm), {noise}",
+                      problems=problems)
+
+
 # ------------------------------------------------------------------------------ commands
 
 def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option: str = "--reading") -> dict[str, float]:
@@ -172,6 +215,7 @@ def add_cli(groups: dict) -> None:
                    "default the face's search start)")
     c.add_argument("--axis-order", default=None, help="nesting reading of the nominal model (default the rig's)")
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
+    add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
     a = sub.add_parser("autocollimator", help="the autocollimator's reading of a frame (seed 001)")
     acs = a.add_subparsers(dest="autocollimator_command", metavar="ACTION")
@@ -182,6 +226,7 @@ def add_cli(groups: dict) -> None:
     r.add_argument("frame", metavar="FRAME", help="autocollimator frame (PNG/TIFF/FITS)")
     r.add_argument("--rig", default="sun_sensor_3axis_autocollimator", help="rig file or default name")
     r.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
+    add_accept_option(r)
     r.set_defaults(func=cmd_autocollimator_read)
 
 
@@ -206,6 +251,10 @@ def cmd_concentricity(args) -> int:
     hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
     spot = read_image(args.spot, shape=shape, what="aiming-camera frame")
     m = measure_concentricity(rig, hole, spot)
+    q = concentricity_quality(rig, m, hole, spot)
+    verdict = judge(q, [("HOLE and SPOT swapped", lambda: concentricity_quality(
+        rig, measure_concentricity(rig, spot, hole), spot, hole, ("SPOT", "HOLE")))], accept=args.accept_poor_fit,
+        what="concentricity measurement")
     if not np.all(np.isfinite(m["offset_px"])):
         raise InputError(f"{args.spot}: no returned spot above 10 % of its peak outside the hole's glow")
     reading = parse_reading(args.reading, rig, faces.index(face))
@@ -221,7 +270,9 @@ def cmd_concentricity(args) -> int:
     res = {"kind": "concentricity", "rig": rig.name, "face": face, "hole_mm": m["hole_mm"], "spot_mm": m["spot_mm"],
            "offset_mm": m["offset_mm"], "offset_um": np.asarray(m["offset_mm"]) * 1000.0, "offset_px": m["offset_px"],
            "hole_pixels": m["hole_pixels"], "spot_pixels": m["spot_pixels"],
-           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, **st}
+           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, **st, "fit": verdict.block()}
+    for line in verdict.lines():
+        print(line)
     if args.json:
         _write_json(args.json, res)
     return 0
@@ -238,11 +289,16 @@ def cmd_autocollimator_read(args) -> int:
     m, sig, sm = read_autocollimator(rig, dn)
     if not sm.ok:
         raise InputError(f"{args.frame}: {sm.problem}")
+    problems, noise = frame_noise_problems(rig, "autocollimator", {str(args.frame): dn})
+    verdict = judge(not_judged(f"one spot on one frame, no χ²: {noise}", problems=problems),
+                    accept=args.accept_poor_fit, what="autocollimator reading")
     print(f"reading θx {m[0]:+.4f}″ ± {sig[0]:.4f}″, θy {m[1]:+.4f}″ ± {sig[1]:.4f}″ (spot at u {sm.uv[0]:.3f}, "
           f"v {sm.uv[1]:.3f} px)")
     res = {"kind": "autocollimator reading", "rig": rig.name, "reading_arcsec": m, "sigma_arcsec": sig,
            "spot_uv_px": sm.uv, "spot_sigma_uv_px": sm.sigma_uv, "peak_dn": sm.peak_dn,
-           "background_dn": sm.background_dn}
+           "background_dn": sm.background_dn, "fit": verdict.block()}
+    for line in verdict.lines():
+        print(line)
     if args.json:
         _write_json(args.json, res)
     print(json.dumps({"reading_arcsec": m.tolist(), "sigma_arcsec": sig.tolist()}))
