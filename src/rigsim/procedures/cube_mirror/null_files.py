@@ -198,6 +198,20 @@ def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option:
     return out
 
 
+def parse_offset(text: str | None, option: str) -> np.ndarray:
+    """``"X,Y"`` (px, each finite and within ±10⁴) → (2,); None: (0, 0)."""
+    if text is None:
+        return np.zeros(2)
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        v = np.array([float(p) for p in parts], float)
+    except ValueError:
+        v = np.array([])
+    if v.shape != (2,) or not np.all(np.isfinite(v)) or np.any(np.abs(v) > 1e4):
+        raise CliError(f"{option} = {text!r}: expected two numbers X,Y in px, each within ±10000")
+    return v
+
+
 def add_cli(groups: dict) -> None:
     sub = groups["top"]
     c = sub.add_parser(
@@ -214,6 +228,10 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--reading", default=None, help="turntable reading of the frames, e.g. X=181.4,Y=0.55 (degrees; "
                    "default the face's search start)")
     c.add_argument("--axis-order", default=None, help="nesting reading of the nominal model (default the rig's)")
+    c.add_argument("--null-offset-px", default=None, metavar="X,Y",
+                   help="the offset (spot − hole, aiming-camera px) at which your aiming camera shows concentricity: its "
+                        "mounting offset, as your procedure defines the null (`run cube-mirror --export-frames` writes the "
+                        "campaign's in null_frames.csv); default 0,0")
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
@@ -258,19 +276,29 @@ def cmd_concentricity(args) -> int:
     if not np.all(np.isfinite(m["offset_px"])):
         raise InputError(f"{args.spot}: no returned spot above 10 % of its peak outside the hole's glow")
     reading = parse_reading(args.reading, rig, faces.index(face))
-    st = null_step(rig, reading, m["offset_px"], args.axis_order)
+    zero = parse_offset(args.null_offset_px, "--null-offset-px")
+    off = np.asarray(m["offset_px"], float) - zero
+    thr = rig.aiming_camera.concentric_threshold_px
+    nulled = bool(np.all(np.abs(off) < thr))
+    st = null_step(rig, reading, off, args.axis_order)
     px_um = rig.aiming_camera.object_pixel_mm * 1000.0
     print(f"hole centre {m['hole_mm'][0]:+.4f}, {m['hole_mm'][1]:+.4f} mm; spot centre {m['spot_mm'][0]:+.4f}, "
           f"{m['spot_mm'][1]:+.4f} mm (screen axes)")
     print(f"offset spot − hole: x {m['offset_px'][0]:+.3f} px, y {m['offset_px'][1]:+.3f} px "
           f"({m['offset_mm'][0] * 1000:+.1f}, {m['offset_mm'][1] * 1000:+.1f} µm on the screen; 1 px = {px_um:.1f} µm)")
-    print("step to the null: " + ", ".join(f"{k} {v:+.5f}°" for k, v in st["step_deg"].items())
-          + "; next command " + ", ".join(f"{k}={v:.4f}°" for k, v in st["next_reading_deg"].items())
-          + (f" (rounded to {st['command_resolution_deg']:g}°)" if st["command_resolution_deg"] else ""))
+    if np.any(zero != 0):
+        print(f"against the null offset ({zero[0]:+.3f}, {zero[1]:+.3f}) px: x {off[0]:+.3f} px, y {off[1]:+.3f} px")
+    if nulled:
+        print(f"concentric: both offsets below the rig's threshold ({thr:g} px); this reading is the face's null")
+    else:
+        print("step to the null: " + ", ".join(f"{k} {v:+.5f}°" for k, v in st["step_deg"].items())
+              + "; next command " + ", ".join(f"{k}={v:.4f}°" for k, v in st["next_reading_deg"].items())
+              + (f" (rounded to {st['command_resolution_deg']:g}°)" if st["command_resolution_deg"] else ""))
     res = {"kind": "concentricity", "rig": rig.name, "face": face, "hole_mm": m["hole_mm"], "spot_mm": m["spot_mm"],
            "offset_mm": m["offset_mm"], "offset_um": np.asarray(m["offset_mm"]) * 1000.0, "offset_px": m["offset_px"],
            "hole_pixels": m["hole_pixels"], "spot_pixels": m["spot_pixels"],
-           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, **st, "fit": verdict.block()}
+           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, "null_offset_px": zero,
+           "offset_from_null_px": off, "threshold_px": thr, "nulled": nulled, **st, "fit": verdict.block()}
     for line in verdict.lines():
         print(line)
     if args.json:
@@ -294,9 +322,12 @@ def cmd_autocollimator_read(args) -> int:
                     accept=args.accept_poor_fit, what="autocollimator reading")
     print(f"reading θx {m[0]:+.4f}″ ± {sig[0]:.4f}″, θy {m[1]:+.4f}″ ± {sig[1]:.4f}″ (spot at u {sm.uv[0]:.3f}, "
           f"v {sm.uv[1]:.3f} px)")
+    thr = rig.autocollimator.null_threshold_arcsec
+    nulled = bool(np.all(np.abs(m) < thr))
+    print(f"{'nulled' if nulled else 'not nulled'}: the rig's null threshold is {thr:g}″ on both readings")
     res = {"kind": "autocollimator reading", "rig": rig.name, "reading_arcsec": m, "sigma_arcsec": sig,
            "spot_uv_px": sm.uv, "spot_sigma_uv_px": sm.sigma_uv, "peak_dn": sm.peak_dn,
-           "background_dn": sm.background_dn, "fit": verdict.block()}
+           "background_dn": sm.background_dn, "threshold_arcsec": thr, "nulled": nulled, "fit": verdict.block()}
     for line in verdict.lines():
         print(line)
     if args.json:
