@@ -1,0 +1,133 @@
+"""The cube-mirror file chain closes: a rendered campaign's exported files, run through the commands
+as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars), give the
+campaign's decisions (each null search's next command and its null) and numbers (the three
+rotations to 1e-9 relative, their covariances to 1e-6, the same fit verdicts).
+
+Cheap campaigns: a ±60° sweep every 30° at 16 spp; seed 000 with a coarse aiming camera (400 × 300 px
+of 60 µm: 1/16 of the pixels, the same field), seed 001 with the autocollimator's frames at 64 spp."""
+
+import shutil
+
+import numpy as np
+import pytest
+from file_chain import assert_rel, derived_rig, read, rigsim
+
+from rigsim.cli import main
+from rigsim.files import Column, read_table
+
+
+def _campaign(d, rig, fmt="png", *extra):
+    """The campaign in-process, its frames exported, renamed (reverse order) with the angle log rewritten."""
+    assert main(["run", "cube-mirror", "--rig", str(rig), "--sweep-step", "30", "--sweep-spp", "16", "--no-budget",
+                 "--repeat-frames", "0", "--export-frames", str(d / "export"), "--frame-format", fmt,
+                 "--out", str(d / "report"), "--quiet", *extra]) == 0
+    bare = d / "bare"
+    bare.mkdir()
+    t = read_table(d / "export" / "angles.csv", [Column("frame", kind="str")], what="angle log")
+    names = {f: f"img_{k:03d}.{fmt.replace('tiff', 'tif')}" for k, f in enumerate(reversed(list(t["frame"])))}
+    for f, g in names.items():
+        shutil.copy(d / "export" / f, bare / g)
+    text = (d / "export" / "angles.csv").read_text()
+    for f, g in names.items():
+        text = text.replace(f + ",", g + ",")
+    (bare / "angles.csv").write_text(text)
+    shutil.copy(d / "export" / "nulls.csv", bare / "nulls.csv")
+    return read(d / "report" / "campaign.json"), bare
+
+
+def _stages(bare, rig, frames):
+    """centroid → calibrate sun-sensor → triad → compose, each in its own process."""
+    rigsim("centroid", *frames, "--rig", rig, "--out", "c.csv", "--quiet", cwd=bare)
+    rigsim("calibrate", "sun-sensor", "--rig", rig, "--angles", "angles.csv", "--centroids", "c.csv", "--out", "sun.json",
+           "--opencv", "cam.yml", cwd=bare)
+    rigsim("triad", "--nulls", "nulls.csv", "--rig", rig, "--out", "cube.json", cwd=bare)
+    p = rigsim("compose", "--cube-from-rot", "cube.json", "--sun-from-rot", "sun.json", "--out", "cs.json", cwd=bare)
+    assert "fit: no fit of its own; its inputs': cube_from_rot" in p.stdout
+    return {k: read(bare / f"{k}.json") for k in ("sun", "cube", "cs")}
+
+
+def _same_numbers(out, camp):
+    for k, b in (("sun", "R_sun_from_rot"), ("cube", "R_cube_from_rot"), ("cs", "R_cube_from_sun")):
+        assert_rel(out[k][b]["matrix"], camp[b]["matrix"])
+        assert_rel(out[k][b]["covariance"]["matrix"], camp[b]["covariance"]["matrix"], rel=1e-6)
+        C = np.array(out[k][b]["covariance"]["matrix"])
+        assert np.array_equal(C, C.T)  # written exactly symmetric
+    i = out["sun"]["intrinsics"]
+    assert_rel([i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"]], [camp["intrinsics"][k] for k in ("fx", "fy", "cx", "cy")])
+    # the campaign's sweep fit and the file route's are judged alike
+    assert out["sun"]["fit"]["verdict"] == camp["calibration"]["fit"]["verdict"] != "poor"
+    assert out["sun"]["fit"]["chi2_dof"] == pytest.approx(camp["calibration"]["fit"]["chi2_dof"], rel=1e-9)
+    assert out["cube"]["fit"]["verdict"] in ("good", "scaled") and out["cs"]["fit"]["inputs"]["sun_from_rot"]
+
+
+def _decisions(camp):
+    """Per null frame (in the search's order): (face, reading, the campaign's decision): 'null' or the next reading."""
+    out = []
+    for s in camp["searches"]:
+        for i, st in enumerate(s["steps"]):
+            last = i == len(s["steps"]) - 1
+            assert not last or s["converged"]
+            out.append((s["face"], st["reading_deg"], "null" if last else s["steps"][i + 1]["reading_deg"]))
+    return out
+
+
+@pytest.fixture(scope="module")
+def two_axis(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cm2")
+    rig = derived_rig("sun_sensor_2axis_diaphragm", d / "rig.toml", {
+        r"resolution_px = \[1600, 1200\]": "resolution_px = [400, 300]",
+        r"pixel_pitch_um = 15\.0": "pixel_pitch_um = 60.0"})
+    camp, bare = _campaign(d, rig)
+    return d, rig, camp, bare
+
+
+@pytest.mark.render
+def test_two_axis_campaign_closes_through_the_commands(two_axis):
+    d, rig, camp, bare = two_axis
+    out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
+    _same_numbers(out, camp)
+    # every null-search pair through `concentricity`, with the null offset the export records: the campaign's
+    # decision (the next command, or this is the null) and its offset
+    t = read_table(d / "export" / "null_frames.csv", [Column("frame", kind="str"), Column("kind", kind="str"),
+                                                       Column("face", kind="str"), Column("x", "deg"), Column("y", "deg"),
+                                                       Column("null_offset_x", "px"), Column("null_offset_y", "px")])
+    holes = [i for i, k in enumerate(t["kind"]) if k == "aiming-hole"]
+    decisions = _decisions(camp)
+    assert len(holes) == len(decisions) >= 3 and any(dec != "null" for *_, dec in decisions)
+    for n, (i, (face, reading, dec)) in enumerate(zip(holes, decisions)):
+        shutil.copy(d / "export" / t["frame"][i], bare / f"n{n}h.png")
+        shutil.copy(d / "export" / t["frame"][i + 1], bare / f"n{n}s.png")
+        assert t["face"][i] == face and (t["x_deg"][i], t["y_deg"][i]) == (reading["X"], reading["Y"])
+        rigsim("concentricity", f"n{n}h.png", f"n{n}s.png", "--rig", rig, "--face", face,
+               "--reading", f"X={float(t['x_deg'][i])!r},Y={float(t['y_deg'][i])!r}",
+               f"--null-offset-px={float(t['null_offset_x_px'][i])!r},{float(t['null_offset_y_px'][i])!r}", "--json", f"n{n}.json",
+               cwd=bare)
+        r = read(bare / f"n{n}.json")
+        step = next(s for s in camp["searches"] if s["face"] == face)["steps"]
+        measured = [s["measured"] for s in step if s["reading_deg"] == reading][0]
+        assert_rel(r["offset_from_null_px"], measured)
+        assert r["nulled"] == (dec == "null") and r["fit"]["verdict"] == "not judged"
+        if dec != "null":
+            assert r["next_reading_deg"] == pytest.approx(dec, abs=1e-9)
+    # the OpenCV camera the calibration wrote is read by `rig import-camera`
+    rigsim("rig", "import-camera", "cam.yml", "--rig", rig, "--out", "imported.toml", cwd=bare)
+    assert "focal_length_mm" in (bare / "imported.toml").read_text()
+
+
+@pytest.mark.render
+def test_three_axis_campaign_closes_through_the_commands(tmp_path):
+    """Seed 001 with TIFF frames: the sweep and the autocollimator's readings and null decisions."""
+    rig = "sun_sensor_3axis_autocollimator"
+    camp, bare = _campaign(tmp_path, rig, "tiff", "--autocollimator-spp", "64")
+    out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
+    _same_numbers(out, camp)
+    t = read_table(tmp_path / "export" / "null_frames.csv", [Column("frame", kind="str"), Column("face", kind="str")])
+    decisions = _decisions(camp)
+    assert len(t["frame"]) == len(decisions)
+    for n, (f, (face, reading, dec)) in enumerate(zip(t["frame"], decisions)):
+        shutil.copy(tmp_path / "export" / f, bare / f"a{n}.tif")
+        rigsim("autocollimator", "read", f"a{n}.tif", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
+        r = read(bare / f"a{n}.json")
+        step = next(s for s in camp["searches"] if s["face"] == face)["steps"]
+        assert_rel(r["reading_arcsec"], [s["measured"] for s in step if s["reading_deg"] == reading][0])
+        assert r["nulled"] == (dec == "null")
