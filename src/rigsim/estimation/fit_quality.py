@@ -89,7 +89,8 @@ class FitQuality:
         v = self.verdict
         tail = {"good": "fits within the noise",
                 "scaled": f"above the noise beyond chance: covariance scaled ×{_num(self.covariance_scale)}",
-                "poor": f"POOR FIT (limit χ²/dof {_num(self.limit)})" if self.dof > 0 else "POOR FIT",
+                "poor": (f"POOR FIT (limit χ²/dof {_num(self.limit)})" if self.dof > 0 and not self.chi2_dof <= self.limit
+                         else "POOR FIT"),
                 "not judged": "no χ² to judge"}[v]
         probs = "; ".join(self.problems)
         return f"{head}: {tail}" + (f"; {probs}" if probs else "")

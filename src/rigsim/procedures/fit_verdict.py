@@ -99,8 +99,8 @@ def add_accept_option(parser) -> None:
 
 
 def diagnose(quality: FitQuality, alternatives: Iterable[Alternative]) -> list[Cause]:
-    """Refit under each alternative; the ones whose refit is not poor and whose χ²/dof is at least
-    :data:`IMPROVEMENT` times smaller than the data's as given, best first. A refit that fails
+    """Refit under each alternative; the ones whose refit is not poor and (when the data as given fail
+    by their χ² alone) whose χ²/dof is at least :data:`IMPROVEMENT` times smaller, best first. A refit that fails
     (too few frames left, a non-physical solution) is no cause."""
     found = []
     for name, refit in alternatives:
@@ -110,8 +110,9 @@ def diagnose(quality: FitQuality, alternatives: Iterable[Alternative]) -> list[C
             continue
         if q is None or q.poor or (q.dof > 0 and not math.isfinite(q.chi2_dof)):
             continue
-        if q.dof > 0 and math.isfinite(quality.chi2_dof) and not q.chi2_dof * IMPROVEMENT <= quality.chi2_dof:
-            continue
+        if (not quality.problems and q.dof > 0 and math.isfinite(quality.chi2_dof)
+                and not q.chi2_dof * IMPROVEMENT <= quality.chi2_dof):
+            continue  # a failed model check is fixed by passing it; a χ² only by a much better one
         found.append(Cause(name, q))
     # equal fits (to 6 digits) are the same explanation read several ways (one reflection is another
     # up to a rotation the fit absorbs): best first, equals in the order they were tested

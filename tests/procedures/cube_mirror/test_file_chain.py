@@ -109,9 +109,42 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
         assert r["nulled"] == (dec == "null") and r["fit"]["verdict"] == "not judged"
         if dec != "null":
             assert r["next_reading_deg"] == pytest.approx(dec, abs=1e-9)
-    # the OpenCV camera the calibration wrote is read by `rig import-camera`
+        # the rendered offset (before the null offset) against the exact trace
+        true = [s["true"] for s in step if s["reading_deg"] == reading][0]
+        assert np.hypot(*(np.array(r["offset_px"]) - true)) < 0.2
+    # the OpenCV camera the calibration wrote is read by `rig import-camera` and by OpenCV
     rigsim("rig", "import-camera", "cam.yml", "--rig", rig, "--out", "imported.toml", cwd=bare)
     assert "focal_length_mm" in (bare / "imported.toml").read_text()
+    import cv2
+
+    fs = cv2.FileStorage(str(bare / "cam.yml"), cv2.FILE_STORAGE_READ)
+    K, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+    i, dd = out_sun_intrinsics(bare)
+    assert_rel([K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist[0, 0], dist[0, 1]], [*i, *dd])
+    assert int(fs.getNode("image_width").real()) == 1024 and (bare / "sun.residuals.png").stat().st_size > 10_000
+
+
+def out_sun_intrinsics(bare):
+    sun = read(bare / "sun.json")
+    i = sun["intrinsics"]
+    assert sun["n_frames"] + sun["n_outliers"] + sun["n_outside_field"] + sun["n_rejected"] == 19
+    return [i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"]], [sun["distortion"]["k1"], sun["distortion"]["k2"]]
+
+
+def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
+    """A frame of the wrong size, a rig without an aiming camera, a missing frame: exit 2, one line."""
+    from rigsim.files import write_image
+
+    d, rig, _, _ = two_axis
+    hole, spot = (str(d / "export" / f) for f in ("aiming-hole_000.png", "aiming-spot_001.png"))
+    write_image(tmp_path / "small.png", np.zeros((100, 100), np.uint16))
+    for args, msg in ((["autocollimator", "read", str(tmp_path / "small.png")],
+                       "small.png: 100×100 px (width×height); expected 1280×1024 px"),
+                      (["concentricity", hole, spot, "--rig", "sun_sensor_3axis_autocollimator"], "no aiming camera"),
+                      (["concentricity", hole, str(tmp_path / "nope.png"), "--rig", str(rig)], "nope.png: no such file")):
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert msg in err and len(err.splitlines()) == 1, err
 
 
 @pytest.mark.render

@@ -180,18 +180,28 @@ def solve_fit_quality(rig: BoresightRig, ref_cams: Sequence[str], ref_uv: np.nda
 
 
 def solve_alternatives(rig: BoresightRig, ref_cams, ref_uv, ref_sigma, cams, uv, noise_source: str) -> list:
-    """(name, refit) for the spot tables read another way: u and v swapped, M1 and M2 swapped, the
-    detectors mirrored (u → W−1−u)."""
+    """(name, refit) for the spot tables read another way — u and v swapped, M1 and M2 swapped, the
+    detectors mirrored (u → W−1−u) — in the reference tables, the measured ones, or both."""
     W = {c.name: CameraGeometry.from_rig(c).width_px for c in rig.cameras}
-
-    def q(f):
-        return lambda: solve_fit_quality(rig, ref_cams, f(ref_uv, ref_cams), ref_sigma, cams, f(uv, cams), noise_source)
 
     def mirror(a, cs):
         a = a.copy()
         a[..., 0] = np.array([W[c] for c in cs], float)[:, None] - 1.0 - a[..., 0]
         return a
 
-    return [("u and v swapped (u_m1_px with v_m1_px, u_m2_px with v_m2_px)", q(lambda a, cs: a[..., ::-1])),
-            ("M1 and M2 swapped", q(lambda a, cs: a[:, ::-1])),
-            ("detectors mirrored (u → W − 1 − u)", q(mirror))]
+    transforms = [("u and v swapped (u_m1_px with v_m1_px, u_m2_px with v_m2_px)", lambda a, cs: a[..., ::-1]),
+                  ("M1 and M2 swapped", lambda a, cs: a[:, ::-1]),
+                  ("the detectors mirrored (u → W − 1 − u)", mirror)]
+    out = []
+    for name, f in transforms:
+        for where, on_ref, on_meas in (("the reference tables", True, False), ("the measured tables", False, True),
+                                       ("every table", True, True)):
+            if on_meas and not len(cams):
+                continue
+
+            def refit(f=f, on_ref=on_ref, on_meas=on_meas):
+                return solve_fit_quality(rig, ref_cams, f(ref_uv, ref_cams) if on_ref else ref_uv, ref_sigma, cams,
+                                         f(uv, cams) if on_meas else uv, noise_source)
+
+            out.append((f"{name} in {where}", refit))
+    return out
