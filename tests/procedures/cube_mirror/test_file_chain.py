@@ -77,7 +77,7 @@ def two_axis(tmp_path_factory):
     rig = derived_rig("sun_sensor_2axis_diaphragm", d / "rig.toml", {
         r"resolution_px = \[1600, 1200\]": "resolution_px = [400, 300]",
         r"pixel_pitch_um = 15\.0": "pixel_pitch_um = 60.0"})
-    camp, bare = _campaign(d, rig)
+    camp, bare = _campaign(d, rig, "tiff")
     return d, rig, camp, bare
 
 
@@ -95,10 +95,10 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
     decisions = _decisions(camp)
     assert len(holes) == len(decisions) >= 3 and any(dec != "null" for *_, dec in decisions)
     for n, (i, (face, reading, dec)) in enumerate(zip(holes, decisions)):
-        shutil.copy(d / "export" / t["frame"][i], bare / f"n{n}h.png")
-        shutil.copy(d / "export" / t["frame"][i + 1], bare / f"n{n}s.png")
+        shutil.copy(d / "export" / t["frame"][i], bare / f"n{n}h.tif")
+        shutil.copy(d / "export" / t["frame"][i + 1], bare / f"n{n}s.tif")
         assert t["face"][i] == face and (t["x_deg"][i], t["y_deg"][i]) == (reading["X"], reading["Y"])
-        rigsim("concentricity", f"n{n}h.png", f"n{n}s.png", "--rig", rig, "--face", face,
+        rigsim("concentricity", f"n{n}h.tif", f"n{n}s.tif", "--rig", rig, "--face", face,
                "--reading", f"X={float(t['x_deg'][i])!r},Y={float(t['y_deg'][i])!r}",
                f"--null-offset-px={float(t['null_offset_x_px'][i])!r},{float(t['null_offset_y_px'][i])!r}", "--json", f"n{n}.json",
                cwd=bare)
@@ -136,7 +136,7 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
     from rigsim.files import write_image
 
     d, rig, _, _ = two_axis
-    hole, spot = (str(d / "export" / f) for f in ("aiming-hole_000.png", "aiming-spot_001.png"))
+    hole, spot = (str(d / "export" / f) for f in ("aiming-hole_000.tif", "aiming-spot_001.tif"))
     write_image(tmp_path / "small.png", np.zeros((100, 100), np.uint16))
     for args, msg in ((["autocollimator", "read", str(tmp_path / "small.png")],
                        "small.png: 100×100 px (width×height); expected 1280×1024 px"),
@@ -149,17 +149,18 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
 
 @pytest.mark.render
 def test_three_axis_campaign_closes_through_the_commands(tmp_path):
-    """Seed 001 with TIFF frames: the sweep and the autocollimator's readings and null decisions."""
+    """Seed 001 (PNG frames; seed 000's test takes TIFF): the sweep, and the autocollimator's readings and null
+    decisions."""
     rig = "sun_sensor_3axis_autocollimator"
-    camp, bare = _campaign(tmp_path, rig, "tiff", "--autocollimator-spp", "64")
+    camp, bare = _campaign(tmp_path, rig, "png", "--autocollimator-spp", "64")
     out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
     _same_numbers(out, camp)
     t = read_table(tmp_path / "export" / "null_frames.csv", [Column("frame", kind="str"), Column("face", kind="str")])
     decisions = _decisions(camp)
     assert len(t["frame"]) == len(decisions)
     for n, (f, (face, reading, dec)) in enumerate(zip(t["frame"], decisions)):
-        shutil.copy(tmp_path / "export" / f, bare / f"a{n}.tif")
-        rigsim("autocollimator", "read", f"a{n}.tif", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
+        shutil.copy(tmp_path / "export" / f, bare / f"a{n}.png")
+        rigsim("autocollimator", "read", f"a{n}.png", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
         r = read(bare / f"a{n}.json")
         step = next(s for s in camp["searches"] if s["face"] == face)["steps"]
         assert_rel(r["reading_arcsec"], [s["measured"] for s in step if s["reading_deg"] == reading][0])

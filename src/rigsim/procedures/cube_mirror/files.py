@@ -320,8 +320,21 @@ def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: 
     independent reading errors of σ ``sigma_rad`` per axis (central differences). ``eq8``: the reading of
     the normals (:data:`rigsim.estimation.cube_attitude.EQ8_READINGS`)."""
     R0, _, _ = cube_from_rot_triad(readings, faces, axis_order, d_rot, eq8)
+
+    def delta(rr):
+        R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot, eq8)
+        return Rotation.from_matrix(R @ R0.T).as_rotvec()
+
+    cols = _reading_columns(readings, sigma_rad, delta, step_rad)
+    J = np.array(cols).T if cols else np.zeros((3, 0))
+    return R0, J @ J.T
+
+
+def _reading_columns(readings: Sequence, sigma_rad: dict[str, float], f, step_rad: float) -> list:
+    """σ·∂f/∂θ for each reading's each axis of σ > 0 (central differences): the columns of f's error
+    propagation from independent reading errors."""
     cols = []
-    for i in range(2):
+    for i in range(len(readings)):
         for lab, s in sigma_rad.items():
             if s <= 0:
                 continue
@@ -329,11 +342,9 @@ def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: 
             for sgn in (1.0, -1.0):
                 rr = [dict(r) for r in readings]
                 rr[i][lab] = rr[i].get(lab, 0.0) + sgn * step_rad
-                R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot, eq8)
-                d.append(Rotation.from_matrix(R @ R0.T).as_rotvec())
+                d.append(np.asarray(f(rr), float))
             cols.append((d[0] - d[1]) / (2 * step_rad) * s)
-    J = np.array(cols).T if cols else np.zeros((3, 0))
-    return R0, J @ J.T
+    return cols
 
 
 CUBE_ALLOWANCE_ARCSEC = 60.0  # normals this far from a perfect cube's angle are still a cube on a real table
@@ -357,17 +368,7 @@ def triad_fit_quality(readings: Sequence, faces: Sequence[str], axis_order: str,
     rr = [dict(r) for r in readings]
     a = angle(rr)
     a_faces = float(angle_between(FACE_NORMALS[faces[0]], FACE_NORMALS[faces[1]]))
-    var = 0.0
-    for i in range(2):
-        for lab, s in sigma_rad.items():
-            if s <= 0:
-                continue
-            d = []
-            for sgn in (1.0, -1.0):
-                x = [dict(r) for r in rr]
-                x[i][lab] = x[i].get(lab, 0.0) + sgn * step_rad
-                d.append(angle(x))
-            var += ((d[0] - d[1]) / (2 * step_rad) * s) ** 2
+    var = float(sum(c**2 for c in _reading_columns(rr, sigma_rad, angle, step_rad)))
     dev = (a - a_faces) * ARCSEC_PER_RAD
     sig = float(np.sqrt(var)) * ARCSEC_PER_RAD
     if not sig > 0:
