@@ -3,9 +3,10 @@
 The tables of docs/formats.md are parsed: each (file, writer, reader) pair they name among rigsim's commands
 must be exercised by a test listed in COVERED (the family file chains run writers and readers as
 subprocesses: tests/procedures/*/test_file_chain.py and the families' file tests); a pair added to the docs
-without a test, or a listed test that no longer exists, fails here. The pairs no chain covers run below, as
-a lab would run them: `render`'s frames through the commands that read each kind, `render target`'s poses
-back into it, and a covariance from another writer (asymmetric by rounding) through `compose`."""
+without a test, or a listed test that no longer exists, fails here. The pairs no chain covers run below
+(in-process: the chains already run every reader as a subprocess): `render`'s frames through the commands
+that read each kind, `render target`'s poses back into it, and a covariance from another writer
+(asymmetric by rounding) through `compose`."""
 
 import importlib.util
 import json
@@ -14,7 +15,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from file_chain import derived_rig, read, rigsim
+from file_chain import derived_rig, read
+
+from rigsim.cli import main
+
+
+def rigsim(*args, cwd=None, ok=(0,)):
+    """``rigsim ARGS`` in this process (from ``cwd``); its status must be in ``ok``."""
+    import contextlib
+    import os
+
+    with contextlib.chdir(cwd or os.getcwd()):
+        rc = main([str(a) for a in args])
+    assert rc in ok, (args, rc)
 
 ROOT = Path(__file__).resolve().parents[2]
 CHAIN = "procedures/cube_mirror/test_file_chain.py::"
@@ -165,7 +178,7 @@ def test_spread_poses_are_rendered_again(tmp_path):
 
 
 @pytest.mark.parametrize("asym, ok", [(1e-7, True), (1e-4, False)])
-def test_a_covariance_from_another_writer_is_symmetrised_within_a_tolerance(tmp_path, asym, ok):
+def test_a_covariance_from_another_writer_is_symmetrised_within_a_tolerance(tmp_path, capsys, asym, ok):
     """compose reads a covariance whose C − Cᵀ is 1e-7 of its largest variance (another writer's rounding) and
     writes its result exactly symmetric; 1e-4 is refused with one line."""
     from scipy.spatial.transform import Rotation
@@ -176,11 +189,12 @@ def test_a_covariance_from_another_writer_is_symmetrised_within_a_tolerance(tmp_
     blk = {"matrix": Rotation.from_euler("xz", [30, 12], degrees=True).as_matrix().tolist(), "covariance": {"matrix": Ca.tolist()}}
     (tmp_path / "s.json").write_text(json.dumps({"R_sun_from_rot": blk}))
     (tmp_path / "c.json").write_text(json.dumps({"R_cube_from_rot": {**blk, "covariance": {"matrix": C.tolist()}}}))
-    p = rigsim("compose", "--cube-from-rot", "c.json", "--sun-from-rot", "s.json", "--out", "cs.json", cwd=tmp_path,
-               ok=(0,) if ok else (2,))
+    rigsim("compose", "--cube-from-rot", "c.json", "--sun-from-rot", "s.json", "--out", "cs.json", cwd=tmp_path,
+           ok=(0,) if ok else (2,))
+    out, err = capsys.readouterr()
     if ok:
         got = np.array(read(tmp_path / "cs.json")["R_cube_from_sun"]["covariance"]["matrix"])
-        assert np.array_equal(got, got.T) and "not judged (no fit block)" in p.stdout
+        assert np.array_equal(got, got.T) and "not judged (no fit block)" in out
     else:
-        assert "s.json: R_sun_from_rot.covariance: not symmetric" in p.stderr and len(p.stderr.splitlines()) == 1
+        assert "s.json: R_sun_from_rot.covariance: not symmetric" in err and len(err.splitlines()) == 1
         assert not (tmp_path / "cs.json").exists()
