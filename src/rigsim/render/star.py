@@ -79,9 +79,18 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
     fx = star_frame_effects(sky, seed=int(seed), noiseless=noiseless)
     if fx.photons is not None:
         photons = photons + fx.photons
+    if fx.stars_uv is not None and len(fx.stars_uv):  # stars beyond the catalogue, with the catalogue stars' PSF
+        photons = photons + render_stars(fx.stars_uv, fx.stars_photons, truth.shape_hw, sigma)
+    if fx.illumination is not None:
+        photons = photons * fx.illumination
     if traced_truth is not None:
         fx.truth["traced_psf"] = traced_truth
     truth_dict = truth.as_dict()
+    if fx.illumination is not None and len(truth):  # the share of each star's light that reaches the detector
+        H, W = truth.shape_hw
+        iu = np.clip(np.rint(truth.uv[:, 0]).astype(int), 0, W - 1)
+        iv = np.clip(np.rint(truth.uv[:, 1]).astype(int), 0, H - 1)
+        fx.truth["vignetting"]["star_illumination"] = fx.illumination[iv, iu].tolist()
     if fx.truth:
         truth_dict["effects"] = fx.truth
     fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth_dict, truth_object=truth,
@@ -106,8 +115,10 @@ def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0, cam
     d = s.detector
     t = Time(rig.sky.epoch_year, format="jyear", scale="tt") + time_s * u.s
     model = f"QE {d.quantum_efficiency:g} K {d.gain_dn_per_e:g}/e read {d.read_noise_e:g}e {d.adc_bits}b"
+    if d.container_bits is not None:
+        model += f" in {d.container_bits}b"
     cards = [list(c) for c in star_frame_header(s.camera() if camera is None else camera, R_cam_from_icrs,
-                                                 exposure_s=d.exposure_s, gain_e_per_dn=1.0 / d.gain_dn_per_e,
+                                                 exposure_s=d.exposure_s, gain_e_per_dn=1.0 / (d.gain_dn_per_e * d.code_step_dn),
                                                  date_obs=t.utc.isot, seed=seed, detector=model)]
     if wcs_name:
         cards.append(["WCSNAME", wcs_name[:68], "where the WCS comes from"])

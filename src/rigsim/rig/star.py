@@ -174,6 +174,18 @@ class Identification(_Model):
     search_radius_px: float = Field(60.0, gt=0.0, le=2000.0, description="largest offset of a star from its predicted position")
     match_tolerance_px: float = Field(2.0, gt=0.0, le=50.0, description="final residual tolerance after the attitude fit")
     min_matches: int = Field(4, ge=3, le=1000)
+    focal_length_tolerance: float = Field(0.05, ge=0.0, le=0.3, description="lost in space: the nominal focal length's "
+                                          "largest relative error (the true f is searched in f / (1 ± this))")
+    pattern_tolerance_px: float = Field(1.0, gt=0.0, le=10.0, description="lost in space: centroid error allowed in "
+                                        "a 4-star pattern's edges (noise and distortion the nominal model leaves)")
+    false_match_probability: float = Field(1e-9, gt=0.0, le=1e-3, description="lost in space: the largest accepted "
+                                           "chance that an identification is a coincidence")
+
+    def lost_in_space_settings(self) -> dict:
+        """The keyword arguments of :func:`rigsim.estimation.star_lis.identify_lost_in_space`."""
+        return {"focal_length_tolerance": self.focal_length_tolerance, "match_tolerance_px": self.match_tolerance_px,
+                "min_matches": self.min_matches, "pattern_tolerance_px": self.pattern_tolerance_px,
+                "false_match_probability": self.false_match_probability}
 
 
 class Nominal(_Model):
@@ -206,6 +218,13 @@ class Calibration(_Model):
     ads_variant: Literal["exact", "improved"] = "exact"
     process_noise_px: float = Field(0.0, ge=0.0, le=100.0, description="EKF process noise per frame (1σ)")
     centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
+    distortion_terms: Literal["auto", "none", "k1", "k1,k2"] = Field(
+        "auto", description="distortion fitted with the intrinsics and attitudes together (the joint fit): 'auto' "
+                            "= k1, and k2 when the data support it (χ² lower by more than 9)")
+    background: Literal["model", "map"] = Field(
+        "model", description="the sky background the stars are found against: 'model' = one level, the detector "
+                             "model's offset and noise; 'map' = a level and noise map measured on each frame (sky "
+                             "glow, gradients, vignetting), stars found by a matched filter (Gaussian fit only)")
     single_pixel_filter: StrictBool = Field(True, description="repair single-pixel events (hot pixels, particle "
                                                                "hits) before extracting the stars")
     reject_poor_fits: StrictBool = Field(True, description="leave out of the calibration the stars whose PSF fit is "
@@ -217,6 +236,14 @@ class Calibration(_Model):
     fixed_pattern: Literal["none", "sequence"] = Field(
         "none", description="subtract the detector's fixed pattern (hot pixels, DSNU) estimated from the sequence "
                             "itself (per-pixel median over the frames) before extracting the stars")
+
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.background == "map" and self.centroid_method != "gauss":
+            raise ValueError(f"background = 'map' fits every star with a Gaussian: centroid_method must be 'gauss', "
+                             f"got {self.centroid_method!r}")
+        return self
 
 
 class Study(_Model):

@@ -68,11 +68,11 @@ def test_frames_round_trip_through_star_calibrate(exported, tmp_path):
     jsonschema.validate(got, _star_schema())
     assert got["mode"] == "files" and got["true_theta"] is None and got["batch"]["error"] is None
     assert len(got["attitudes"]) == 20 and all(x["identified"] for x in got["attitudes"])
-    # the batch calibration in OpenCV's form: read back by cv2.FileStorage (through rig import-camera's reader)
+    # the joint calibration in OpenCV's form: read back by cv2.FileStorage (through rig import-camera's reader)
     from rigsim.rig.opencv_camera import read_opencv_camera
 
     cv = read_opencv_camera(d / "cal" / "camera.yml")
-    th = dict(zip(got["theta_names"], got["batch"]["theta"]))
+    th = dict(zip(got["theta_names"], got["joint"]["theta"]))
     assert (cv.fx, cv.fy, cv.cx, cv.cy, cv.dist["k1"], cv.dist["k2"]) == (th["f"], th["f"], th["u0"], th["v0"], th["k1"], th["k2"])
     assert cv.size == (1024, 1024)
     ref = json.loads((exported / "report" / "star_calibration.json").read_text())

@@ -7,8 +7,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from rigsim.errors import CliError
-from rigsim.files.options import SEED, SPP, integer
+from rigsim.files.options import SEED, SPP, integer, number
 
 __all__ = ["add_cli", "cmd_run_star_calibration"]
 
@@ -48,22 +50,36 @@ def add_cli(groups: dict) -> None:
     sts = st.add_subparsers(dest="star_command", metavar="ACTION")
     c = sts.add_parser(
         "calibrate", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-        help="extract, identify and calibrate (f, u0, v0, k1, k2) from star frames and an attitude log",
+        help="extract, identify and calibrate (f, u0, v0, k1, k2) from star frames, with or without an attitude log",
         description="The seed-004 pipeline on your frames (PNG/TIFF 16-bit or FITS) with the nominal rig: star "
-                    "extraction, identification from the commanded attitude, AD/ADS EKFs and batch least squares "
-                    "of (f, u0, v0, k1, k2) with covariance. The attitude log has one row per frame: frame, time_s, "
-                    "qw, qx, qy, qz (the commanded R(cam<-ICRS), scalar first).")
+                    "extraction, identification (from the commanded attitude of an attitude log, or lost in space "
+                    "from the frames alone), the intrinsics and every attitude fitted together with a held-out check, "
+                    "and the document's AD/ADS EKFs and batch least squares of (f, u0, v0, k1, k2) with covariance. "
+                    "The attitude log has one row per frame: frame, time_s, qw, qx, qy, qz (the commanded "
+                    "R(cam<-ICRS), scalar first). Frames that cannot be identified are named and left out.")
     c.add_argument("frames", nargs="+", metavar="FRAME", help="star frames of the rig's detector size")
     c.add_argument("--rig", default="star_sensor", help="star-sensor rig file (nominal values only)")
-    c.add_argument("--attitudes", required=True, metavar="FILE", help="attitude log (.csv/.parquet)")
+    c.add_argument("--attitudes", default=None, metavar="FILE",
+                   help="attitude log (.csv/.parquet); without it the frames are identified lost in space, in the "
+                        "order given")
     c.add_argument("--out", required=True, metavar="DIR", help="output folder: stars.csv and calibration.json")
     c.add_argument("--ekf", default="both", choices=["ad", "ads", "both"], help="EKF measurement model(s) to report")
     c.add_argument("--opencv", default=None, metavar="FILE",
                    help="also write the batch calibration as OpenCV's FileStorage camera (.yml/.json/.xml)")
-    c.add_argument("--identify", default="commanded", choices=["commanded", "lost-in-space"],
+    c.add_argument("--identify", default=None, choices=["commanded", "lost-in-space"],
                    help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
-                        "frame and time_s)")
+                        "frame and time_s). Default: commanded with --attitudes, else lost-in-space")
+    c.add_argument("--site", default=None, metavar="LAT,LON[,HEIGHT_M]",
+                   help="ground frames: the site (geodetic degrees, metres); with --utc the stars are refracted by the "
+                        "air before the joint fit (off when not given)")
+    c.add_argument("--utc", default=None, metavar="ISO8601", help="the first frame's time (UTC), with --site")
+    c.add_argument("--pressure-hpa", type=number(100, 1100), default=None,
+                   help="air pressure at the site (default the standard atmosphere at its height)")
+    c.add_argument("--temperature-c", type=number(-60, 60), default=10.0, help="air temperature at the site")
     c.set_defaults(func=cmd_star_calibrate)
+    from rigsim.procedures.star import twin_commands
+
+    twin_commands.add_cli(sts)
     p.set_defaults(func=cmd_run_star_calibration)
     from rigsim.procedures.star import render_commands
 
@@ -90,6 +106,33 @@ def _check(args) -> None:
         raise CliError(f"--mitsuba-spp = {spp}: must be a power of 4 between 1 and 65536 (e.g. 64, 256, 1024)")
 
 
+def _site(args):
+    """--site and --utc (both or neither) as a refraction Site; None without them."""
+    if (args.site is None) != (args.utc is None):
+        raise CliError("--site and --utc go together: refraction needs where and when (leave both out when unknown)")
+    if args.site is None:
+        return None
+    from astropy.time import Time
+
+    from rigsim.optics.refraction import Site
+
+    parts = args.site.split(",")
+    try:
+        vals = [float(x) for x in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3) or not all(np.isfinite(vals)):
+        raise CliError(f"--site = {args.site!r}: expected LAT,LON[,HEIGHT_M] in degrees and metres")
+    lat, lon, hgt = (*vals, 0.0)[:3]
+    if not (-90 <= lat <= 90 and -180 <= lon <= 360 and -500 <= hgt <= 9000):
+        raise CliError(f"--site = {args.site!r}: latitude −90 to 90°, longitude −180 to 360°, height −500 to 9000 m")
+    try:
+        Time(args.utc, scale="utc")
+    except ValueError:
+        raise CliError(f"--utc = {args.utc!r}: expected an ISO 8601 time, e.g. 2019-07-29T20:47:26") from None
+    return Site(lat, lon, hgt, pressure_hpa=args.pressure_hpa, temperature_c=args.temperature_c)
+
+
 def cmd_star_calibrate(args) -> int:
     from rigsim.files import write_json, write_table
     from rigsim.procedures.star.files import calibrate_star_files, star_result_json, stars_table
@@ -101,28 +144,52 @@ def cmd_star_calibrate(args) -> int:
         raise CliError(f"--out = {out}: exists and is not a folder")
     if args.opencv and Path(args.opencv).suffix.lower() not in (".yml", ".yaml", ".json", ".xml"):
         raise CliError(f"--opencv {args.opencv}: an OpenCV FileStorage name ends in .yml, .yaml, .json or .xml")
+    site = _site(args)
+    identify = args.identify or ("commanded" if args.attitudes else "lost-in-space")
+    if identify == "commanded" and not args.attitudes:
+        raise CliError("--identify commanded needs --attitudes (the commanded attitude of every frame)")
     t0 = time.perf_counter()
-    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=args.identify)
+    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=identify,
+                                      site=site, utc=args.utc)
+    for name, ident in zip(names, res.ident):
+        if not ident.ok:
+            print(f"{name}: not identified ({ident.reason}); left out", file=sys.stderr)
     models = ("ad", "ads") if args.ekf == "both" else (args.ekf,)
     data = star_result_json(res, names, models)
     write_table(out / "stars.csv", stars_table(res, names))
     write_json(out / "calibration.json", data)
+    j = data.get("joint")
     if args.opencv:
         from rigsim.files.opencv import write_opencv_camera
 
-        th = dict(zip(data["theta_names"], res.batch.theta))  # f, u0, v0 (px), k1, k2
+        th = dict(zip(data["theta_names"], j["theta"] if j else res.batch.theta))  # f, u0, v0 (px), k1, k2
         W, H = rig.sensor.resolution_px
         write_opencv_camera(args.opencv, th["f"], th["f"], th["u0"], th["v0"], [th["k1"], th["k2"], 0.0, 0.0, 0.0], W, H)
-        print(f"→ {args.opencv} (OpenCV camera: the batch least-squares calibration)")
+        print(f"→ {args.opencv} (OpenCV camera: the {'joint fit' if j else 'batch least squares'})")
     st = res.ident_stats
-    print(f"{st['frames']} frames, {st['frames_identified']} identified; {st['usable']} usable stars, "
+    print(f"{st['frames']} frames, {st['frames_identified']} identified ({identify}); {st['usable']} usable stars, "
           f"{st['identified']} identified")
+    if j:
+        sig = dict(zip(j["estimated"], j["covariance"]["sigma"]))
+        th = dict(zip(data["theta_names"], j["theta"]))
+        print("joint fit (intrinsics and attitudes): " + ", ".join(
+            f"{n} {th[n]:.5g} ± {sig[n]:.2g}" for n in j["estimated"]) + f"; {j['n_stars']} stars, {j['n_rejected']} left "
+            f"out beyond 5σ")
+        print(f"  χ²/dof {j['chi2_reduced_noise_model']:.2f} under the centroid σ → {j['chi2_reduced']:.2f} with a floor "
+              f"of {j['sigma_floor_px']:.3f} px; {j['verdict']}")
+        fov = j["field_of_view_deg"]
+        print(f"  field of view {fov['horizontal']:.4f}° × {fov['vertical']:.4f}° (edge to edge through the principal point)")
+        if j["held_out"]:
+            h = j["held_out"]
+            print(f"  held out: {h['n_stars']} stars of frames left out of the fit predicted to {h['rms_px']:.3f} px rms, "
+                  f"error/σ rms {h['z_rms']:.2f}")
     b = res.batch
-    print("batch least squares: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in zip(b.names, b.x, b.sigma))
-          + f" (χ²/dof {b.chi2_reduced:.2f})")
+    print("batch least squares (angular distances): " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
+                                                               zip(b.names, b.x, b.sigma)) + f" (χ²/dof {b.chi2_reduced:.2f})")
     for key, e in data["ekf"].items():
         print(f"EKF {key}: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
-                                           zip(e["estimated"], e["state"], e["covariance"]["sigma"])))
+                                           zip(e["estimated"], e["state"], e["covariance"]["sigma"]))
+              + (f" (mean NIS {e['mean_nis']:.2f})" if e.get("mean_nis") is not None else ""))
     print(f"→ {out / 'stars.csv'}, {out / 'calibration.json'} [{time.perf_counter() - t0:.2f} s]")
     return 0
 

@@ -19,6 +19,7 @@ from rigsim.errors import InputError
 from rigsim.estimation.observability import observability
 from rigsim.estimation.star_calibration import MODELS, FrameObs, batch_lsq, run_ekf
 from rigsim.estimation.star_id import IdentResult, identify
+from rigsim.estimation.star_joint import joint_calibration
 from rigsim.estimation.star_lis import identify_lost_in_space
 from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
@@ -85,6 +86,7 @@ class PipelineOutput:
     batch: object = None                       # BatchResult (f, u0, v0, k1, k2)
     observability: dict = field(default_factory=dict)
     times: dict = field(default_factory=dict)
+    joint: object = None                       # JointCalibration: intrinsics and attitudes fitted together
 
     @property
     def R_est(self) -> list:
@@ -95,7 +97,8 @@ class StarPipeline:
     """The seed-004 pipeline, frame by frame: :meth:`add` extracts and identifies one
     :class:`StarObservation`; :meth:`calibrate` runs the estimators over all frames added."""
 
-    def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue, *, identification: str = "commanded"):
+    def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue, *, identification: str = "commanded",
+                 refraction=None):
         if not isinstance(nominal, NominalStarRig):
             raise TypeError("the pipeline takes the nominal rig (StarRig.nominal_rig()), not the rig with its truth")
         if identification not in IDENTIFICATION:
@@ -111,6 +114,16 @@ class StarPipeline:
         self.times = {"extract": 0.0, "identify": 0.0}
         self.fixed_pattern = None  # a DN image subtracted from every frame before extraction (or None)
         self.fixed_pattern_note = "none"  # what was subtracted, for the output
+        # (Site, frame index → UTC time): the air's refraction of every identified star before the joint fit
+        self.refraction = refraction
+
+    def _refract(self, k: int, dirs: np.ndarray) -> np.ndarray:
+        if self.refraction is None:
+            return dirs
+        from rigsim.optics.refraction import apparent_directions
+
+        site, time_of = self.refraction
+        return apparent_directions(dirs, site, time_of(k))
 
     def set_sequence_pattern(self, observations) -> None:
         """Subtract the fixed pattern of these observations (:func:`sequence_pattern`) from every frame."""
@@ -122,7 +135,8 @@ class StarPipeline:
         t0 = time.perf_counter()
         c = self.nominal.calibration
         found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, method=c.centroid_method,
-                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference)
+                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference,
+                              background=c.background)
         keep = found.usable
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
@@ -130,15 +144,14 @@ class StarPipeline:
         if self.centroid_map is not None:  # the ground calibration of the lens's centroid shift ([nominal] centroid_map)
             usable = replace(usable, uv=corrected_centroids(usable.uv, self.centroid_map, self.camera))
         t1 = time.perf_counter()
-        kw = {"search_radius_px": idc.search_radius_px, "match_tolerance_px": idc.match_tolerance_px,
-              "min_matches": idc.min_matches}
-        if self.identification == "lost-in-space":  # no prior: geometric voting of the brightest stars
+        if self.identification == "lost-in-space":  # no prior: 4-star patterns of the brightest stars
             order = np.argsort(-usable.flux, kind="stable")
-            ident = identify_lost_in_space(usable.uv[order], self.sky, self.camera, **kw)
+            ident = identify_lost_in_space(usable.uv[order], self.sky, self.camera, **idc.lost_in_space_settings())
             if ident.ok:
                 ident = replace(ident, obs_index=order[ident.obs_index])
         else:
-            ident = identify(usable.uv, self.sky, obs.R_commanded, self.camera, **kw)
+            ident = identify(usable.uv, self.sky, obs.R_commanded, self.camera, search_radius_px=idc.search_radius_px,
+                             match_tolerance_px=idc.match_tolerance_px, min_matches=idc.min_matches)
         self.times["extract"] += t1 - t0
         self.times["identify"] += time.perf_counter() - t1
         self.counts["detected"] += len(found)
@@ -159,29 +172,55 @@ class StarPipeline:
         s, c = self.nominal.sensor, self.nominal.calibration
         weighting = c.weighting if weighting is None else weighting
         p12 = (s.p1, s.p2)
+        t0 = time.perf_counter()
+        joint = None
+        frames_obs = self.frames_obs
+        if any(i.ok for i in self.ident):
+            # intrinsics and every attitude fitted together; without a prior attitude the frames are
+            # identified again with each round's camera (lost in space starts from the nominal one)
+            lis = self.identification == "lost-in-space"
+            joint = joint_calibration(self.usable, self.ident, self.sky, self.camera,
+                                      prior_sigma={"f": s.focal_length_sigma_px, "u0": s.principal_point_sigma_px,
+                                                   "v0": s.principal_point_sigma_px},
+                                      distortion=c.distortion_terms,
+                                      match_tolerance_px=self.nominal.identification.match_tolerance_px,
+                                      reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
+            if lis:
+                self.ident = joint.ident
+            # every estimator below takes the centroid σ with the noise floor the joint fit found
+            floor = joint.bundle.sigma_floor_px if np.isfinite(joint.bundle.sigma_floor_px) else 0.0
+            frames_obs = [FrameObs(fo.uv[m], np.sqrt(fo.sigma_uv[m] ** 2 + floor**2), fo.dirs_icrs[m],
+                                   None if fo.flux is None else fo.flux[m])
+                          for fo, m in zip(joint.frames_obs, joint.bundle.used)]
+        self.times["joint fit"] = time.perf_counter() - t0
         ident_stats = {"frames": len(self.ident), "frames_identified": int(sum(i.ok for i in self.ident)),
                        **self.counts, "identified": int(sum(len(i) for i in self.ident)),
                        "attitude_error_deg": self.nominal.identification.attitude_error_deg,
                        "fixed_pattern": self.fixed_pattern_note,
                        "centroid_map": "none" if s.centroid_map is None else
                        f"ground map of the traced lens (B−V {s.centroid_map.reference_bv:g}, σ {s.centroid_map.sigma_px:g} px)",
-                       "reasons": [i.reason for i in self.ident if not i.ok]}
-        out = PipelineOutput(self.nominal, self.usable, self.ident, self.frames_obs, ident_stats, times=dict(self.times))
+                       "reasons": [i.reason for i in self.ident if not i.ok],
+                       "refraction": "off (no site and time)" if self.refraction is None else
+                       "on: {:.4f}°, {:.4f}°, {:.0f} m, {:.1f} hPa, {:.1f} °C".format(
+                           self.refraction[0].latitude_deg, self.refraction[0].longitude_deg, self.refraction[0].height_m,
+                           self.refraction[0].pressure, self.refraction[0].temperature_c)}
+        out = PipelineOutput(self.nominal, self.usable, self.ident, frames_obs, ident_stats, times=dict(self.times),
+                             joint=joint)
         t0 = time.perf_counter()
         for case in PIPELINE_CASES:
             th0, est, ps = pipeline_case_setup(self.nominal, case)
             for model in MODELS:
-                out.ekf[(case, model)] = run_ekf(self.frames_obs, th0, model=model, estimate=est, prior_sigma=ps,
+                out.ekf[(case, model)] = run_ekf(frames_obs, th0, model=model, estimate=est, prior_sigma=ps,
                                                  weighting=weighting, process_sigma=c.process_noise_px, p12=p12,
                                                  max_stars=c.max_stars_per_frame, equations=equations)
         out.times[f"ekf ({len(out.ekf)} runs)"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        out.batch = batch_lsq(self.frames_obs, np.array(s.theta, dtype=float), weighting=weighting, p12=p12,
+        out.batch = batch_lsq(frames_obs, np.array(s.theta, dtype=float), weighting=weighting, p12=p12,
                               max_stars=c.max_stars_per_frame, equations=equations)
         out.times["batch LSQ"] = time.perf_counter() - t0
         for model in MODELS:
             for label, est in OBSERVABILITY_STATES:
-                out.observability[(model, label)] = observability(self.frames_obs, out.batch.theta, model=model,
+                out.observability[(model, label)] = observability(frames_obs, out.batch.theta, model=model,
                                                                   estimate=est, weighting=weighting, p12=p12,
                                                                   max_stars=c.max_stars_per_frame)
         return out
