@@ -354,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
         parts = [ln.strip().removeprefix("- ") for ln in str(exc).splitlines() if ln.strip()] or [type(exc).__name__]
         one = parts[0] + (" " + "; ".join(parts[1:]) if len(parts) > 1 else "")
         print(f"rigsim: error: {safe_text(one, 4000)}", file=sys.stderr)  # one line, control characters escaped
-        return 2
+        return int(getattr(exc, "exit_status", 2))
     except KeyboardInterrupt:
         print("rigsim: interrupted", file=sys.stderr)
         return 130

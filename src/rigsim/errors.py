@@ -1,6 +1,7 @@
 """Every user-facing error and warning of rigsim, in one hierarchy.
 
-``rigsim`` prints any :class:`RigsimError` as one line (``rigsim: error: ...``) and exits 2. The
+``rigsim`` prints any :class:`RigsimError` as one line (``rigsim: error: ...``) and exits 2 (3 for a
+:class:`PoorFitError`: data that do not fit the model, docs/fit-judgement.md). The
 message names the file or option, the field, the value and the allowed range. Library callers
 catch :class:`RigsimError` (or the specific class); the classes that describe bad input also
 derive from ``ValueError`` so that generic ``except ValueError`` code keeps working.
@@ -9,7 +10,7 @@ derive from ``ValueError`` so that generic ``except ValueError`` code keeps work
 from __future__ import annotations
 
 __all__ = ["RigsimError", "CliError", "RigError", "GeometryError", "SearchError", "DatasetError", "InputError", "ViewError",
-           "ExportError", "ResourceError", "GeometryWarning", "SaturationWarning"]
+           "ExportError", "ResourceError", "PoorFitError", "POOR_FIT_EXIT", "GeometryWarning", "SaturationWarning"]
 
 
 class RigsimError(Exception):
@@ -45,6 +46,17 @@ class SearchError(RigsimError, RuntimeError):
 class InputError(RigsimError, ValueError):
     """A user's file (frame, table, JSON result) is unreadable or holds a wrong column, unit, shape,
     bit depth or value: the message names the file, the line/column and what was expected."""
+
+
+POOR_FIT_EXIT = 3  # the exit status of a command whose data do not fit its model
+
+
+class PoorFitError(RigsimError):
+    """The data do not fit the estimator's model by a wide margin (docs/fit-judgement.md): nothing was
+    written as a result. The message names the χ²/dof and the causes that make the data fit, if any;
+    ``rigsim`` exits with :data:`POOR_FIT_EXIT`."""
+
+    exit_status = POOR_FIT_EXIT
 
 
 class DatasetError(RigsimError):

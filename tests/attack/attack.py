@@ -3,7 +3,7 @@ command's body (not only its parser). Each case runs ``rigsim.cli.main`` in a fo
 folder, with a time limit, and is classified:
 
   ok        exit 0
-  clear     exit 2 (or 1 for a full disk / interrupted run) with exactly one line on stderr
+  clear     exit 2 (or 1 for a full disk / interrupted run, 3 for a poor fit) with exactly one line on stderr
   traceback an exception escaped main(), or a Python traceback was printed
   unclear   another exit status, or several lines of error
   hang      still running after the time limit (a valid value that starts a long run is counted too and
@@ -168,7 +168,7 @@ def run_case(argv, cwd: Path, limit: float):
         return "traceback", rc, text
     if rc == 0:
         return "ok", rc, text
-    if rc in (1, 2, 130) and len(lines) == 1 and lines[0].startswith("rigsim"):
+    if rc in (1, 2, 3, 130) and len(lines) == 1 and lines[0].startswith("rigsim"):
         return "clear", rc, text
     return "unclear", rc, text
 

@@ -125,6 +125,20 @@ def test_score_against_known_errors(clean, tmp_path):
     assert s.rms == pytest.approx(np.sqrt(np.mean(expect**2)), rel=1e-6)
 
 
+def test_rigsim_centroid_tables_are_scored(clean, tmp_path):
+    """The file chain: `rigsim centroid` on a dataset's frames writes the table `dataset score` reads (frame file
+    names for the index, spot 0 of each frame), each in a subprocess; `dataset verify` reads the manifest."""
+    from file_chain import rigsim
+
+    root, _ = clean
+    frames = sorted(str(p) for p in (root / "frames").glob("*.png"))
+    rigsim("centroid", *frames, "--rig", RIG, "--out", tmp_path / "c.csv", "--quiet")
+    p = rigsim("dataset", "score", root, tmp_path / "c.csv", "--json-out", tmp_path / "s.json")
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["n"] == N and s["missing"] == [] and s["rms"] < 0.05, p.stdout
+    rigsim("dataset", "verify", root)
+
+
 @pytest.mark.parametrize("content,msg", [
     ("frame,u\n1,2\n", "hold no known prediction; expected 'frame' and 'u, v' or 'u_px, v_px'"),
     ("u,v\n1,2\n", "no 'frame' column"),
@@ -277,6 +291,18 @@ def test_star_frames_are_fits_with_one_truth_row_per_star_and_scored_by_matching
     s = score(tmp_path, p)
     assert s.detection["false_detections"] == 1 and s.detection["missed"] == 0
     assert s.rms == pytest.approx(np.sqrt(2) * 0.05, rel=0.15)
+    # the file chain: `star calibrate` reads the dataset's FITS frames (a lab's log: the frames' attitudes)
+    from file_chain import rigsim
+
+    from rigsim.files import write_table
+    from rigsim.procedures.star.files import attitude_log_columns
+
+    names = [f"frame_{i:06d}.fits" for i in range(3)]
+    R = [np.array(ds.sidecar(i)["truth"]["R_cam_from_icrs"]) for i in range(3)]
+    write_table(tmp_path / "log.csv", attitude_log_columns(names, [0.0, 1.0, 2.0], R))
+    rigsim("star", "calibrate", *(tmp_path / "frames" / n for n in names), "--attitudes", tmp_path / "log.csv",
+           "--out", tmp_path / "cal")
+    assert json.loads((tmp_path / "cal" / "calibration.json").read_text())["identification"]["frames_identified"] == 3
 
 
 def test_boresight_rois_with_the_state_and_exact_spot(tmp_path):

@@ -9,7 +9,9 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from file_chain import rigsim
 
 from rigsim.dataset.ownership import OWNER_FILE, dataset_lock
 from rigsim.dataset.runner import generate, verify
@@ -246,6 +248,14 @@ def test_the_same_seed_gives_byte_identical_frames_for_one_or_two_workers(tmp_pa
                      progress=False, chunk=1)
         shas.append({k: v for k, v in r.manifest["files_sha256"].items() if k.endswith((".png", ".fits"))})
     assert len(shas[0]) >= 2 and shas[0] == shas[1]
+    # the file chain: the commands that read these kinds read a dataset's frames (docs/formats.md)
+    frames = sorted(str(p) for p in (tmp_path / "w1" / "frames").glob("*.png"))
+    if kind == "aiming-camera":  # frame 0 the lit hole, frame 1 the returned spot
+        p = rigsim("concentricity", frames[0], frames[1], "--rig", rig, "--json", tmp_path / "c.json")
+        assert np.all(np.isfinite(json.loads((tmp_path / "c.json").read_text())["offset_px"])), p.stdout
+    elif kind == "autocollimator":
+        rigsim("autocollimator", "read", frames[0], "--rig", rig, "--json", tmp_path / "a.json")
+        assert np.all(np.isfinite(json.loads((tmp_path / "a.json").read_text())["reading_arcsec"]))
 
 
 def test_workers_choose_the_tested_libllvm_whatever_drjit_libllvm_path_says(tmp_path):

@@ -101,9 +101,12 @@ def _columns(path, header: list[str], mode: str | None) -> tuple[str, tuple[str,
     raise DatasetError(f"{path}: columns {header[:12]} hold no {mode or 'known'} prediction; expected 'frame' and {want}")
 
 
-def read_predictions(path, mode: str | None = None, multi: bool = False):
+def read_predictions(path, mode: str | None = None, multi: bool = False, names: dict[str, int] | None = None):
     """(mode, {frame: values}, columns used, frames whose prediction is NaN or empty: a failed fit, counted as
-    missing). With ``multi`` (star frames) several rows per frame: {frame: (k, d) array}."""
+    missing). With ``multi`` (star frames) several rows per frame: {frame: (k, d) array}. ``frame`` is the
+    dataset's index, or (``names``: file name → index) the frame's file name, as ``rigsim centroid``
+    writes it; with a ``spot`` column (``rigsim centroid``'s tables) a one-spot frame is scored on its
+    spot 0, the brightest."""
     path = Path(path)
     if not path.exists():
         raise DatasetError(f"{path}: no such predictions file")
@@ -122,6 +125,7 @@ def read_predictions(path, mode: str | None = None, multi: bool = False):
         raise DatasetError(f"{path}: no 'frame' column (the dataset's frame index, truth.csv's 'frame')")
     mode, cols = _columns(path, header, mode)
     idx = [header.index("frame")] + [header.index(c) for c in cols]
+    spot_col = header.index("spot") if "spot" in header and not multi else None
     out: dict[int, list | np.ndarray] = {}
     failed: list[int] = []
     for line, row in enumerate(rd, start=2):
@@ -131,10 +135,15 @@ def read_predictions(path, mode: str | None = None, multi: bool = False):
             vals = [row[i].strip() for i in idx]
         except IndexError:
             raise DatasetError(f"{path}:{line}: {len(row)} fields, header has {len(header)}") from None
+        if spot_col is not None and spot_col < len(row) and row[spot_col].strip() not in ("0", ""):
+            continue  # a fainter spot of a one-spot frame
         try:
             fr = int(vals[0])
         except ValueError:
-            raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0]!r} is not an integer") from None
+            fr = (names or {}).get(Path(vals[0]).name)
+            if fr is None:
+                raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0]!r} is neither a frame index nor a frame "
+                                   "file of the dataset (frames/frame_NNNNNN.EXT)") from None
         try:
             v = np.array([float(x) if x else math.nan for x in vals[1:]])
         except ValueError:
@@ -164,6 +173,13 @@ def read_predictions(path, mode: str | None = None, multi: bool = False):
     return mode, out, cols, sorted(set(failed) - set(out))
 
 
+def _frame_names(ds) -> dict[str, int]:
+    """The dataset's frame file names → their index (what ``rigsim centroid frames/*`` writes as ``frame``)."""
+    from rigsim.dataset.store import frame_files
+
+    return {frame_files(ds.root, i, ds.fmt)[0].name: i for i in range(len(ds))}
+
+
 def _isfloat(x) -> bool:
     try:
         float(x)
@@ -179,7 +195,7 @@ def score(root, predictions, *, mode: str | None = None, truth_ref: str = "centr
     ds = open_dataset(root)
     if ds.rows_per_frame:
         return _score_stars(ds, predictions, outlier, match_radius_px, outlier_abs)
-    mode, pred, cols, failed = read_predictions(predictions, mode)
+    mode, pred, cols, failed = read_predictions(predictions, mode, names=_frame_names(ds))
     t = ds.truth_numpy()
     n = len(ds)
     unknown = sorted(k for k in [*pred, *failed] if not (0 <= k < n))
@@ -278,7 +294,7 @@ def _score_stars(ds, predictions, outlier, match_radius_px: float, outlier_abs: 
     are missed. Errors are over the matched valid stars (px)."""
     from scipy.spatial import cKDTree
 
-    mode, pred, cols, failed = read_predictions(predictions, "centroid", multi=True)
+    mode, pred, cols, failed = read_predictions(predictions, "centroid", multi=True, names=_frame_names(ds))
     t = ds.truth_numpy()
     n = len(ds)
     unknown = sorted(k for k in pred if not (0 <= k < n))

@@ -15,6 +15,11 @@ Outliers (``outlier_sigma``): a frame whose residual, over its centroid's own 1�
 robust (MAD) scale of all such normalised residuals, exceeds the limit is left out and the fit is
 repeated until no frame does. The first judgement uses a Cauchy-loss fit, which an outlier with
 leverage cannot bend towards itself (docs/campaign.md, "Outliers in the sweep").
+
+With the centroids' σ, the fit is judged against their rms σ̄ (the fit is unweighted;
+:class:`~rigsim.estimation.fit_quality.FitQuality`): the covariance is then the noise model's,
+σ̄²(JᵀJ)⁻¹, scaled by χ²/dof when that is above 1 beyond chance — the residual scatter's,
+s²(JᵀJ)⁻¹ with s² = RSS/dof.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from rigsim.estimation.fit_quality import FitQuality, judge_residuals
 from rigsim.optics.camera import PinholeBrown, project
 from rigsim.rig.turntable import TurntableModel, as_reading
 
@@ -45,6 +51,7 @@ class SunCalibration:
     uv: np.ndarray = field(repr=False)  # the frames used
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # input rows left out as outliers
     outside_field: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # input rows beyond the field
+    fit: FitQuality | None = None  # the residuals against the centroids' σ (when the caller gave one)
 
     @property
     def sigma(self) -> dict[str, float]:
@@ -125,6 +132,7 @@ def calibrate_sun_sensor(
     sigma_uv: np.ndarray | None = None,
     outlier_sigma: float = 0.0,
     max_field_deg: float = 90.0,
+    noise_source: str = "the centroids' σ",
 ) -> SunCalibration:
     """Fit intrinsics and R(sun←rot) to observed sun-image centroids.
 
@@ -135,7 +143,10 @@ def calibrate_sun_sensor(
     ``outlier_sigma`` > 0: leave out, and refit without, every frame whose normalised residual
     (module docstring) exceeds it; 0 keeps every frame. ``max_field_deg`` < 90: leave out every frame
     whose centroid lies farther than that from the axis, through the nominal camera (``f_guess_px``,
-    principal point at the detector's centre): the sensor's usable field.
+    principal point at the detector's centre): the sensor's usable field. ``noise_source``: with
+    ``sigma_uv`` (finite and > 0 everywhere), the fit is judged against it (``SunCalibration.fit``)
+    and the covariance is the noise model's, scaled by χ²/dof beyond chance (module docstring);
+    the phrase names the σ in the reports.
     """
     uv = np.asarray(uv, float)
     m_dirs = sun_directions_in_mount(model, as_reading(poses_rad), d_rot)
@@ -151,7 +162,25 @@ def calibrate_sun_sensor(
                  outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
     fit.outliers = inside[fit.outliers]
     fit.outside_field = np.setdiff1d(np.arange(len(uv)), inside)
+    if sigma_uv is not None:
+        sig = np.array(np.broadcast_to(np.asarray(sigma_uv, float), uv.shape))
+        used = np.setdiff1d(inside, fit.outliers)
+        if np.all(np.isfinite(sig[used])) and np.all(sig[used] > 0):
+            _judge_against_noise(fit, sig[used], noise_source)
     return fit
+
+
+def _judge_against_noise(fit: SunCalibration, sig: np.ndarray, noise_source: str) -> None:
+    """Judge the fit against the centroids' σ (its used frames') and put the noise model's covariance,
+    scaled by χ²/dof beyond chance, in place of the residual scatter's. The fit is unweighted, so
+    it is judged against one σ, the rms of the frames' (a frame with a small σ would otherwise
+    weigh in the χ² what it does not weigh in the fit)."""
+    s_rms = float(np.sqrt(np.mean(sig**2)))
+    fit.fit = judge_residuals(fit.residuals_px, s_rms, len(fit.params), f"{noise_source}, rms {s_rms:.3g} px")
+    res = fit.residuals_px.ravel()
+    s2 = float(res @ res) / max(res.size - len(fit.params), 1)
+    if s2 > 0 and np.isfinite(s2):
+        fit.covariance = fit.covariance * (s_rms**2 * fit.fit.covariance_scale / s2)
 
 
 def _judge(m_dirs, uv, sigma_uv, outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential,
@@ -173,8 +202,11 @@ def _judge(m_dirs, uv, sigma_uv, outlier_sigma, width, height, f_guess_px, fit_k
         keep = np.flatnonzero(z.max(axis=1) <= outlier_sigma * scale)
         if len(keep) < 8 or np.array_equal(keep, used):
             break
-        used = keep
-        fit = _fit(m_dirs[used], uv[used], width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+        try:
+            refit = _fit(m_dirs[keep], uv[keep], width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+        except ValueError:  # a non-physical camera on the frames left: keep the last fit
+            break
+        used, fit = keep, refit
         z = np.abs(fit.camera.project(m_dirs @ fit.R_sun_from_rot.T) - uv) / sig
     if len(used) == n:
         return plain

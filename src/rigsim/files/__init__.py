@@ -7,7 +7,7 @@ docs/formats.md lists the files."""
 from .atomic import atomic_write_bytes
 from .cache import cache_dir
 from .images import FRAME_SUFFIXES, read_image, write_image
-from .results import covariance_block, read_json, write_json
+from .results import covariance_block, read_json, symmetric_covariance, write_json
 from .tables import Column, read_table, write_table
 
 __all__ = [
@@ -19,6 +19,7 @@ __all__ = [
            "read_image",
            "read_json",
            "read_table",
+           "symmetric_covariance",
            "write_image",
            "write_json",
            "write_table",

@@ -11,7 +11,10 @@ from rigsim.errors import InputError
 from rigsim.files.atomic import atomic_write_bytes
 
 
-def write_opencv_camera(path, fx: float, fy: float, cx: float, cy: float, dist, width: int, height: int) -> Path:
+def write_opencv_camera(path, fx: float, fy: float, cx: float, cy: float, dist, width: int, height: int, *,
+                        fit_verdict: str | None = None) -> Path:
+    """``fit_verdict``: also write ``rigsim_fit_verdict`` (e.g. "poor" for a calibration written with
+    --accept-poor-fit; OpenCV's readers ignore a key they do not ask for)."""
     import cv2
 
     path = Path(path)
@@ -24,4 +27,6 @@ def write_opencv_camera(path, fx: float, fy: float, cx: float, cy: float, dist, 
     fs.write("image_height", int(height))
     fs.write("camera_matrix", np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], float))
     fs.write("distortion_coefficients", np.asarray(dist, float).reshape(1, -1))
+    if fit_verdict is not None:
+        fs.write("rigsim_fit_verdict", str(fit_verdict))
     return atomic_write_bytes(path, fs.releaseAndGetString().encode())

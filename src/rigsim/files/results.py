@@ -58,11 +58,36 @@ def read_json(path, required: Sequence[str] = (), *, what: str = "result") -> di
     return obj
 
 
+SYMMETRY_TOLERANCE = 1e-6  # of the largest diagonal entry: a covariance read back is symmetrised within it
+
+
 def covariance_block(names: Sequence[str], cov, units: Sequence[str]) -> dict:
     """The JSON shape of a covariance: the parameters' names, their units, the matrix (entry (i, j)
-    in unit_i·unit_j) and the 1σ of each parameter."""
+    in unit_i·unit_j; written exactly symmetric, (C + Cᵀ)/2) and the 1σ of each parameter."""
     c = np.asarray(cov, float)
     if c.shape != (len(names), len(names)) or len(units) != len(names):
         raise ValueError(f"covariance of shape {c.shape} for {len(names)} names and {len(units)} units")
+    c = 0.5 * (c + c.T)
     return {"names": list(names), "units": list(units), "matrix": c.tolist(),
             "sigma": np.sqrt(np.clip(np.diag(c), 0.0, None)).tolist()}
+
+
+def symmetric_covariance(c, *, where: str) -> np.ndarray:
+    """A covariance read from a file, symmetrised: (C + Cᵀ)/2 when C − Cᵀ is within
+    :data:`SYMMETRY_TOLERANCE` of its largest diagonal entry (rounding in a writer, a text round
+    trip), and positive semi-definite within the same tolerance; otherwise refused naming ``where``."""
+    c = np.asarray(c, float)
+    n = c.shape[0] if c.ndim == 2 else 0
+    if c.ndim != 2 or c.shape != (n, n) or not np.all(np.isfinite(c)):
+        raise InputError(f"{where}: shape {c.shape}; expected a finite square matrix")
+    scale = float(np.max(np.abs(np.diag(c)))) if n else 0.0
+    tol = SYMMETRY_TOLERANCE * max(scale, 1e-300)
+    asym = float(np.max(np.abs(c - c.T))) if n else 0.0
+    if asym > tol:
+        raise InputError(f"{where}: not symmetric (largest |C − Cᵀ| {asym:.3g}, {asym / max(scale, 1e-300):.3g} of the "
+                         f"largest variance; allowed {SYMMETRY_TOLERANCE:g})")
+    c = 0.5 * (c + c.T)
+    lo = float(np.min(np.linalg.eigvalsh(c))) if n else 0.0
+    if lo < -tol:
+        raise InputError(f"{where}: not positive semi-definite (eigenvalue {lo:.3g} against a largest variance {scale:.3g})")
+    return c

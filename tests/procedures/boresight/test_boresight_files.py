@@ -2,14 +2,12 @@
 through `rigsim boresight centroid` and `solve` and give the in-process (Δf, α, β, γ) to 1e-9
 relative; the streaming mode gives the same rows; bad tables are one line."""
 
-import io
 import json
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from file_chain import rigsim
 
 from rigsim.cli import main
 from rigsim.files import Column, read_table, write_image, write_table
@@ -34,7 +32,10 @@ def orbit(tmp_path_factory):
     return rig, res, files, d
 
 
-def test_orbit_frames_round_trip(orbit, tmp_path, capsys):
+def test_orbit_frames_round_trip(orbit, tmp_path):
+    """The file chain in subprocesses, as a lab runs it: `boresight centroid` per camera and stage, `boresight
+    solve` (table, JSON and --stream) — the in-process orbit's estimates to 1e-9, the fit judged (the reference
+    rows' scatter against the tables' σ, every spot inside its ROI window)."""
     rig, res, files, _ = orbit
     outs = {}
     for cam in [c.name for c in rig.cameras]:
@@ -43,11 +44,12 @@ def test_orbit_frames_round_trip(orbit, tmp_path, capsys):
             m1 = [str(files[(stage, cam, 0, k)]) for k in ks]
             m2 = [str(files[(stage, cam, 1, k)]) for k in ks]
             outs[(cam, tag)] = tmp_path / f"{tag}_{cam}.csv"
-            assert main(["boresight", "centroid", "--camera", cam, "--m1", *m1, "--m2", *m2,
-                         "--out", str(outs[(cam, tag)])]) == 0
+            rigsim("boresight", "centroid", "--camera", cam, "--m1", *m1, "--m2", *m2, "--out", outs[(cam, tag)])
     cams = [c.name for c in rig.cameras]
-    assert main(["boresight", "solve", "--reference", *(str(outs[(c, "ref")]) for c in cams),
-                 "--measured", *(str(outs[(c, "meas")]) for c in cams), "--out", str(tmp_path / "est.csv")]) == 0
+    refs, meas = [str(outs[(c, "ref")]) for c in cams], [str(outs[(c, "meas")]) for c in cams]
+    p = rigsim("boresight", "solve", "--reference", *refs, "--measured", *meas, "--out", tmp_path / "est.csv",
+               "--json-out", tmp_path / "est.json")
+    assert "fit: χ²/dof" in p.stdout and "POOR" not in p.stdout
     t = read_table(tmp_path / "est.csv", [Column("camera", kind="str"), Column("delta_f", "um"), Column("alpha", "arcsec"),
                                           Column("beta", "arcsec"), Column("gamma", "arcsec")])
     dv = res["estimates"]["dvad"]
@@ -58,14 +60,10 @@ def test_orbit_frames_round_trip(orbit, tmp_path, capsys):
         assert got.shape == ref.shape == (3, 4)
         assert np.all(np.abs(got - ref) <= 1e-9 * np.abs(ref).max()), np.abs(got - ref).max()
     # streaming: the same rows through stdin/stdout (the cached DVAD solver)
-    meas = read_table(outs[(cams[0], "meas")], [Column("camera", kind="str"), Column("u_m1", "px")])
     text = (outs[(cams[0], "meas")]).read_text()
-    p = subprocess.run([sys.executable, "-c", "import sys; from rigsim.cli import main; sys.exit(main(sys.argv[1:]))",
-                        "boresight", "solve", "--reference", str(outs[(cams[0], "ref")]), "--stream"],
-                       input=text, capture_output=True, text=True, timeout=120)
-    assert p.returncode == 0, p.stderr
+    p = rigsim("boresight", "solve", "--reference", outs[(cams[0], "ref")], "--stream", stdin=text)
     lines = p.stdout.strip().splitlines()
-    assert lines[0] == "sample,camera,delta_f_um,alpha_arcsec,beta_arcsec,gamma_arcsec" and len(lines) == 1 + len(meas["camera"])
+    assert lines[0] == "sample,camera,delta_f_um,alpha_arcsec,beta_arcsec,gamma_arcsec" and len(lines) == 4
     s = np.array([[float(x) for x in ln.split(",")[2:]] for ln in lines[1:]])
     ref = np.column_stack([dv["delta_f_um"][0], np.array(dv["camera_angles_arcsec"][0])])
     np.testing.assert_allclose(s, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
@@ -76,15 +74,22 @@ def test_orbit_frames_round_trip(orbit, tmp_path, capsys):
     import jsonschema
 
     schema = json.loads(pkg_files("rigsim").joinpath("schemas/boresight-result.schema.json").read_text())
-    assert main(["boresight", "solve", "--reference", *(str(outs[(c, "ref")]) for c in cams),
-                 "--measured", *(str(outs[(c, "meas")]) for c in cams), "--json-out", str(tmp_path / "est.json")]) == 0
     js = json.loads((tmp_path / "est.json").read_text())
     jsonschema.validate(js, schema)
     assert js["mode"] == "files" and "sigma_* columns" in js["centroid_sigma_source"]
     assert len(js["samples"]) == 6 and len(js["relative"]) == 3
     assert all(x["R_ref_from_meas"].get("true_matrix") is None for x in js["samples"])
     np.testing.assert_allclose([r["angles_arcsec"] for r in js["relative"]], dv["relative_arcsec"], atol=1e-9)
-    capsys.readouterr()
+    n_ref = rig.orbit.reference_frames
+    assert js["fit"]["dof"] == 4 * (n_ref - 1) * 2 and js["fit"]["verdict"] in ("good", "scaled")
+    # u and v swapped in a reference table: every spot leaves its ROI window; refused, nothing written, named
+    swapped = tmp_path / "ref_swapped.csv"
+    swapped.write_text(outs[(cams[0], "ref")].read_text().replace("u_m1_px,v_m1_px,u_m2_px,v_m2_px",
+                                                                   "v_m1_px,u_m1_px,v_m2_px,u_m2_px"))
+    p = rigsim("boresight", "solve", "--reference", swapped, "--measured", outs[(cams[0], "meas")], "--out",
+               tmp_path / "bad.csv", ok=(3,))
+    assert "outside the nominal 48-px ROI windows" in p.stderr and "The data fit when read as: u and v swapped" in p.stderr
+    assert not (tmp_path / "bad.csv").exists()
 
 
 def test_boresight_covariance_matches_a_monte_carlo_of_the_estimator():

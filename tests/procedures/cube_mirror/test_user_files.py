@@ -157,53 +157,6 @@ def test_user_centroider_in_the_campaign(tmp_path, capsys, monkeypatch):
     _assert_rel(user2["user"]["R_cube_from_sun_error_arcsec"], user["user"]["R_cube_from_sun_error_arcsec"], 1e-9)
 
 
-def _sweep_export(tmp_path):
-    """A short rendered sweep (±60° every 30°, 16 spp) exported as bare files, in-process calibration."""
-    from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
-    from rigsim.procedures.cube_mirror.sweep import render_sweep
-    from rigsim.procedures.cube_mirror.user_frames import CampaignFrames
-    from rigsim.rig.load import load_rig
-    from rigsim.truth.cube_mirror.realization import noise_from_rig, realization_from_rig
-
-    rig = load_rig(RIGS["000"])
-    rig = rig.model_copy(update={"procedure": rig.procedure.model_copy(update={"sweep_step_deg": 20.0})})
-    fr = CampaignFrames(rig, tmp_path / "export", seed=3)
-    fr.out_dir.mkdir()
-    obs, _ = render_sweep(rig, realization_from_rig(rig), noise_from_rig(rig), 5, spp=16, on_frame=fr.sweep_frame)
-    fr.write_logs([{"X": 3.1, "Y": 0.01}, {"X": 1.6, "Y": 0.0}], rig.procedure.faces)
-    return rig, fit_sun_sensor(rig, obs.readings, obs.uv, default_axis_order(rig), sigma_uv=obs.sigma_uv), obs
-
-
-@pytest.mark.render
-def test_sweep_frames_round_trip_fast(tmp_path, capsys):
-    """The default suite's version: the sweep alone (49 poses), the in-process fit against the file route."""
-    rig, cal, obs = _sweep_export(tmp_path)
-    d = _rename(tmp_path / "export", tmp_path / "bare")
-    frames = sorted(str(p) for p in d.glob("img_*"))
-    assert main(["centroid", *frames, "--rig", RIGS["000"], "--out", str(d / "c.parquet"), "--quiet"]) == 0
-    assert main(["calibrate", "sun-sensor", "--rig", RIGS["000"], "--angles", str(d / "angles.csv"),
-                 "--centroids", str(d / "c.parquet"), "--out", str(d / "sun.json")]) == 0
-    sun = json.loads((d / "sun.json").read_text())
-    assert sun["n_frames"] + sun["n_outliers"] == len(obs.uv) == cal.n_points + len(cal.outliers)
-    assert sun["n_outliers"] == len(sun["frames_outliers"]) == len(cal.outliers)
-    _assert_rel(sun["R_sun_from_rot"]["matrix"], cal.R_sun_from_rot)
-    _assert_rel([sun["intrinsics"][k] for k in ("fx_px", "fy_px", "cx_px", "cy_px")],
-                [cal.camera.fx, cal.camera.fy, cal.camera.cx, cal.camera.cy])
-    _assert_rel(np.array(sun["R_sun_from_rot"]["covariance"]["matrix"]),
-                cal.rotation_covariance_rad2 * (180 / np.pi * 3600) ** 2, 1e-6)
-    assert (d / "sun.residuals.png").stat().st_size > 10_000
-    # OpenCV reads the camera it writes
-    import cv2
-
-    assert main(["calibrate", "sun-sensor", "--rig", RIGS["000"], "--angles", str(d / "angles.csv"),
-                 "--centroids", str(d / "c.parquet"), "--out", str(d / "sun.json"), "--opencv", str(d / "cam.yml")]) == 0
-    fs = cv2.FileStorage(str(d / "cam.yml"), cv2.FILE_STORAGE_READ)
-    K, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
-    _assert_rel([K[0, 0], K[1, 1], K[0, 2], K[1, 2]], [cal.camera.fx, cal.camera.fy, cal.camera.cx, cal.camera.cy])
-    _assert_rel(dist[0, :2], [cal.camera.k1, cal.camera.k2])
-    assert int(fs.getNode("image_width").real()) == 1024
-
-
 @pytest.mark.parametrize("edit, message", [
     (lambda d: (d / "angles.csv").write_text((d / "angles.csv").read_text().replace("x_deg", "x_rad")),
      r"angles\.csv: column x_rad: expected x_deg \(degrees\), got radians"),
@@ -245,7 +198,8 @@ def test_triad_3axis_and_compose_covariance(tmp_path, capsys):
     from rigsim.frames import ARCSEC_PER_RAD
     from rigsim.rig.turntable import TurntableReading
 
-    write_table(tmp_path / "nulls.csv", {"face": ["+X", "+Y"], "y_deg": [-90.2, 0.3], "x_deg": [0.1, 89.7], "z_deg": [5.0, 5.0]})
+    # two nulls of one cube (their normals 90° apart within the readings' σ: TRIAD's fit is judged)
+    write_table(tmp_path / "nulls.csv", {"face": ["+X", "+Y"], "y_deg": [-90.2, 0.0], "x_deg": [0.1, 89.7], "z_deg": [5.0, 5.0]})
     assert main(["triad", "--nulls", str(tmp_path / "nulls.csv"), "--rig", RIGS["001"], "--out", str(tmp_path / "c.json"),
                  "--sigma-arcsec", "10"]) == 0
     res = json.loads((tmp_path / "c.json").read_text())
@@ -253,7 +207,7 @@ def test_triad_3axis_and_compose_covariance(tmp_path, capsys):
     C = np.array(res["R_cube_from_rot"]["covariance"]["matrix"])
     rng = np.random.default_rng(0)
     base = [{"Y": np.radians(-90.2), "X": np.radians(0.1), "Z": np.radians(5.0)},
-            {"Y": np.radians(0.3), "X": np.radians(89.7), "Z": np.radians(5.0)}]
+            {"Y": np.radians(0.0), "X": np.radians(89.7), "Z": np.radians(5.0)}]
     d = []
     for _ in range(3000):
         rr = [TurntableReading({k: v + rng.normal(0, 10 / ARCSEC_PER_RAD) for k, v in b.items()}) for b in base]
@@ -317,60 +271,3 @@ def test_compose_returns_a_known_cube_from_sun(tmp_path):
     wrong = sun_from_rot.inv() * cube_from_rot
     assert np.degrees((wrong * cube_from_sun.inv()).magnitude()) > 20.0
     assert np.trace(np.array(got["covariance"]["matrix"])) == pytest.approx(np.trace(Cc) + np.trace(Cs), rel=1e-12)
-
-
-@pytest.mark.render
-def test_null_commands_equal_the_campaign_measurers(tmp_path, capsys):
-    """One aiming-camera pair and one autocollimator frame as the campaign's measurers render and
-    measure them (frames handed out by their hook), then measured again from bare files."""
-    from rigsim.files import write_image
-    from rigsim.procedures.cube_mirror.autocollimation import FaceReadingMeasurer
-    from rigsim.procedures.cube_mirror.concentricity import OffsetMeasurer
-    from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
-    from rigsim.rig.load import load_rig
-    from rigsim.rig.turntable import pose_deg_to_rad
-    from rigsim.truth.cube_mirror.realization import realization_from_rig
-
-    got = []
-
-    def keep(kind, dn, info):
-        p = tmp_path / f"f{len(got)}.png"
-        write_image(p, dn)
-        got.append((kind, p, info))
-
-    rig = load_rig(RIGS["000"])
-    real = realization_from_rig(rig)
-    m = OffsetMeasurer(rig, real, 0, renderer=ConcentricityRenderer(rig, real, 0), seed=3, on_frame=keep)
-    m.last_reading = pose_deg_to_rad({"X": 181.398, "Y": 0.528})
-    meas, exact, _ = m(m.last_reading)
-    assert [g[0] for g in got] == ["aiming-hole", "aiming-spot"]
-    assert main(["concentricity", str(got[0][1]), str(got[1][1]), "--reading", "X=181.398,Y=0.528",
-                 "--json", str(tmp_path / "c.json")]) == 0
-    c = json.loads((tmp_path / "c.json").read_text())
-    _assert_rel(c["offset_px"], meas + m.bias_px)
-    _assert_rel(c["offset_px"], got[0][2]["measured_offset_px"])
-    assert np.hypot(*(np.array(c["offset_px"]) - exact)) < 0.2  # rendered vs exact, px
-    assert c["offset_um"] == pytest.approx([x * 15.0 for x in c["offset_px"]], rel=1e-12)
-
-    rig = load_rig(RIGS["001"])
-    real = realization_from_rig(rig)
-    from rigsim.rig.turntable import NOMINAL_D
-
-    f = FaceReadingMeasurer(rig, real, "+Z", NOMINAL_D, seed=5, spp=64, on_frame=keep)
-    pose = pose_deg_to_rad(rig.procedure.search_start[0])
-    reading, ex, _ = f(pose)
-    assert got[-1][0] == "autocollimator"
-    assert main(["autocollimator", "read", str(got[-1][1]), "--json", str(tmp_path / "a.json")]) == 0
-    a = json.loads((tmp_path / "a.json").read_text())
-    _assert_rel(a["reading_arcsec"], reading)
-    assert 0.001 < a["sigma_arcsec"][0] < 0.1 and np.all(np.abs(np.array(a["reading_arcsec"]) - ex) < 1.0)
-    capsys.readouterr()
-    # bad frames: one line each
-    write_image(tmp_path / "small.png", np.zeros((100, 100), np.uint16))
-    assert main(["autocollimator", "read", str(tmp_path / "small.png")]) == 2
-    assert "small.png: 100×100 px (width×height); expected 1280×1024 px" in capsys.readouterr().err
-    assert main(["concentricity", str(got[0][1]), str(got[1][1]), "--rig", RIGS["001"]]) == 2
-    assert "no aiming camera" in capsys.readouterr().err
-    assert main(["concentricity", str(got[0][1]), str(tmp_path / "nope.png")]) == 2
-    assert "nope.png: no such file" in capsys.readouterr().err
-

@@ -86,6 +86,9 @@ def add_cli(groups: dict) -> None:
     v.add_argument("--centroid-sigma-px", type=number(1e-6, 10), default=None, metavar="PX",
                    help="centroid σ per coordinate for the JSON's covariances (default: the tables' sigma_* columns "
                         "when every table has them, else the rig's study.centroid_sigma_px)")
+    from rigsim.procedures.fit_verdict import add_accept_option
+
+    add_accept_option(v)
     v.set_defaults(func=cmd_boresight_solve)
     return p
 
@@ -126,14 +129,16 @@ def cmd_boresight_solve(args) -> int:
     if args.stream:
         if args.measured or args.method != "dvad" or args.reading != "consistent" or args.json_out:
             raise CliError("--stream solves rows from stdin with DVAD (consistent reading); drop --measured/--method/--reading/--json-out")
+        _judge_solve(args, rig, rcams, ruv, [], np.zeros((0, 2, 2)))
         return _stream(rig, ref)
     if not args.measured:
         raise CliError("--measured FILE... is required (or --stream)")
     samples, cams, uv = _merged_rows(args.measured, rig, "spot table")
+    verdict, sig = _judge_solve(args, rig, rcams, ruv, cams, uv)
     est = F.solve_rows(rig, ref, cams, uv, method=args.method, reading=args.reading)
     cols = F.estimate_columns(samples, cams, est)
     if args.json_out:
-        _write_solve_json(args, rig, rcams, ref, samples, cams, uv)
+        _write_solve_json(args, rig, rcams, ref, samples, cams, uv, sig, verdict)
     if args.out:
         write_table(args.out, cols)
         print(f"{len(samples)} rows solved ({args.method}, {args.reading}) → {args.out}")
@@ -141,6 +146,8 @@ def cmd_boresight_solve(args) -> int:
         print(",".join(cols))
         for row in zip(*cols.values()):
             print(",".join(str(x) for x in row))
+    for line in verdict.lines():
+        print(line, file=sys.stderr if not args.out else sys.stdout)
     return 0
 
 
@@ -151,30 +158,51 @@ def _table_sigmas(paths):
     return None if any(g is None for g in got) else np.concatenate(got)
 
 
-def _write_solve_json(args, rig, rcams, ref, samples, cams, uv) -> None:
+def _sigmas(args, rig, rcams, cams):
+    """The centroid σ of the measured rows (n, 4) and of the reference rows (n_ref, 4) px, and their source:
+    --centroid-sigma-px, the tables' sigma_* columns, or the rig's study value, in that order."""
+    sig_m = None if args.stream else _table_sigmas(args.measured)
+    sig_r = _table_sigmas(args.reference)
+    if args.centroid_sigma_px is not None:
+        s = float(args.centroid_sigma_px)
+        return np.full((len(cams), 4), s), np.full((len(rcams), 4), s), f"--centroid-sigma-px {s:g}"
+    if sig_r is not None and (sig_m is not None or args.stream):
+        return sig_m, sig_r, "the spot tables' sigma_* columns (the centroider's per-spot σ)"
+    s = rig.study.centroid_sigma_px
+    return (np.full((len(cams), 4), s), np.full((len(rcams), 4), s),
+            f"the rig's study.centroid_sigma_px = {s:g} (the tables have no sigma_* columns)")
+
+
+def _judge_solve(args, rig, rcams, ruv, cams, uv):
+    """The solve's verdict (:func:`rigsim.procedures.boresight.files.solve_fit_quality`) and the σ the JSON's
+    covariances use, scaled by χ²/dof when the reference scatter exceeds them beyond chance."""
+    from rigsim.procedures.boresight.files import solve_alternatives, solve_fit_quality
+    from rigsim.procedures.fit_verdict import judge
+
+    sig_m, sig_r, source = _sigmas(args, rig, rcams, cams)
+    q = solve_fit_quality(rig, rcams, ruv, sig_r, cams, uv, source)
+    verdict = judge(q, solve_alternatives(rig, rcams, ruv, sig_r, cams, uv, source), accept=args.accept_poor_fit,
+                    what="boresight solve")
+    k = float(np.sqrt(verdict.covariance_scale))
+    return verdict, (None if sig_m is None else sig_m * k, sig_r * k, source)
+
+
+def _write_solve_json(args, rig, rcams, ref, samples, cams, uv, sig, verdict) -> None:
     """The JSON result of ``boresight solve``: covariances from the centroid σ (option, the tables' columns, or
-    the rig's study value, in that order; the source is written in the file)."""
+    the rig's study value, in that order; the source is written in the file), scaled by the fit's χ²/dof."""
     from rigsim.files import write_json
     from rigsim.procedures.boresight.files import camera_geometry
     from rigsim.procedures.boresight.result_json import boresight_result_json
 
-    n_ref = {c: rcams.count(c) for c in ref}
-    sig_m, sig_r = _table_sigmas(args.measured), _table_sigmas(args.reference)
-    if args.centroid_sigma_px is not None:
-        s = float(args.centroid_sigma_px)
-        sig_m, source = np.full((len(cams), 4), s), f"--centroid-sigma-px {s:g}"
-        sig_r = {c: np.full(4, s / np.sqrt(n_ref[c])) for c in ref}
-    elif sig_m is not None and sig_r is not None:
-        source = "the spot tables' sigma_* columns (the centroider's per-spot σ)"
-        sig_r = {c: np.sqrt(np.mean(sig_r[[k for k, x in enumerate(rcams) if x == c]] ** 2, axis=0) / n_ref[c])
-                 for c in ref}
-    else:
-        s = rig.study.centroid_sigma_px
-        sig_m, source = np.full((len(cams), 4), s), f"the rig's study.centroid_sigma_px = {s:g} (the tables have no sigma_* columns)"
-        sig_r = {c: np.full(4, s / np.sqrt(n_ref[c])) for c in ref}
+    sig_m, sig_r_rows, source = sig
+    sig_r = {c: np.sqrt(np.mean(sig_r_rows[[k for k, x in enumerate(rcams) if x == c]] ** 2, axis=0) / rcams.count(c))
+             for c in ref}
+    if verdict.covariance_scale != 1.0:
+        source += f", scaled by χ²/dof = {verdict.covariance_scale:.4g} (the reference rows scatter beyond it)"
     geoms = {c: camera_geometry(rig, c) for c in dict.fromkeys([*cams, *ref])}
     data = boresight_result_json(rig, geoms, ref, samples, cams, uv, sig_m, sig_r, method=args.method,
                                  reading=args.reading, mode="files", rig_file=args.rig, sigma_source=source)
+    data["fit"] = verdict.block()
     write_json(args.json_out, data)
     print(f"→ {args.json_out} (covariances from {source})")
 

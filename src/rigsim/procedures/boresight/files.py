@@ -15,6 +15,7 @@ import numpy as np
 
 from rigsim.errors import InputError
 from rigsim.estimation.dvad import BoresightEstimate, DVADSolver, estimate
+from rigsim.estimation.fit_quality import FitQuality, judge_residuals, not_judged
 from rigsim.files import Column, read_image, read_table
 from rigsim.imaging import NoiseModel
 from rigsim.imaging.rois import centroid_rois
@@ -22,7 +23,7 @@ from rigsim.optics.line_camera import CameraGeometry
 from rigsim.rig.boresight import BoresightRig
 
 __all__ = ["SIGMA_COLUMNS", "SPOT_COLUMNS", "camera_geometry", "spot_sigmas", "centroid_roi_files", "read_spot_rows", "reference_spots",
-           "solve_rows", "estimate_columns", "streaming_solver"]
+           "solve_rows", "estimate_columns", "streaming_solver", "solve_fit_quality", "solve_alternatives", "window_problems"]
 
 SPOT_COLUMNS = [Column("camera", kind="str"), Column("u_m1", "px"), Column("v_m1", "px"), Column("u_m2", "px"),
                 Column("v_m2", "px"), Column("sample", kind="str", required=False)]
@@ -131,3 +132,76 @@ def estimate_columns(samples, cams, est: dict[str, BoresightEstimate]) -> dict[s
 def streaming_solver(rig: BoresightRig, ref: dict[str, np.ndarray]) -> dict[str, DVADSolver]:
     """The cached DVAD solver per camera for a real-time loop (one row at a time)."""
     return {c: DVADSolver(camera_geometry(rig, c), r) for c, r in ref.items()}
+
+
+# ------------------------------------------------------------------------------ the solve's fit
+
+def window_problems(rig: BoresightRig, cams: Sequence[str], uv: np.ndarray, what: str) -> list[str]:
+    """The spots that lie outside their detector's nominal ROI window (``orbit.window_px`` centred
+    on the design reference spot): a camera that reads out ROIs cannot have measured them."""
+    w = rig.orbit.window_px
+    bad = []
+    for k, c in enumerate(cams):
+        g = camera_geometry(rig, c)
+        for j in range(2):
+            o = np.asarray(g.roi_origin(j, w), float)
+            p = uv[k, j]
+            if not (np.all(np.isfinite(p)) and np.all(p >= o - 0.5) and np.all(p <= o + w - 0.5)):
+                bad.append((k, j, p, o))
+    if not bad:
+        return []
+    k, j, p, o = bad[0]
+    return [f"{len(bad)} {what} spot(s) outside the nominal {w}-px ROI windows (first: row {k + 1}, camera {cams[k]}, "
+            f"M{j + 1} at ({p[0]:.6g}, {p[1]:.6g}) px, window u {o[0]:g}…{o[0] + w - 1:g}, v {o[1]:g}…{o[1] + w - 1:g})"]
+
+
+def solve_fit_quality(rig: BoresightRig, ref_cams: Sequence[str], ref_uv: np.ndarray, ref_sigma, cams: Sequence[str],
+                      uv: np.ndarray, noise_source: str) -> FitQuality:
+    """DVAD is exactly determined (four spot coordinates, four unknowns), so what is judged is the
+    rest: the reference rows' scatter about each camera's mean over the centroid σ (``ref_sigma``,
+    (n, 4) or a scalar; χ² with 4·(rows − 1) dof per camera) and every spot inside its nominal ROI
+    window (a failed check makes the fit poor)."""
+    ref_cams = list(ref_cams)
+    sig = np.broadcast_to(np.asarray(ref_sigma, float), (len(ref_cams), 4)).reshape(-1, 2, 2)
+    res, s = [], []
+    for c in dict.fromkeys(ref_cams):
+        rows = [k for k, x in enumerate(ref_cams) if x == c]
+        if len(rows) > 1:
+            res.append(ref_uv[rows] - ref_uv[rows].mean(axis=0))
+            s.append(sig[rows])
+    problems = window_problems(rig, ref_cams, ref_uv, "reference") + window_problems(rig, cams, uv, "measured")
+    if not res:
+        return not_judged("DVAD is exactly determined and each camera has one reference row", problems=problems)
+    r, s = np.concatenate(res), np.concatenate(s)
+    n_means = 4 * len(res)
+    ok = np.isfinite(s) & (s > 0)
+    s = np.where(ok, s, np.median(s[ok]) if ok.any() else 1.0)
+    return judge_residuals(r, s, n_means, f"{noise_source}: the reference rows' scatter", problems=problems)
+
+
+def solve_alternatives(rig: BoresightRig, ref_cams, ref_uv, ref_sigma, cams, uv, noise_source: str) -> list:
+    """(name, refit) for the spot tables read another way — u and v swapped, M1 and M2 swapped, the
+    detectors mirrored (u → W−1−u) — in the reference tables, the measured ones, or both."""
+    W = {c.name: CameraGeometry.from_rig(c).width_px for c in rig.cameras}
+
+    def mirror(a, cs):
+        a = a.copy()
+        a[..., 0] = np.array([W[c] for c in cs], float)[:, None] - 1.0 - a[..., 0]
+        return a
+
+    transforms = [("u and v swapped (u_m1_px with v_m1_px, u_m2_px with v_m2_px)", lambda a, cs: a[..., ::-1]),
+                  ("M1 and M2 swapped", lambda a, cs: a[:, ::-1]),
+                  ("the detectors mirrored (u → W − 1 − u)", mirror)]
+    out = []
+    for name, f in transforms:
+        for where, on_ref, on_meas in (("the reference tables", True, False), ("the measured tables", False, True),
+                                       ("every table", True, True)):
+            if on_meas and not len(cams):
+                continue
+
+            def refit(f=f, on_ref=on_ref, on_meas=on_meas):
+                return solve_fit_quality(rig, ref_cams, f(ref_uv, ref_cams) if on_ref else ref_uv, ref_sigma, cams,
+                                         f(uv, cams) if on_meas else uv, noise_source)
+
+            out.append((f"{name} in {where}", refit))
+    return out

@@ -130,7 +130,9 @@ def run_campaign(
         sweep_readings, sweep_uv = simulate_sweep(rig, real, noise, rng)
     d_ref = reference_direction(rig, real, noise, rng)  # steps 2–3 / A, C
     readings_null = simulate_nulls(rig, real, noise, rng, d_ref)
-    est = estimate(rig, readings_null, axis_order, sweep_readings=sweep_readings, sweep_uv=sweep_uv)
+    sig = None if sweep_uv is None or not noise.centroid_sigma_px else np.full(np.shape(sweep_uv), noise.centroid_sigma_px)
+    est = estimate(rig, readings_null, axis_order, sweep_readings=sweep_readings, sweep_uv=sweep_uv,
+                   sweep_sigma_uv=sig)  # the fit judged against the noise the simulation drew
     return compare(rig, est, real)
 
 

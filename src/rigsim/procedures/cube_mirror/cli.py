@@ -41,6 +41,8 @@ def add_cli(groups: dict) -> None:
     cmr.add_argument("--threshold", type=number(1e-6, 1000), default=None, help="rendered: null-search threshold, px (seed 000) or arcsec (001); default the rig's")
     cmr.add_argument("--sweep-spp", type=SPP, default=256, help="rendered: samples per pixel of the sun-sensor sweep frames")
     cmr.add_argument("--sweep-step", type=number(1e-3, 90), default=None, metavar="DEG", help="rendered: sweep step (default the rig's, 5°)")
+    cmr.add_argument("--autocollimator-spp", type=SPP, default=None, metavar="N",
+                     help="rendered, seed 001: samples per pixel of the autocollimator's frames (default 1024)")
     cmr.add_argument("--repeat-frames", type=integer(0, 100), default=4, help="rendered: extra frames at the first null to measure the null-measurement noise")
     cmr.add_argument("--axis-order", default=None, help="estimator's axis nesting reading, outermost first (default: the rig's)")
     cmr.add_argument("--no-budget", action="store_true", help="skip the Monte-Carlo error budget")
@@ -113,7 +115,7 @@ def cmd_run_cube_mirror(args) -> int:
     if args.trials is None:
         args.trials = 300 if args.analytic else 200
     if args.analytic:
-        used = [o for o in ("export_frames", "centroider", "import_centroids") if getattr(args, o)]
+        used = [o for o in ("export_frames", "centroider", "import_centroids", "autocollimator_spp") if getattr(args, o)]
         if used:
             raise CliError(f"--{used[0].replace('_', '-')}: works on rendered frames; drop --analytic")
         return _run_cube_mirror_analytic(args)
@@ -174,7 +176,8 @@ def _run_cube_mirror_rendered(args) -> int:
             camp = rc.run_rendered_campaign(rig, real, seed=args.seed, axis_order=axis_order, noise=noise,
                                             noiseless=args.ideal, threshold=threshold, sweep_spp=args.sweep_spp,
                                             sweep_step_deg=args.sweep_step, repeat_frames=args.repeat_frames,
-                                            progress=_Releasing(bar), frames=frames, aiming_workers=min(2, cores()))
+                                            progress=_Releasing(bar), frames=frames, aiming_workers=min(2, cores()),
+                                            autocollimator_spp=args.autocollimator_spp)
     wall = dict(camp.times)
     res = camp.result
     cal = camp.calibration

@@ -124,7 +124,8 @@ class OffsetMeasurer:
         m = measure_concentricity(self.rig, fr.hole.dn, fr.spot.dn)  # the `rigsim concentricity` stage
         if self.on_frame is not None:
             info = {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
-                    "measured_offset_px": np.asarray(m["offset_px"]).tolist(), "face": self.face}
+                    "measured_offset_px": np.asarray(m["offset_px"]).tolist(), "face": self.face,
+                    "null_offset_px": np.asarray(self.bias_px, float).tolist()}
             self.on_frame("aiming-hole", fr.hole.dn, info)
             self.on_frame("aiming-spot", fr.spot.dn, info)
         if not np.all(np.isfinite(m["offset_px"])):

@@ -10,8 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rigsim.errors import CliError
+from rigsim.errors import CliError, PoorFitError
 from rigsim.files.options import number
+from rigsim.procedures.fit_verdict import add_accept_option
 from rigsim.rig.load import DEFAULT_RIG
 
 __all__ = ["add_cli"]
@@ -38,6 +39,7 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--out", required=True, metavar="FILE", help="the calibration (.json); a residual plot is written beside it")
     c.add_argument("--axis-order", default=None, help="axis nesting, outermost first (default the rig's)")
     c.add_argument("--opencv", default=None, metavar="FILE", help="also write OpenCV's FileStorage camera (.yml/.json)")
+    add_accept_option(c)
     c.set_defaults(func=cmd_calibrate_sun_sensor)
 
     t = sub.add_parser(
@@ -59,6 +61,7 @@ def add_cli(groups: dict) -> None:
                         "'printed' rotates each face's own normal (degenerate; the conditioning is printed)")
     t.add_argument("--out", default=None, metavar="FILE", help="write R(cube←rot) and its covariance as JSON")
     t.add_argument("--json", action="store_true", help="also print the JSON result (last line)")
+    add_accept_option(t)
     t.set_defaults(func=cmd_triad)
 
     m = sub.add_parser("compose", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -67,6 +70,7 @@ def add_cli(groups: dict) -> None:
     m.add_argument("--cube-from-rot", required=True, metavar="A.json", help="JSON with R_cube_from_rot (rigsim triad --out)")
     m.add_argument("--sun-from-rot", required=True, metavar="B.json", help="JSON with R_sun_from_rot (rigsim calibrate sun-sensor)")
     m.add_argument("--out", default=None, metavar="FILE", help="write R(cube←sun) and its covariance as JSON")
+    add_accept_option(m)
     m.set_defaults(func=cmd_compose)
 
 
@@ -80,6 +84,8 @@ def _print_rotation(name: str, blk: dict) -> None:
 def cmd_calibrate_sun_sensor(args) -> int:
     from rigsim.files import write_json
     from rigsim.procedures.cube_mirror import files as F
+    from rigsim.procedures.cube_mirror.input_causes import sweep_alternatives
+    from rigsim.procedures.fit_verdict import judge
     from rigsim.rig.load import load_rig
 
     rig = load_rig(args.rig)
@@ -88,17 +94,23 @@ def cmd_calibrate_sun_sensor(args) -> int:
     if out.suffix.lower() != ".json":
         raise CliError(f"--out = {args.out}: expected a .json file name")
     t0 = time.perf_counter()
-    cal, inputs = F.calibrate_sun_sensor_files(rig, args.angles, args.centroids, order)
-    res = F.sun_calibration_json(cal, rig, order, inputs)
+    tables = F.read_sweep_tables(rig, args.angles, args.centroids)
+    cal, inputs, q = F.fit_sweep_tables(rig, tables, order)
+    verdict = judge(q, sweep_alternatives(rig, tables, order), accept=args.accept_poor_fit, what="sun-sensor calibration")
+    if cal is None:
+        raise PoorFitError(f"sun-sensor calibration: {q.describe()}; there is no calibration to write")
+    res = F.sun_calibration_json(cal, rig, order, inputs, fit=verdict.block())
     res["inputs"] = {"angles": str(args.angles), "centroids": str(args.centroids)}
     write_json(out, res)
     plot = F.plot_residuals(cal, out.with_suffix(".residuals.png"))
     if args.opencv:
-        F.write_opencv_camera(args.opencv, cal.camera)
+        F.write_opencv_camera(args.opencv, cal.camera, poor_fit=verdict.quality.poor)
     i = res["intrinsics"]
     print(f"sun-sensor calibration: {cal.n_points} frames ({len(inputs.rejected)} without a usable spot, "
           f"{len(cal.outliers)} outliers and {len(cal.outside_field)} beyond the field left out), "
           f"residual rms {cal.rms_px:.4f} px")
+    for line in verdict.lines():
+        print(line)
     print(f"fx {i['fx_px']:.3f} px, fy {i['fy_px']:.3f} px, principal point ({i['cx_px']:.3f}, {i['cy_px']:.3f}) px, "
           f"k1 {cal.camera.k1:+.3e}, k2 {cal.camera.k2:+.3e}")
     _print_rotation("R(sun←rot)", res["R_sun_from_rot"])
@@ -154,8 +166,14 @@ def cmd_triad(args) -> int:
         sigma = {a.label: args.sigma_arcsec / ARCSEC_PER_RAD for a in rig.turntable.axes}
     else:
         sigma = F.reading_sigma_rad(rig)
-    R, C = F.triad_with_covariance(readings, faces, order, sigma, eq8=args.eq8)
-    res = F.triad_json(R, C, faces, order, readings, sigma, rig.name, eq8=args.eq8)
+    verdict = _judge_triad(rig, readings, faces, order, sigma, args.accept_poor_fit,
+                           None if args.nulls is not None else {"X": "θ1, θ3", "Y": "θ2, θ4"})
+    try:
+        R, C = F.triad_with_covariance(readings, faces, order, sigma, eq8=args.eq8)
+    except ValueError as exc:  # parallel normals: no attitude at all
+        raise PoorFitError(f"TRIAD: {exc}; there is no rotation to write") from None
+    res = F.triad_json(R, C * verdict.covariance_scale, faces, order, readings, sigma, rig.name, eq8=args.eq8)
+    res["fit"] = verdict.block()
     from rigsim.estimation.cube_attitude import EQ8_READINGS, cube_from_rot_triad
     from rigsim.estimation.triad import triad_conditioning
     from rigsim.optics.cube import FACE_NORMALS
@@ -176,6 +194,8 @@ def cmd_triad(args) -> int:
     for f, r in zip(faces, readings):
         print(f"  {f}: " + ", ".join(f"{k}={np.degrees(v):.6f}°" for k, v in r.items()))
     _print_rotation("R(cube←rot)", res["R_cube_from_rot"])
+    for line in verdict.lines():
+        print(line)
     print(f"angle between the two measured normals: {ang:.5f}° (a perfect cube: 90°; deviation {(ang - 90) * 3600:+.1f}″)")
     if cond["degenerate"]:
         print(f"DEGENERATE: r1 and r2 are {cond['angle_r_deg']:.3f}° apart while the faces are {cond['angle_n_deg']:.1f}° "
@@ -196,12 +216,30 @@ def cmd_triad(args) -> int:
     return 0
 
 
+def _judge_triad(rig, readings, faces, order, sigma, accept, cols=None):
+    """The verdict of TRIAD on the null readings (:func:`~rigsim.procedures.cube_mirror.files.triad_fit_quality`),
+    with the null log's readings read other ways as the causes."""
+    from rigsim.procedures.cube_mirror import files as F
+    from rigsim.procedures.cube_mirror.input_causes import null_alternatives
+    from rigsim.procedures.fit_verdict import judge
+    from rigsim.rig.turntable import TurntableReading
+
+    def quality(rr, o=None):
+        return F.triad_fit_quality([TurntableReading(r) for r in rr], faces, o or order, sigma)
+
+    alts = null_alternatives([a.label for a in rig.turntable.axes], [dict(r) for r in readings], quality,
+                             [o for o in F.axis_orders(rig) if o != order], cols)
+    return judge(quality([dict(r) for r in readings]), alts, accept=accept, what="TRIAD")
+
+
 def cmd_compose(args) -> int:
     from rigsim.files import write_json
-    from rigsim.procedures.cube_mirror.files import compose_rotations
+    from rigsim.procedures.cube_mirror.files import compose_with_verdict
 
-    res = compose_rotations(args.cube_from_rot, args.sun_from_rot)
+    res, verdict = compose_with_verdict(args.cube_from_rot, args.sun_from_rot, accept_poor_fit=args.accept_poor_fit)
     _print_rotation("R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ", res["R_cube_from_sun"])
+    for line in verdict.lines():
+        print(line)
     if args.out:
         write_json(args.out, res)
         print(f"→ {args.out}")

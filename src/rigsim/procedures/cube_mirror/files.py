@@ -8,6 +8,7 @@ Rotations are written as matrices with a covariance of the small rotation δ (ar
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,29 +17,35 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rigsim.errors import InputError
-from rigsim.estimation.cube_attitude import AXIS_ORDERS_2AXIS, AXIS_ORDERS_3AXIS, cube_from_rot_triad
+from rigsim.estimation.cube_attitude import AXIS_ORDERS_2AXIS, AXIS_ORDERS_3AXIS, cube_from_rot_triad, normal_in_mount
+from rigsim.estimation.fit_quality import POOR_CHI2_DOF, FitQuality, judge_chi2, judge_residuals, not_judged
 from rigsim.estimation.sun_calibration import SunCalibration
-from rigsim.files import Column, covariance_block, read_json, read_table
-from rigsim.frames import ARCSEC_PER_RAD
+from rigsim.files import Column, covariance_block, read_json, read_table, symmetric_covariance
+from rigsim.frames import ARCSEC_PER_RAD, angle_between
 from rigsim.imaging.frame_spots import REJECT
 from rigsim.optics.cube import FACE_NORMALS
 from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
 from rigsim.procedures.results import ROTATION_CONVENTION, rotation_block
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import TurntableReading
+from rigsim.rig.turntable import TurntableModel, TurntableReading, as_reading
 
 __all__ = [
     "ROTATION_CONVENTION",
     "SunSensorInputs",
+    "SweepTables",
     "angle_columns",
     "axis_orders",
     "calibrate_sun_sensor_files",
     "compose_rotations",
+    "fit_sweep_tables",
+    "join_sweep",
+    "read_sweep_tables",
     "read_angle_log",
     "read_nulls",
     "read_spot_table",
     "sun_calibration_json",
     "sun_sensor_inputs",
+    "triad_fit_quality",
     "triad_json",
     "triad_with_covariance",
     "write_opencv_camera",
@@ -116,19 +123,37 @@ class SunSensorInputs:
     sigma_uv: np.ndarray | None = None  # the centroids' 1σ (N, 2), NaN where the table gives none
 
 
-def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSensorInputs:
-    """Join an angle log and a centroid table on the frame name. Every frame of the centroid table
-    must be in the log; frames without a usable spot (flags INVALID, SATURATED, EDGE, or none) are
-    left out, as the in-process sweep does."""
+@dataclass(frozen=True)
+class SweepTables:
+    """The angle log and the centroid table as read, before they are joined: the log's frames and
+    readings (rad) in its row order, and the table's first spot per frame (:func:`read_spot_table`).
+    The fit's causes (:mod:`rigsim.procedures.cube_mirror.input_causes`) read them other ways."""
+
+    frames: list[str]
+    readings: dict[str, np.ndarray]
+    spots: dict[str, tuple[float, float, int, int, float, float]]
+    angles_path: str
+    centroids_path: str
+
+
+def read_sweep_tables(rig: CubeMirrorRig, angles_path, centroids_path) -> SweepTables:
+    """Read an angle log and a centroid table; every frame of the centroid table must be in the log."""
     frames, reading, _ = read_angle_log(angles_path, rig)
     spots = read_spot_table(centroids_path)
     known = set(frames)
     for f, (_, _, _, line, _, _) in spots.items():
         if f not in known:
             raise InputError(f"{centroids_path}: line {line}, column frame: {f!r} has no row in the angle log {angles_path}")
+    return SweepTables(frames, {k: np.asarray(v, float) for k, v in reading.items()}, spots, str(angles_path),
+                       str(centroids_path))
+
+
+def join_sweep(t: SweepTables) -> SunSensorInputs:
+    """The frames of the log with a usable spot (flags INVALID, SATURATED, EDGE, or none: left out,
+    as the in-process sweep does), their readings, centroids and σ."""
     keep, uv, sig, rejected = [], [], [], []
-    for i, f in enumerate(frames):
-        s = spots.get(f)
+    for i, f in enumerate(t.frames):
+        s = t.spots.get(f)
         if s is None or s[2] & int(REJECT):
             rejected.append(f)
             continue
@@ -136,23 +161,61 @@ def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSen
         uv.append(s[:2])
         sig.append(s[4:6])
     keep = np.array(keep, dtype=int)
-    return SunSensorInputs([frames[i] for i in keep], TurntableReading({k: v[keep] for k, v in reading.items()}),
+    return SunSensorInputs([t.frames[i] for i in keep], TurntableReading({k: v[keep] for k, v in t.readings.items()}),
                            np.array(uv, float).reshape(-1, 2), rejected, np.array(sig, float).reshape(-1, 2))
+
+
+def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSensorInputs:
+    """Join an angle log and a centroid table on the frame name. Every frame of the centroid table
+    must be in the log; frames without a usable spot (flags INVALID, SATURATED, EDGE, or none) are
+    left out, as the in-process sweep does."""
+    return join_sweep(read_sweep_tables(rig, angles_path, centroids_path))
+
+
+def fit_sweep_tables(rig: CubeMirrorRig, t: SweepTables, axis_order: str
+                     ) -> tuple[SunCalibration | None, SunSensorInputs, FitQuality]:
+    """The sun-sensor calibration of joined tables and its fit quality. A least squares that ends
+    at a non-physical camera (a focal length ≤ 0: data that no sun sensor could give) is no
+    calibration (None) and a poor fit."""
+    inp = join_sweep(t)
+    if len(inp.frames) < 8:
+        raise InputError(f"{t.centroids_path}: {len(inp.frames)} frames with a usable spot; the calibration needs at least 8")
+    try:
+        cal = fit_sun_sensor(rig, inp.readings, inp.uv, axis_order, sigma_uv=inp.sigma_uv)
+    except ValueError as exc:
+        if "at least 8" in str(exc):
+            raise InputError(f"{t.centroids_path}: {exc}") from None
+        return None, inp, judge_chi2(math.inf, 2 * len(inp.frames) - 12, "the centroids' σ",
+                                     problems=(f"the least squares ends at a non-physical camera ({exc})",))
+    return cal, inp, cal.fit or not_judged("no centroid σ: neither the table nor the rig gives one")
 
 
 def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, axis_order: str | None = None
                                ) -> tuple[SunCalibration, SunSensorInputs]:
-    """Step 1 / B on files: intrinsics, distortion and R(sun←rot) by least squares."""
+    """Step 1 / B on files: intrinsics, distortion and R(sun←rot) by least squares (its fit quality
+    in ``SunCalibration.fit``; ``rigsim calibrate sun-sensor`` refuses a poor one)."""
     order = axis_order or default_axis_order(rig)
-    inp = sun_sensor_inputs(rig, angles_path, centroids_path)
-    if len(inp.frames) < 8:
-        raise InputError(f"{centroids_path}: {len(inp.frames)} frames with a usable spot; the calibration needs at least 8")
-    return fit_sun_sensor(rig, inp.readings, inp.uv, order, sigma_uv=inp.sigma_uv), inp
+    cal, inp, q = fit_sweep_tables(rig, read_sweep_tables(rig, angles_path, centroids_path), order)
+    if cal is None:
+        raise InputError(f"{centroids_path}: {q.describe()}")
+    return cal, inp
 
 
-def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: str, inputs: SunSensorInputs) -> dict:
+def covariance_source(q: FitQuality | None) -> str:
+    """How a sun-sensor calibration's covariance was made (the JSON's ``sigma_source``)."""
+    if q is None or q.dof <= 0:
+        return "residual scatter of the fit (σ² = RSS / dof): no centroid σ to judge it against"
+    if q.covariance_scale != 1.0:
+        return (f"{q.noise_source}, scaled by χ²/dof = {q.covariance_scale:.4g} (the residuals exceed the noise beyond "
+                "chance)")
+    return f"{q.noise_source} (χ²/dof {q.chi2_dof:.3g}, within chance of 1: not scaled)"
+
+
+def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: str, inputs: SunSensorInputs,
+                         fit: dict | None = None) -> dict:
     """The calibration as one JSON object: intrinsics with their covariance, R(sun←rot) with its
-    covariance, residual statistics, the frames used."""
+    covariance, residual statistics, the frames used, and the fit's verdict (``fit``: the command's
+    :meth:`~rigsim.procedures.fit_verdict.Verdict.block`; default the calibration's own quality)."""
     cam = cal.camera
     n_int = len(cal.param_names) - 3
     units = {"fx": "px", "fy": "px", "cx": "px", "cy": "px"}
@@ -174,17 +237,20 @@ def sun_calibration_json(cal: SunCalibration, rig: CubeMirrorRig, axis_order: st
         "n_outside_field": len(cal.outside_field),
         "frames_outside_field": [inputs.frames[i] for i in cal.outside_field],
         "max_field_deg": rig.procedure.sweep_max_field_deg,
-        "sigma_source": "residual scatter of the fit (σ² = RSS / dof)",
+        "sigma_source": covariance_source(cal.fit),
+        "fit": fit if fit is not None else (cal.fit.as_dict() if cal.fit is not None else None),
     }
 
 
-def write_opencv_camera(path, cal_camera) -> Path:
+def write_opencv_camera(path, cal_camera, *, poor_fit: bool = False) -> Path:
     """OpenCV's FileStorage camera of a calibrated :class:`~rigsim.optics.camera.PinholeBrown`, YAML, JSON or XML by
-    the suffix (:func:`rigsim.files.opencv.write_opencv_camera`)."""
+    the suffix (:func:`rigsim.files.opencv.write_opencv_camera`); a poor fit written anyway is marked
+    (``rigsim_fit_verdict: poor``)."""
     from rigsim.files.opencv import write_opencv_camera as write
 
     c = cal_camera
-    return write(path, c.fx, c.fy, c.cx, c.cy, [c.k1, c.k2, c.p1, c.p2, c.k3], c.width, c.height)
+    return write(path, c.fx, c.fy, c.cx, c.cy, [c.k1, c.k2, c.p1, c.p2, c.k3], c.width, c.height,
+                 fit_verdict="poor" if poor_fit else None)
 
 
 def plot_residuals(cal: SunCalibration, path, title: str = "") -> Path:
@@ -254,8 +320,21 @@ def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: 
     independent reading errors of σ ``sigma_rad`` per axis (central differences). ``eq8``: the reading of
     the normals (:data:`rigsim.estimation.cube_attitude.EQ8_READINGS`)."""
     R0, _, _ = cube_from_rot_triad(readings, faces, axis_order, d_rot, eq8)
+
+    def delta(rr):
+        R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot, eq8)
+        return Rotation.from_matrix(R @ R0.T).as_rotvec()
+
+    cols = _reading_columns(readings, sigma_rad, delta, step_rad)
+    J = np.array(cols).T if cols else np.zeros((3, 0))
+    return R0, J @ J.T
+
+
+def _reading_columns(readings: Sequence, sigma_rad: dict[str, float], f, step_rad: float) -> list:
+    """σ·∂f/∂θ for each reading's each axis of σ > 0 (central differences): the columns of f's error
+    propagation from independent reading errors."""
     cols = []
-    for i in range(2):
+    for i in range(len(readings)):
         for lab, s in sigma_rad.items():
             if s <= 0:
                 continue
@@ -263,11 +342,41 @@ def triad_with_covariance(readings: Sequence, faces: Sequence[str], axis_order: 
             for sgn in (1.0, -1.0):
                 rr = [dict(r) for r in readings]
                 rr[i][lab] = rr[i].get(lab, 0.0) + sgn * step_rad
-                R, _, _ = cube_from_rot_triad([TurntableReading(x) for x in rr], faces, axis_order, d_rot, eq8)
-                d.append(Rotation.from_matrix(R @ R0.T).as_rotvec())
+                d.append(np.asarray(f(rr), float))
             cols.append((d[0] - d[1]) / (2 * step_rad) * s)
-    J = np.array(cols).T if cols else np.zeros((3, 0))
-    return R0, J @ J.T
+    return cols
+
+
+CUBE_ALLOWANCE_ARCSEC = 60.0  # normals this far from a perfect cube's angle are still a cube on a real table
+
+
+def triad_fit_quality(readings: Sequence, faces: Sequence[str], axis_order: str, sigma_rad: dict[str, float],
+                      d_rot=(0.0, 0.0, 1.0), step_rad: float = 1e-6) -> FitQuality:
+    """TRIAD's one redundant datum judged: the angle between the two measured face normals (the beam
+    direction read back through each null's reading, nominal turntable of nesting ``axis_order``)
+    against the angle between the two faces of a perfect cube, over its σ propagated from
+    independent reading errors of σ ``sigma_rad`` per axis (central differences); χ² with 1 dof.
+    It is poor beyond 5σ *and* :data:`CUBE_ALLOWANCE_ARCSEC` (a real cube's faces and a real table's
+    axes are not perfect: a deviation below it scales the covariance, e.g. seed 000 Table 1's
+    43″). A flipped sign or swapped columns keep the angle, so this datum cannot reveal them."""
+    model = TurntableModel.nominal(list(axis_order))
+
+    def angle(rr) -> float:
+        r1, r2 = (normal_in_mount(model, as_reading(r), d_rot) for r in rr)
+        return float(angle_between(r1, r2))
+
+    rr = [dict(r) for r in readings]
+    a = angle(rr)
+    a_faces = float(angle_between(FACE_NORMALS[faces[0]], FACE_NORMALS[faces[1]]))
+    var = float(sum(c**2 for c in _reading_columns(rr, sigma_rad, angle, step_rad)))
+    dev = (a - a_faces) * ARCSEC_PER_RAD
+    sig = float(np.sqrt(var)) * ARCSEC_PER_RAD
+    if not sig > 0:
+        return not_judged("no reading σ to judge the normals' angle against")
+    return judge_residuals([dev], sig, 0, f"the readings' σ through the normals' angle, {sig:.3g}″", unit="arcsec",
+                           problems=(() if np.degrees(a) >= 1.0 else
+                                     (f"the two nulls give the same normal ({np.degrees(a):.4f}° apart)",)),
+                           limit=max(POOR_CHI2_DOF, (CUBE_ALLOWANCE_ARCSEC / sig) ** 2))
 
 
 def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, readings, sigma_rad: dict, rig_name="",
@@ -279,7 +388,9 @@ def triad_json(R: np.ndarray, cov_rad2: np.ndarray, faces, axis_order: str, read
             "R_cube_from_rot": rotation_block(R, cov_rad2)}
 
 
-def _rotation_from(path, key: str) -> tuple[np.ndarray, np.ndarray]:
+def _rotation_from(path, key: str) -> tuple[np.ndarray, np.ndarray, dict | None]:
+    """A rotation block of a JSON result: the matrix, its covariance (rad², symmetrised within
+    :func:`rigsim.files.symmetric_covariance`'s tolerance) and the result's ``fit`` block (None if it has none)."""
     obj = read_json(path, required=(key,), what=f"result with {key}")
     blk = obj[key]
     try:
@@ -291,17 +402,27 @@ def _rotation_from(path, key: str) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"{path}: {key}: matrix {R.shape}, covariance {C.shape}; expected finite 3×3 each")
     if abs(np.linalg.det(R) - 1.0) > 1e-6 or np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6:
         raise InputError(f"{path}: {key}.matrix is not a rotation (det {np.linalg.det(R):.6f}); expected R·Rᵀ = I, det +1")
-    if np.max(np.abs(C - C.T)) > 1e-9 * max(np.max(np.abs(C)), 1e-30) or np.min(np.linalg.eigvalsh(C)) < -1e-12 * np.max(np.abs(C)):
-        raise InputError(f"{path}: {key}.covariance is not symmetric positive semi-definite")
-    return R, C
+    C = symmetric_covariance(C, where=f"{path}: {key}.covariance")
+    fit = obj.get("fit")
+    return R, C, fit if isinstance(fit, dict) else None
 
 
-def compose_rotations(cube_path, sun_path) -> dict:
+def compose_rotations(cube_path, sun_path, *, accept_poor_fit: bool = False) -> dict:
     """R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ (seed 001 eq 9) with Σ = Σ_cube + R·Σ_sun·Rᵀ (independent
-    inputs; δ_cube←sun = δ_cube←rot − R(cube←sun)·δ_sun←rot)."""
-    Rc, Cc = _rotation_from(cube_path, "R_cube_from_rot")
-    Rs, Cs = _rotation_from(sun_path, "R_sun_from_rot")
+    inputs; δ_cube←sun = δ_cube←rot − R(cube←sun)·δ_sun←rot). The inputs' fit verdicts are carried
+    in ``fit``; an input marked as a poor fit is refused (:class:`~rigsim.errors.PoorFitError`)
+    unless ``accept_poor_fit``."""
+    return compose_with_verdict(cube_path, sun_path, accept_poor_fit=accept_poor_fit)[0]
+
+
+def compose_with_verdict(cube_path, sun_path, *, accept_poor_fit: bool = False):
+    """:func:`compose_rotations` and its :class:`~rigsim.procedures.fit_verdict.Verdict`."""
+    from rigsim.procedures.fit_verdict import inherited
+
+    Rc, Cc, fc = _rotation_from(cube_path, "R_cube_from_rot")
+    Rs, Cs, fs = _rotation_from(sun_path, "R_sun_from_rot")
+    verdict = inherited({"cube_from_rot": fc, "sun_from_rot": fs}, accept=accept_poor_fit, what="R(cube←sun)")
     R = Rc @ Rs.T
     C = Cc + R @ Cs @ R.T
     return {"format": "rigsim.compose/1", "procedure": "cube-mirror", "stage": "compose", "kind": "compose", "inputs": {"cube_from_rot": str(cube_path), "sun_from_rot": str(sun_path)},
-            "R_cube_from_sun": rotation_block(R, C)}
+            "R_cube_from_sun": rotation_block(R, C), "fit": verdict.block()}, verdict

@@ -14,11 +14,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from rigsim.errors import CliError, InputError
+from rigsim.estimation.fit_quality import FitQuality, not_judged
 from rigsim.estimation.null_search import numerical_jacobian, offset_model
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.imaging.screen import hole_spot_offset
 from rigsim.imaging.spot import THRESHOLD_SIGMA, SpotMeasurement, measure_spot
 from rigsim.optics.aiming import nominal_screen_homography
+from rigsim.procedures.fit_verdict import add_accept_option, judge
 from rigsim.rig.cube_mirror import Autocollimator, CubeMirrorRig
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -130,6 +132,47 @@ def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
     return m, sig, sm
 
 
+# ------------------------------------------------------------------------------ what one frame can judge
+
+NOISE_LIMIT = 5.0  # a frame whose background noise is this many times the detector model's is not of this camera
+HOLE_LIMIT = 2.0   # a hole whose size is off the rig's by more than this factor is not the diaphragm's hole
+
+
+def frame_noise_problems(rig: CubeMirrorRig, camera: str, frames: Mapping[str, np.ndarray]) -> tuple[list[str], str]:
+    """The frames whose background noise (clipped rms) exceeds :data:`NOISE_LIMIT` times the
+    rig's detector model at their level (the σ of every measurement on them rests on that model),
+    and a phrase with the largest ratio."""
+    from rigsim.procedures.centroid import detector_settings, frame_background
+
+    n = detector_settings(rig, camera).noise
+    out, worst = [], 0.0
+    for name, img in frames.items():
+        med, sd = frame_background(img)
+        model = float(np.sqrt(n.variance(max(med, n.offset_dn))))
+        ratio = sd / model if model > 0 else math.inf
+        worst = max(worst, ratio)
+        if not ratio <= NOISE_LIMIT:
+            out.append(f"{name}: background noise {sd:.3g} DN, {ratio:.3g}× the rig's {camera} model ({model:.3g} DN): "
+                       "a frame of another camera, or the rig's detector is not this camera's")
+    return out, f"background noise {worst:.3g}× the rig's {camera} model at most"
+
+
+def concentricity_quality(rig: CubeMirrorRig, m: dict, hole_dn: np.ndarray, spot_dn: np.ndarray,
+                          names=("HOLE", "SPOT")) -> FitQuality:
+    """What a hole/spot pair can judge (one measurement: no χ²): the frames' noise against the
+    aiming camera's model (:func:`frame_noise_problems`) and the hole's size against the rig's
+    diaphragm (its equivalent diameter, from the pixels above half its peak, within a factor
+    :data:`HOLE_LIMIT` of ``diaphragm_screen.hole_diameter_mm``)."""
+    problems, noise = frame_noise_problems(rig, "aiming-camera", dict(zip(names, (hole_dn, spot_dn))))
+    d = 2.0 * math.sqrt(max(m["hole_pixels"], 0) / math.pi) * rig.aiming_camera.object_pixel_mm
+    d0 = rig.diaphragm_screen.hole_diameter_mm
+    if not (d0 / HOLE_LIMIT <= d <= d0 * HOLE_LIMIT):
+        problems.append(f"{names[0]}: the hole is {d:.3g} mm across, the rig's is {d0:g} mm: not a frame of the lit "
+                        "hole with the return blocked")
+    return not_judged(f"one hole/spot pair, no χ²: hole {d:.3g} mm across (the rig's {d0:g} mm), {noise}",
+                      problems=problems)
+
+
 # ------------------------------------------------------------------------------ commands
 
 def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option: str = "--reading") -> dict[str, float]:
@@ -155,6 +198,20 @@ def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option:
     return out
 
 
+def parse_offset(text: str | None, option: str) -> np.ndarray:
+    """``"X,Y"`` (px, each finite and within ±10⁴) → (2,); None: (0, 0)."""
+    if text is None:
+        return np.zeros(2)
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        v = np.array([float(p) for p in parts], float)
+    except ValueError:
+        v = np.array([])
+    if v.shape != (2,) or not np.all(np.isfinite(v)) or np.any(np.abs(v) > 1e4):
+        raise CliError(f"{option} = {text!r}: expected two numbers X,Y in px, each within ±10000")
+    return v
+
+
 def add_cli(groups: dict) -> None:
     sub = groups["top"]
     c = sub.add_parser(
@@ -171,7 +228,12 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--reading", default=None, help="turntable reading of the frames, e.g. X=181.4,Y=0.55 (degrees; "
                    "default the face's search start)")
     c.add_argument("--axis-order", default=None, help="nesting reading of the nominal model (default the rig's)")
+    c.add_argument("--null-offset-px", default=None, metavar="X,Y",
+                   help="the offset (spot − hole, aiming-camera px) at which your aiming camera shows concentricity: its "
+                        "mounting offset, as your procedure defines the null (`run cube-mirror --export-frames` writes the "
+                        "campaign's in null_frames.csv); default 0,0")
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
+    add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
     a = sub.add_parser("autocollimator", help="the autocollimator's reading of a frame (seed 001)")
     acs = a.add_subparsers(dest="autocollimator_command", metavar="ACTION")
@@ -182,6 +244,7 @@ def add_cli(groups: dict) -> None:
     r.add_argument("frame", metavar="FRAME", help="autocollimator frame (PNG/TIFF/FITS)")
     r.add_argument("--rig", default="sun_sensor_3axis_autocollimator", help="rig file or default name")
     r.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
+    add_accept_option(r)
     r.set_defaults(func=cmd_autocollimator_read)
 
 
@@ -206,22 +269,38 @@ def cmd_concentricity(args) -> int:
     hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
     spot = read_image(args.spot, shape=shape, what="aiming-camera frame")
     m = measure_concentricity(rig, hole, spot)
+    q = concentricity_quality(rig, m, hole, spot)
+    verdict = judge(q, [("HOLE and SPOT swapped", lambda: concentricity_quality(
+        rig, measure_concentricity(rig, spot, hole), spot, hole, ("SPOT", "HOLE")))], accept=args.accept_poor_fit,
+        what="concentricity measurement")
     if not np.all(np.isfinite(m["offset_px"])):
         raise InputError(f"{args.spot}: no returned spot above 10 % of its peak outside the hole's glow")
     reading = parse_reading(args.reading, rig, faces.index(face))
-    st = null_step(rig, reading, m["offset_px"], args.axis_order)
+    zero = parse_offset(args.null_offset_px, "--null-offset-px")
+    off = np.asarray(m["offset_px"], float) - zero
+    thr = rig.aiming_camera.concentric_threshold_px
+    nulled = bool(np.all(np.abs(off) < thr))
+    st = null_step(rig, reading, off, args.axis_order)
     px_um = rig.aiming_camera.object_pixel_mm * 1000.0
     print(f"hole centre {m['hole_mm'][0]:+.4f}, {m['hole_mm'][1]:+.4f} mm; spot centre {m['spot_mm'][0]:+.4f}, "
           f"{m['spot_mm'][1]:+.4f} mm (screen axes)")
     print(f"offset spot − hole: x {m['offset_px'][0]:+.3f} px, y {m['offset_px'][1]:+.3f} px "
           f"({m['offset_mm'][0] * 1000:+.1f}, {m['offset_mm'][1] * 1000:+.1f} µm on the screen; 1 px = {px_um:.1f} µm)")
-    print("step to the null: " + ", ".join(f"{k} {v:+.5f}°" for k, v in st["step_deg"].items())
-          + "; next command " + ", ".join(f"{k}={v:.4f}°" for k, v in st["next_reading_deg"].items())
-          + (f" (rounded to {st['command_resolution_deg']:g}°)" if st["command_resolution_deg"] else ""))
+    if np.any(zero != 0):
+        print(f"against the null offset ({zero[0]:+.3f}, {zero[1]:+.3f}) px: x {off[0]:+.3f} px, y {off[1]:+.3f} px")
+    if nulled:
+        print(f"concentric: both offsets below the rig's threshold ({thr:g} px); this reading is the face's null")
+    else:
+        print("step to the null: " + ", ".join(f"{k} {v:+.5f}°" for k, v in st["step_deg"].items())
+              + "; next command " + ", ".join(f"{k}={v:.4f}°" for k, v in st["next_reading_deg"].items())
+              + (f" (rounded to {st['command_resolution_deg']:g}°)" if st["command_resolution_deg"] else ""))
     res = {"kind": "concentricity", "rig": rig.name, "face": face, "hole_mm": m["hole_mm"], "spot_mm": m["spot_mm"],
            "offset_mm": m["offset_mm"], "offset_um": np.asarray(m["offset_mm"]) * 1000.0, "offset_px": m["offset_px"],
            "hole_pixels": m["hole_pixels"], "spot_pixels": m["spot_pixels"],
-           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, **st}
+           "reading_deg": {k: math.degrees(v) for k, v in reading.items()}, "null_offset_px": zero,
+           "offset_from_null_px": off, "threshold_px": thr, "nulled": nulled, **st, "fit": verdict.block()}
+    for line in verdict.lines():
+        print(line)
     if args.json:
         _write_json(args.json, res)
     return 0
@@ -238,11 +317,19 @@ def cmd_autocollimator_read(args) -> int:
     m, sig, sm = read_autocollimator(rig, dn)
     if not sm.ok:
         raise InputError(f"{args.frame}: {sm.problem}")
+    problems, noise = frame_noise_problems(rig, "autocollimator", {str(args.frame): dn})
+    verdict = judge(not_judged(f"one spot on one frame, no χ²: {noise}", problems=problems),
+                    accept=args.accept_poor_fit, what="autocollimator reading")
     print(f"reading θx {m[0]:+.4f}″ ± {sig[0]:.4f}″, θy {m[1]:+.4f}″ ± {sig[1]:.4f}″ (spot at u {sm.uv[0]:.3f}, "
           f"v {sm.uv[1]:.3f} px)")
+    thr = rig.autocollimator.null_threshold_arcsec
+    nulled = bool(np.all(np.abs(m) < thr))
+    print(f"{'nulled' if nulled else 'not nulled'}: the rig's null threshold is {thr:g}″ on both readings")
     res = {"kind": "autocollimator reading", "rig": rig.name, "reading_arcsec": m, "sigma_arcsec": sig,
            "spot_uv_px": sm.uv, "spot_sigma_uv_px": sm.sigma_uv, "peak_dn": sm.peak_dn,
-           "background_dn": sm.background_dn}
+           "background_dn": sm.background_dn, "threshold_arcsec": thr, "nulled": nulled, "fit": verdict.block()}
+    for line in verdict.lines():
+        print(line)
     if args.json:
         _write_json(args.json, res)
     print(json.dumps({"reading_arcsec": m.tolist(), "sigma_arcsec": sig.tolist()}))

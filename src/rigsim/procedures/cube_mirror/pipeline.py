@@ -41,12 +41,31 @@ def fit_sun_sensor(rig: CubeMirrorRig, readings, uv, axis_order: str, d_rot=NOMI
     sun-image centroids, with the nominal turntable (nesting ``axis_order``) and the design focal
     length as the start. Frames beyond ``procedure.sweep_max_field_deg`` from the axis or beyond
     ``procedure.sweep_outlier_sigma`` are left out (``sigma_uv``: the centroids' 1σ, which scales the
-    outlier test; None: all equal)."""
+    outlier test, and the fit is judged against it, :func:`sweep_sigma`)."""
     ss = rig.sun_sensor
+    sig, source = sweep_sigma(rig, sigma_uv, len(np.asarray(uv).reshape(-1, 2)))
     return calibrate_sun_sensor(readings, uv, TurntableModel.nominal(list(axis_order)), *ss.resolution_px,
-                                f_guess_px=ss.fx_px, d_rot=d_rot, sigma_uv=sigma_uv,
+                                f_guess_px=ss.fx_px, d_rot=d_rot, sigma_uv=sig, noise_source=source,
                                 outlier_sigma=rig.procedure.sweep_outlier_sigma,
                                 max_field_deg=rig.procedure.sweep_max_field_deg)
+
+
+def sweep_sigma(rig: CubeMirrorRig, sigma_uv, n: int) -> tuple[np.ndarray | None, str]:
+    """The sweep centroids' 1σ (n, 2) the fit is judged against, and a phrase naming it: the
+    centroider's per-frame σ (``sigma_uv``; where a frame has none, the median of the others), else
+    the rig's ``sun_sensor.centroid_sigma_px`` for every frame; (None, "") when there is none (an
+    ideal rig's σ of 0)."""
+    s = None if sigma_uv is None else np.array(np.broadcast_to(np.asarray(sigma_uv, float), (n, 2)))
+    good = np.zeros((n, 2), bool) if s is None else np.isfinite(s) & (s > 0)
+    if good.all():
+        return s, "the centroids' σ"
+    if good.any():
+        s[~good] = float(np.median(s[good]))
+        return s, "the centroids' σ (their median where a frame has none)"
+    nominal = float(rig.sun_sensor.centroid_sigma_px)
+    if nominal > 0:
+        return np.full((n, 2), nominal), f"the rig's sun_sensor.centroid_sigma_px = {nominal:g} px (no centroid σ given)"
+    return None, ""
 
 
 def estimate(rig: CubeMirrorRig, null_readings, axis_order: str, *, sweep_readings=None, sweep_uv=None,

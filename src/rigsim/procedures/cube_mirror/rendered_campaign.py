@@ -99,7 +99,8 @@ def expected_frames(rig: CubeMirrorRig) -> int:
 def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 0, axis_order: str | None = None,
                           noise: Noise | None = None, noiseless: bool = False, threshold: float | None = None,
                           sweep_spp: int = 256, sweep_step_deg: float | None = None, repeat_frames: int = 0,
-                          progress=None, frames=None, aiming_workers: int = 1) -> RenderedCampaign:
+                          progress=None, frames=None, aiming_workers: int = 1,
+                          autocollimator_spp: int | None = None) -> RenderedCampaign:
     """One campaign on rendered frames against the rig instance ``real``.
 
     ``noise``: the random errors that are not image noise (encoder noise; default the rig's).
@@ -109,7 +110,8 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     scatter (for :func:`rendered_error_budget`). ``frames``
     (:class:`~rigsim.procedures.cube_mirror.user_frames.CampaignFrames`) sees every sweep frame.
     ``aiming_workers``: processes rendering each aiming-camera frame's fixed pencil chunks (the frames
-    are the same for any count).
+    are the same for any count). ``autocollimator_spp``: samples per pixel of the autocollimator's
+    frames (seed 001; default :data:`~rigsim.procedures.cube_mirror.autocollimation.DEFAULT_SPP`).
     """
     from rigsim.procedures.cube_mirror.sweep import render_sweep
 
@@ -179,7 +181,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
         pb.set_description("step A: autocollimator on the plane mirror")
         t0 = time.perf_counter()
         step_a = step_a_align(rig, real, rng, rendered=True, threshold_arcsec=threshold, progress=pb.update,
-                              noiseless=noiseless)
+                              noiseless=noiseless, spp=autocollimator_spp)
         times["step A (plane mirror)"] = time.perf_counter() - t0
         resid = [np.asarray(m) - np.asarray(e) for m, e in zip(step_a.measured_arcsec, step_a.exact_arcsec)]
         rig_c = rig if threshold is None else rig.model_copy(update={
@@ -189,7 +191,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
             t0 = time.perf_counter()
             res = autocollimator_face_search(rig_c, real, fi, step_a.axis_rot, _encoder_errors(rig, noise, rng),
                                              rendered=True, seed=search_seed + fi, noiseless=noiseless,
-                                             axis_order=order, progress=pb.update,
+                                             axis_order=order, progress=pb.update, spp=autocollimator_spp,
                                              on_frame=None if frames is None else frames.null_frame)
             times[f"step C search, face {face}"] = time.perf_counter() - t0
             searches.append(res)
@@ -198,7 +200,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
                 pb.set_description("autocollimator repeatability")
                 t0 = time.perf_counter()
                 meas = FaceReadingMeasurer(rig, real, face, step_a.axis_rot, rendered=True,
-                                           seed=search_seed + 1000, noiseless=noiseless)
+                                           seed=search_seed + 1000, noiseless=noiseless, spp=autocollimator_spp)
                 for _ in range(int(repeat_frames)):
                     m, ex, _f = meas(res.final_true_pose_rad)
                     resid.append(np.asarray(m) - np.asarray(ex))

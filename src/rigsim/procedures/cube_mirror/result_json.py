@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.procedures.cube_mirror.files import reading_sigma_rad, triad_with_covariance
+from rigsim.procedures.cube_mirror.files import reading_sigma_rad, triad_fit_quality, triad_with_covariance
 from rigsim.procedures.results import rotation_block
 from rigsim.rig.turntable import TurntableReading
 
@@ -26,6 +26,8 @@ def campaign_json(res, rig, *, mode: str, seed: int, rig_file=None, ideal: bool 
     readings = [TurntableReading({k: math.radians(v) for k, v in p.items()}) for p in res.null_poses_deg]
     faces = list(rig.procedure.faces)
     _, C_cube = triad_with_covariance(readings, faces, res.axis_order, sigma)
+    triad_fit = triad_fit_quality(readings, faces, res.axis_order, sigma)  # as `rigsim triad` judges it
+    C_cube = C_cube * triad_fit.covariance_scale
     cal = res.calibration
     C_sun = np.asarray(cal.rotation_covariance_rad2) if cal is not None else np.zeros((3, 3))
     R = res.R_cube_from_sun_est
@@ -45,11 +47,13 @@ def campaign_json(res, rig, *, mode: str, seed: int, rig_file=None, ideal: bool 
         "R_sun_from_rot": block(res.R_sun_from_rot_est, res.R_sun_from_rot_true, C_sun, res.sun_error_arcsec),
         "R_cube_from_rot": block(res.R_cube_from_rot_est, res.R_cube_from_rot_true, C_cube, res.cube_error_arcsec),
         "R_cube_from_sun": block(res.R_cube_from_sun_est, res.R_cube_from_sun_true, C_cs, res.error_arcsec),
+        "triad_fit": triad_fit.as_dict(),
     }
     if cal is not None:
         n_int = len(cal.param_names) - 3
         sig = np.sqrt(np.diag(cal.covariance))
         out["intrinsics"] = dict(zip(cal.param_names[:n_int], cal.params[:n_int].tolist()))
         out["calibration"] = {"names": list(cal.param_names), "params": cal.params.tolist(), "sigma": sig.tolist(),
-                              "rms_px": float(cal.rms_px), "n_points": int(cal.n_points)}
+                              "rms_px": float(cal.rms_px), "n_points": int(cal.n_points),
+                              "fit": None if cal.fit is None else cal.fit.as_dict()}
     return out

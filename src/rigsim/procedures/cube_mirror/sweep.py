@@ -13,13 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rigsim.estimation.sun_calibration import SunCalibration, calibrate_sun_sensor, sweep_poses
+from rigsim.estimation.sun_calibration import SunCalibration, sweep_poses
 from rigsim.imaging import NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sun_disk import spot_truth
 from rigsim.rig.cube_mirror import CubeMirrorRig
-from rigsim.rig.turntable import NOMINAL_D, TruePose, TurntableModel, TurntableReading
+from rigsim.rig.turntable import TruePose, TurntableReading
 from rigsim.truth.cube_mirror.realization import Noise, Realization
 
 
@@ -172,9 +172,6 @@ def render_sweep(
 
 
 def calibrate_from_sweep(rig: CubeMirrorRig, sweep: SweepObservation, axis_order: str | None = None) -> SunCalibration:
-    order = list(axis_order) if axis_order else [a.label for a in rig.turntable.axes]
-    ss = rig.sun_sensor
-    return calibrate_sun_sensor(sweep.readings, sweep.uv, TurntableModel.nominal(order), *ss.resolution_px,
-                                f_guess_px=ss.fx_px, d_rot=NOMINAL_D, sigma_uv=sweep.sigma_uv,
-                                outlier_sigma=rig.procedure.sweep_outlier_sigma,
-                                max_field_deg=rig.procedure.sweep_max_field_deg)
+    from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
+
+    return fit_sun_sensor(rig, sweep.readings, sweep.uv, axis_order or default_axis_order(rig), sigma_uv=sweep.sigma_uv)

@@ -101,6 +101,8 @@ class CampaignFrames:
         m = info.get("measured_offset_px", info.get("measured_arcsec"))
         unit = "px" if "measured_offset_px" in info else "arcsec"
         row.update({f"measured_x_{unit}": m[0], f"measured_y_{unit}": m[1]} if m is not None else {})
+        if "null_offset_px" in info:  # the offset at which the operator's aiming camera shows concentricity
+            row.update({"null_offset_x_px": info["null_offset_px"][0], "null_offset_y_px": info["null_offset_px"][1]})
         self.null_rows.append(row)
 
     def write_logs(self, null_readings: list[TurntableReading], faces) -> dict[str, Path]:
