@@ -125,3 +125,20 @@ def test_every_star_of_every_frame_fits_its_own_psf_width_without_a_traceback():
     for p in TIFFS:
         sf = extract_star_field(read_image(p), psf_sigma_px=0.6, gain_dn_per_e=6.0, fit_psf="star")
         assert len(sf) > 50 and np.isfinite(sf.u).mean() > 0.9
+
+
+def test_a_poor_joint_fit_writes_nothing_unless_accepted(tmp_path, capsys, monkeypatch):
+    """The gate: a joint fit whose χ²/dof under the centroider's σ is beyond 25 stops the command with
+    status 3 before anything is written; --accept-poor-fit writes it marked."""
+    from rigsim.estimation.fit_quality import judge_chi2
+    from rigsim.procedures.star import files
+
+    monkeypatch.setattr(files, "joint_fit_quality", lambda b: judge_chi2(40.0 * b.dof, b.dof, "the centroider's σ"))
+    out = tmp_path / "cal"
+    assert main(["star", "calibrate", *TIFFS[:2], "--rig", str(RIG), "--out", str(out)]) == 3
+    assert "star-camera calibration: the data do not fit the model" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["star", "calibrate", *TIFFS[:2], "--rig", str(RIG), "--out", str(out), "--accept-poor-fit"]) == 0
+    cal = json.loads((out / "calibration.json").read_text())
+    assert cal["joint"]["fit"]["verdict"] == "poor" and cal["joint"]["fit"]["accepted_poor_fit"] is True
+    assert "POOR FIT ACCEPTED" in capsys.readouterr().out

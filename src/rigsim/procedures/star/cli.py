@@ -76,6 +76,9 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--pressure-hpa", type=number(100, 1100), default=None,
                    help="air pressure at the site (default the standard atmosphere at its height)")
     c.add_argument("--temperature-c", type=number(-60, 60), default=10.0, help="air temperature at the site")
+    from rigsim.procedures.fit_verdict import add_accept_option
+
+    add_accept_option(c)
     c.set_defaults(func=cmd_star_calibrate)
     from rigsim.procedures.star import twin_commands
 
@@ -104,6 +107,15 @@ def _check(args) -> None:
     spp = args.mitsuba_spp
     if spp < 1 or spp > 65536 or (spp & (spp - 1)) or (spp.bit_length() - 1) % 2:
         raise CliError(f"--mitsuba-spp = {spp}: must be a power of 4 between 1 and 65536 (e.g. 64, 256, 1024)")
+
+
+def _fit_text(fit: dict) -> str:
+    """A short phrase of a ``fit`` block: χ²/dof, the verdict, the covariance's scale."""
+    c = fit.get("chi2_dof")
+    head = f"χ²/dof {c:.3g}" if c is not None else "χ²/dof —"
+    tail = {"good": "fits", "scaled": f"σ scaled ×{fit['covariance_scale']:.3g}^½ (covariance ×{fit['covariance_scale']:.3g})",
+            "poor": "POOR FIT: not a measurement", "not judged": "not judged"}[fit["verdict"]]
+    return f"{head}, {tail}"
 
 
 def _site(args):
@@ -155,7 +167,15 @@ def cmd_star_calibrate(args) -> int:
         if not ident.ok:
             print(f"{name}: not identified ({ident.reason}); left out", file=sys.stderr)
     models = ("ad", "ads") if args.ekf == "both" else (args.ekf,)
+    verdict = None
+    if res.joint is not None:  # the calibration this command writes is the joint fit: judged before anything is written
+        from rigsim.procedures.fit_verdict import judge
+        from rigsim.procedures.star.files import joint_fit_quality
+
+        verdict = judge(joint_fit_quality(res.joint.bundle), accept=args.accept_poor_fit, what="star-camera calibration")
     data = star_result_json(res, names, models)
+    if verdict is not None:
+        data["joint"]["fit"]["accepted_poor_fit"] = bool(verdict.accepted)
     write_table(out / "stars.csv", stars_table(res, names))
     write_json(out / "calibration.json", data)
     j = data.get("joint")
@@ -183,13 +203,16 @@ def cmd_star_calibrate(args) -> int:
             h = j["held_out"]
             print(f"  held out: {h['n_stars']} stars of frames left out of the fit predicted to {h['rms_px']:.3f} px rms, "
                   f"error/σ rms {h['z_rms']:.2f}")
-    b = res.batch
+    if verdict is not None and verdict.accepted:  # (the χ² line above says how the σ were widened)
+        print("  " + verdict.lines()[-1])
+    bj = data["batch"]
     print("batch least squares (angular distances): " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
-                                                               zip(b.names, b.x, b.sigma)) + f" (χ²/dof {b.chi2_reduced:.2f})")
+                                                               zip(bj["estimated"], res.batch.x, bj["covariance"]["sigma"]))
+          + f"; {_fit_text(bj['fit'])}")
     for key, e in data["ekf"].items():
         print(f"EKF {key}: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
                                            zip(e["estimated"], e["state"], e["covariance"]["sigma"]))
-              + (f" (mean NIS {e['mean_nis']:.2f})" if e.get("mean_nis") is not None else ""))
+              + f"; {_fit_text(e['fit'])}")
     print(f"→ {out / 'stars.csv'}, {out / 'calibration.json'} [{time.perf_counter() - t0:.2f} s]")
     return 0
 

@@ -171,6 +171,31 @@ POOR_FIT_CHI2 = 25.0
 (the σ floor the joint fit needed is then many times the centroid σ)."""
 
 
+def batch_fit_quality(b):
+    """The batch fit's χ² against the centroid σ it was given (with the joint fit's floor)."""
+    from rigsim.estimation.fit_quality import judge_chi2
+
+    return judge_chi2(b.chi2, b.n_eq - len(b.names), "the centroid σ propagated to the angular distances")
+
+
+def ekf_fit(e):
+    """An EKF's innovations against their predicted covariance: Σ NIS over Σ its dimensions."""
+    from rigsim.estimation.fit_quality import judge_chi2
+
+    ok = np.isfinite(e.nis)
+    dof = int(np.sum(np.asarray(e.dof if e.dof is not None else e.n_eq)[ok]))
+    return judge_chi2(float(np.sum(e.nis[ok])), dof, "the innovations' predicted covariance (NIS)")
+
+
+def joint_fit_quality(b):
+    """The joint fit judged against the centroider's own σ (before the floor widens them)."""
+    from rigsim.estimation.fit_quality import judge_chi2, not_judged
+
+    if not b.success or b.dof <= 0:
+        return not_judged("the joint fit did not converge", problems=(f"not converged: {b.message}",))
+    return judge_chi2(b.chi2_reduced_model * b.dof, b.dof, "the centroider's σ (its inverse Fisher matrix)", unit="px")
+
+
 def _finite(x):
     return float(x) if x is not None and np.isfinite(x) else None
 
@@ -212,6 +237,10 @@ def joint_block(out: PipelineOutput, names: Sequence[str], true_theta=None) -> d
         "estimated": list(b.names), "theta": np.asarray(b.theta, float).tolist(),
         "covariance": covariance_block(list(b.names), b.cov, units),
         "error": None if true_theta is None else (np.asarray(b.theta) - true_theta).tolist(),
+        "fit": {**joint_fit_quality(b).as_dict(), "covariance_scale": 1.0, "covariance_scaled": False,
+                "sigma_floor_px": b.sigma_floor_px,
+                "covariance_note": "the covariance is that of the fit with every centroid σ widened by sigma_floor_px in "
+                                   "quadrature (χ²/dof 1 with it), not the noise model's scaled"},
         "chi2_reduced_noise_model": b.chi2_reduced_model, "chi2_reduced": b.chi2_reduced,
         "sigma_floor_px": b.sigma_floor_px, "dof": b.dof, "n_stars": b.n_stars, "n_rejected": b.n_rejected,
         "residual_rms_px": b.residual_rms_px, "verdict": joint_verdict(b), "converged": bool(b.success),
@@ -251,6 +280,7 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
 
     b = out.batch
     t = None if true_theta is None else np.asarray(true_theta, float)
+    batch_fit = batch_fit_quality(b)
 
     def err(theta):
         return None if t is None else (np.asarray(theta) - t).tolist()
@@ -260,18 +290,21 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
            "theta_names": list(THETA_NAMES), "theta_units": list(THETA_UNITS),
            "nominal_theta": list(out.nominal.sensor.theta), "true_theta": None if t is None else t.tolist(),
            "batch": {"theta": b.theta.tolist(), "estimated": list(b.names),
-                     "covariance": covariance_block(list(b.names), b.cov, [THETA_UNITS[THETA_NAMES.index(n)] for n in b.names]),
+                     "covariance": covariance_block(list(b.names), np.asarray(b.cov) * batch_fit.covariance_scale,
+                                                    [THETA_UNITS[THETA_NAMES.index(n)] for n in b.names]),
                      "chi2_reduced": b.chi2_reduced, "n_equations": b.n_eq, "converged": bool(b.success),
-                     "error": err(b.theta)},
+                     "fit": batch_fit.as_dict(), "error": err(b.theta)},
            "ekf": {}, "identification": out.ident_stats}
     for (case, model), e in out.ekf.items():
         if model not in ekf_models:
             continue
+        q = ekf_fit(e)
         res["ekf"][f"{case}/{model}"] = {
             "case": case, "model": model, "estimated": list(e.names), "state": e.x.tolist(), "theta": e.theta.tolist(),
-            "covariance": covariance_block(list(e.names), e.P, [THETA_UNITS[THETA_NAMES.index(n)] for n in e.names]),
+            "covariance": covariance_block(list(e.names), np.asarray(e.P) * q.covariance_scale,
+                                           [THETA_UNITS[THETA_NAMES.index(n)] for n in e.names]),
             "mean_nis": float(np.nanmean(e.nis)) if np.isfinite(e.nis).any() else None,
-            "error": err(e.theta)}
+            "fit": q.as_dict(), "error": err(e.theta)}
     if out.joint is not None:
         res["joint"] = joint_block(out, names, t)
     res["ekf_cases"] = {"f_nominal": "state (u0, v0), f fixed at the nominal value",
