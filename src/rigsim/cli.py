@@ -14,6 +14,7 @@ from rigsim.dataset import cli as dataset_cli
 from rigsim.errors import CliError, RigsimError
 from rigsim.families import FAMILIES, family_of
 from rigsim.files.options import number
+from rigsim.files.outputs import declare
 from rigsim.procedures import centroid as centroid_stage
 from rigsim.procedures import readings_commands, robustness_commands
 from rigsim.procedures import target_commands
@@ -171,6 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     gi.add_argument("--pixel-pitch-um", type=number(0.1, 100.0), default=None, metavar="UM",
                     help="the detector's pixel pitch, if not the rig's (OpenCV's matrix is in pixels)")
     gi.set_defaults(func=cmd_rig_import_camera)
+    declare(gi, "out", suffixes=(".toml",))
 
     r = sub.add_parser("run", help="run a documented procedure end to end")
     rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")
@@ -199,10 +201,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from rigsim.files.outputs import guard
         from rigsim.render.threads import command_threads
 
+        inputs = _checked_files(parser, args)
         with _Heartbeat(" ".join(a for a in (argv if argv is not None else sys.argv[1:])[:2] if not a.startswith("-"))), \
-                command_threads():
+                command_threads(), guard(inputs):
             rc = int(args.func(args) or 0)
         sys.stdout.flush()
         return rc
@@ -230,6 +234,42 @@ def main(argv: list[str] | None = None) -> int:
             print(f"rigsim: error: {safe_text(str(exc.filename), 300)}: {exc.strerror}", file=sys.stderr)
             return 2
         raise
+
+
+def _leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The subcommand's own parser (``rigsim calibrate sun-sensor`` → that of ``sun-sensor``)."""
+    p = parser
+    while True:
+        subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        name = getattr(args, subs[0].dest, None) if subs else None
+        if name is None or name not in subs[0].choices:
+            return p
+        p = subs[0].choices[name]
+
+
+def _checked_files(parser: argparse.ArgumentParser, args) -> list:
+    """Before the command runs: its inputs (every file or folder named by an option or positional that is not one
+    of its declared outputs) as (label, path), after :func:`rigsim.files.outputs.check_plan` has refused any output
+    that would destroy one of them or another output, or that cannot be written."""
+    from pathlib import Path
+
+    from rigsim.files.outputs import check_plan, declared_outputs
+
+    leaf = _leaf_parser(parser, args)
+    labels = {a.dest: (a.option_strings[0] if a.option_strings else (a.metavar if isinstance(a.metavar, str) else
+                                                                        a.dest.upper()))
+              for a in leaf._actions if a.dest != "help"}
+    outputs, out_dests = declared_outputs(args, labels)
+    inputs = []
+    for dest, label in labels.items():
+        if dest in out_dests:
+            continue
+        v = getattr(args, dest, None)
+        for x in (v if isinstance(v, (list, tuple)) else [v]):
+            if isinstance(x, str) and x and os.path.lexists(x):
+                inputs.append((label, Path(x)))
+    check_plan(outputs, inputs)
+    return inputs
 
 
 _PATH_ERRNOS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.ELOOP, errno.EACCES, errno.EPERM,

@@ -170,7 +170,7 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
                                                                              else "has one renderer (no --renderer)"))
     if workers is not None and not (1 <= workers <= 512):
         raise DatasetError(f"--workers = {workers}: allowed range is 1 to 512")
-    if isinstance(scheduler, str) and not re.fullmatch(r"((tcp|tls|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}", scheduler):
+    if isinstance(scheduler, str) and not re.fullmatch(r"((tcp|tls|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:[0-9]{1,5}", scheduler):
         raise DatasetError(f"--scheduler {scheduler!r}: expected a Dask scheduler address HOST:PORT or tcp://HOST:PORT")
     if not (0 <= retries <= 20):
         raise DatasetError(f"--retries = {retries}: allowed range is 0 to 20")

@@ -96,8 +96,14 @@ def read_spot_table(path) -> dict[str, tuple[float, float, int, int, float, floa
         if bad.size:
             raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {key}: {s[bad[0]]}; expected ≥ 0 px or empty")
     out: dict[str, tuple[float, float, int, int, float, float]] = {}
+    seen: dict[tuple[str, int], int] = {}
     for i in np.argsort(spot, kind="stable"):
         f = Path(str(t["frame"][i])).name
+        key, line = (f, int(spot[i])), int(t["__line__"][i])
+        if key in seen:
+            raise InputError(f"{path}: line {line}, column frame: {f!r} spot {key[1]} already on line {seen[key]}; one row "
+                             "per frame and spot (a frame listed twice is not new data)")
+        seen[key] = line
         if f in out:
             continue
         fl = int(flags[i]) | (int(REJECT) if not (np.isfinite(t["u_px"][i]) and np.isfinite(t["v_px"][i])) else 0)
@@ -231,6 +237,15 @@ def read_nulls(path, rig: CubeMirrorRig) -> tuple[list[str], list[TurntableReadi
     for f, line in zip(t["face"], t["__line__"]):
         if f not in FACE_NORMALS:
             raise InputError(f"{path}: line {line}, column face: {f!r}; expected one of {', '.join(FACE_NORMALS)}")
+    for a in rig.turntable.axes:
+        x = t[f"{a.label.lower()}_deg"]
+        bad = np.flatnonzero(np.abs(x) > 360.0)
+        if bad.size:
+            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
+                             "expected -360 to 360 degrees")
+    if t["face"][0] == t["face"][1]:
+        raise InputError(f"{path}: line {t['__line__'][1]}, column face: {t['face'][1]!r} again; expected the nulls of two "
+                         "different faces")
     readings = [TurntableReading({a.label: float(np.radians(t[f"{a.label.lower()}_deg"][i])) for a in rig.turntable.axes})
                 for i in range(2)]
     return [str(f) for f in t["face"]], readings

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rigsim.errors import CliError
 from rigsim.files.options import SEED, SPP, integer
+from rigsim.files.outputs import Output, declare
 
 __all__ = ["add_cli", "cmd_run_star_calibration"]
 
@@ -64,7 +65,12 @@ def add_cli(groups: dict) -> None:
                    help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
                         "frame and time_s)")
     c.set_defaults(func=cmd_star_calibrate)
+    declare(c, "out", folder=True, derived=lambda a: [Output(Path(a.out) / n, f"--out's {n}")
+                                                      for n in ("stars.csv", "calibration.json")])
+    declare(c, "opencv", suffixes=(".yml", ".yaml", ".json", ".xml"))
     p.set_defaults(func=cmd_run_star_calibration)
+    declare(p, "out", folder=True)
+    declare(p, "export_frames", folder=True)
     from rigsim.procedures.star import render_commands
 
     render_commands.add_cli(groups)

@@ -75,8 +75,13 @@ def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, att
                       ) -> tuple[list[StarObservation], list[str]]:
     """The frames as the pipeline takes them, in the order of their times, and their names; each
     frame's size is checked against the rig's detector and each must have a row in the log."""
+    from rigsim.files.inputs import check_distinct
+    from rigsim.files.memory import check_frames_kept
+
+    check_distinct(paths, "FRAME", what="star frame")
     log = read_attitude_log(log_path, attitude=attitude)
     W, H = nominal.sensor.resolution_px
+    check_frames_kept(len(paths), W, H, 8, what="star calibrate")
     rows = []
     for p in paths:
         name = Path(p).name
