@@ -102,7 +102,65 @@ def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, 
     needs only frame and time_s)."""
     obs, names = star_observations(paths, log_path, nominal, attitude=identification == "commanded")
     sky = SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year)
+    if identification == "commanded":
+        check_attitude_convention(obs, names, log_path, nominal, sky)
     return calibrate_frames(obs, nominal, sky, identification=identification), names
+
+
+CONVENTIONS = {
+    "scalar last": "the columns qw, qx, qy, qz hold (x, y, z, w): the scalar is written last",
+    "conjugated": "the quaternions are R(ICRS←cam), the inverse of R(cam←ICRS): conjugate them (negate qx, qy, qz)",
+    "scalar last and conjugated": "the scalar is written last and the quaternions are R(ICRS←cam): reorder the "
+                                  "columns to w, x, y, z and negate x, y, z",
+}
+CONVENTION_SAMPLE = 3  # frames tried (first, middle, last) before the pipeline runs
+
+
+def _convention_attitudes(R_log: np.ndarray) -> dict[str, np.ndarray]:
+    """The attitude the log's quaternion gives under each convention it might have been written in."""
+    q = Rotation.from_matrix(R_log).as_quat(scalar_first=True)  # the four columns as written (w, x, y, z); ± alike
+    last = Rotation.from_quat(q, scalar_first=False).as_matrix()
+    return {"as written": R_log, "scalar last": last, "conjugated": R_log.T, "scalar last and conjugated": last.T}
+
+
+def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky: SkyCatalogue) -> None:
+    """Before the pipeline runs: when none of up to :data:`CONVENTION_SAMPLE` frames (first, middle, last)
+    identifies with the log's attitude as the prior, the same frames are identified lost in space (no prior), and
+    their attitudes from the stars are compared with the log's quaternion read under each convention it might have
+    been written in (scalar first or last, R(cam←ICRS) or its inverse). A log that matches under another convention
+    is refused with one line naming it; a log that matches under none is refused as not describing these frames.
+    With no frame identified lost in space either, nothing can be said here (the pipeline reports the frames)."""
+    from rigsim.frames import rotation_angle
+    from rigsim.procedures.star.pipeline import StarPipeline
+
+    k = len(obs)
+    pick = sorted({0, k // 2, k - 1})[:CONVENTION_SAMPLE]
+    prior = StarPipeline(nominal, sky, identification="commanded")
+    if any(prior.add(obs[i]).ok for i in pick):
+        return
+    lis = StarPipeline(nominal, sky, identification="lost-in-space")
+    tol = max(5.0 * nominal.identification.attitude_error_deg, 1.0)
+    seen = []
+    for i in pick:
+        ident = lis.add(obs[i])
+        if not ident.ok:
+            continue
+        err = {c: float(np.degrees(rotation_angle(R, ident.R_cam_from_icrs)))
+               for c, R in _convention_attitudes(obs[i].R_commanded).items()}
+        seen.append((names[i], err))
+    if not seen:
+        return
+    name, err = seen[0]
+    best = min(err, key=err.get)
+    if best == "as written" and err[best] <= tol:
+        return  # the log is right; the frames fail to identify for another reason
+    if best != "as written" and err[best] <= tol and all(min(e, key=e.get) == best for _, e in seen):
+        raise InputError(f"{log_path}: no frame identifies with its attitudes as written (R(cam←ICRS), scalar first); "
+                         f"read {best}, they agree with the stars of {len(seen)} frame(s) identified without a prior "
+                         f"({name}: {err[best]:.3g}° instead of {err['as written']:.3g}°): {CONVENTIONS[best]}")
+    raise InputError(f"{log_path}: its attitudes are {err['as written']:.3g}° from the attitude the stars of {name} give "
+                     f"(identified without a prior), and {min(err[c] for c in CONVENTIONS):.3g}° at best read scalar "
+                     "last or conjugated: is the log for these frames (rows, times, frame names)?")
 
 
 def stars_table(out: PipelineOutput, names: Sequence[str]) -> dict[str, list]:
