@@ -276,16 +276,40 @@ _PATH_ERRNOS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, e
                 errno.EROFS, errno.EEXIST, errno.ENXIO}
 
 
+HEARTBEAT_ENV = "RIGSIM_HEARTBEAT_S"
+"""Seconds between the heartbeat lines of a command whose stderr is not a terminal (default 30; 0: none)."""
+
+
 class _Heartbeat:
     """On a terminal, a command that runs longer than ``delay`` seconds without a progress bar of its own shows
-    the seconds it has been working on stderr (one line, rewritten in place, erased at the end)."""
+    the seconds it has been working on stderr (one line, rewritten in place, erased at the end). When stderr is not
+    a terminal (a log file, a batch job, a pipe), a long command writes a note line every ``log_interval`` seconds
+    (``RIGSIM_HEARTBEAT_S``, default 30): a hung run and a slow one no longer look the same in a log."""
 
-    def __init__(self, label: str, delay: float = 2.0, interval: float = 0.5, stream=None):
+    def __init__(self, label: str, delay: float = 2.0, interval: float = 0.5, stream=None,
+                 log_interval: float | None = None):
         import threading
 
         self.label, self.delay, self.interval = f"rigsim {label}".strip(), delay, interval
         self.stream = stream if stream is not None else sys.stderr
+        self.log_interval = _heartbeat_seconds() if log_interval is None else float(log_interval)
         self.stop, self.shown, self.thread = threading.Event(), False, None
+
+    def _log(self) -> None:
+        """Off a terminal: one line every ``log_interval`` seconds, while the command runs."""
+        import time
+
+        t0 = time.monotonic()
+        k = 0
+        while not self.stop.wait(self.log_interval):
+            k += 1
+            m, s = divmod(int(round(k * self.log_interval)), 60)
+            try:
+                self.stream.write(f"rigsim: note: {self.label} still working ({f'{m} min ' if m else ''}{s} s; "
+                                  f"{time.strftime('%H:%M:%S')})\n")
+                self.stream.flush()
+            except (OSError, ValueError):  # the log went away: the command goes on
+                return
 
     def _run(self) -> None:
         import time
@@ -316,6 +340,9 @@ class _Heartbeat:
         if tty:
             self.thread = threading.Thread(target=self._run, name="rigsim-heartbeat", daemon=True)
             self.thread.start()
+        elif self.log_interval > 0:
+            self.thread = threading.Thread(target=self._log, name="rigsim-heartbeat", daemon=True)
+            self.thread.start()
         return self
 
     def __exit__(self, *exc) -> None:
@@ -325,6 +352,19 @@ class _Heartbeat:
             if self.shown:
                 self.stream.write("\r\x1b[K")
                 self.stream.flush()
+
+
+def _heartbeat_seconds() -> float:
+    text = os.environ.get(HEARTBEAT_ENV, "").strip()
+    if not text:
+        return 30.0
+    try:
+        from rigsim.files.numbers import parse_float
+
+        v = parse_float(text, special=False)
+    except ValueError:
+        return 30.0
+    return v if 0 <= v <= 86400 else 30.0
 
 
 def _silence_stdout() -> None:
