@@ -34,10 +34,11 @@ examples:
   rigsim calibrate sun-sensor --angles angles.csv --centroids centroids.csv --out sun.json
   rigsim star calibrate frames/*.fits --attitudes attitudes.csv --out cal                docs/user-data.md
   rigsim render target --target chessboard:10x7:20 --poses poses.csv --out board   a target through the true camera
-  rigsim rig check scenes/my_rig.toml           validate a rig file (and print its geometry)
-  rigsim doctor                                 versions, libLLVM and Mitsuba variant
+  rigsim rig check my_rig.toml                  validate a rig file (and print its geometry)
+  rigsim doctor                                 versions, libLLVM, Mitsuba variant, where the default rigs are installed
 
-Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
+--rig takes a rig file's path, or the name of a default rig installed with rigsim (rigsim rig list; their
+folder: rigsim doctor). The guides (docs/*.md) are in rigsim's source repository, not in the installed package.
 """
 
 
@@ -105,8 +106,15 @@ def cmd_rig_import_camera(args) -> int:
 
 def cmd_doctor(args) -> int:
     import platform
+    from pathlib import Path
 
-    info: dict = {"rigsim": rigsim.__version__, "python": platform.python_version()}
+    from rigsim.rig.load import SCENES_DIR
+
+    info: dict = {"rigsim": rigsim.__version__, "python": platform.python_version(),
+                  "installed at": str(Path(rigsim.__file__).resolve().parent),
+                  "default rigs": f"{SCENES_DIR} (rigsim rig list; copy one to start your own)",
+                  "result schemas": str(Path(rigsim.__file__).resolve().parent / "schemas"),
+                  "guides": "docs/ of rigsim's source repository (not installed with the package)"}
     try:
         from rigsim.render.backend import doctor_report
     except ImportError as exc:  # render package not available
@@ -159,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     gc = gs.add_parser("check", help="validate a rig file")
     gc.add_argument("rig")
     gc.set_defaults(func=cmd_rig_check)
-    gl = gs.add_parser("list", help="list the default rigs in scenes/")
+    gl = gs.add_parser("list", help="list the default rigs installed with rigsim (their folder: rigsim doctor)")
     gl.set_defaults(func=cmd_rig_list)
     gi = gs.add_parser("import-camera", help="a rig file with the intrinsics of an OpenCV camera (FileStorage YAML/JSON)",
                        description="Write a copy of RIG whose sun sensor (or star sensor) has the camera matrix, "
