@@ -106,3 +106,15 @@ def test_unwritable_outputs_are_refused_up_front(tmp_path):
         check_plan([Output(tmp_path / ("x" * 250), "--out")], [])
     with pytest.raises(InputError, match=r"--out = .*f': is a file; expected a folder"):
         check_plan([Output(tmp_path / "f", "--out", folder=True)], [])
+
+
+def test_a_second_name_of_a_file_inside_an_input_folder_is_refused(tmp_path):
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    (ds / "manifest.json").write_text("{}")
+    os.link(ds / "manifest.json", tmp_path / "m.json")
+    with pytest.raises(InputError, match=r"--json-out = .*m\.json': is a file of the input folder DIR"):
+        check_plan([Output(tmp_path / "m.json", "--json-out")], [("DIR", ds)])
+    with guard([("DIR", ds)]):
+        with pytest.raises(InputError, match="is a file of the input folder DIR"):
+            atomic_write_bytes(tmp_path / "m.json", b"x")

@@ -121,6 +121,26 @@ def _parent_problem(path: Path) -> str | None:
         return None
 
 
+def _linked_into(path: Path, folder: str) -> bool:
+    """Whether ``path`` is a second name (a hard link) of a file inside ``folder``: looked for only when the file has
+    several names, so a plain output never walks an input folder."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return False
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink < 2:
+        return False
+    for d, _, names in os.walk(folder):
+        for n in names:
+            try:
+                o = os.lstat(os.path.join(d, n))
+            except OSError:
+                continue
+            if (o.st_dev, o.st_ino) == (st.st_dev, st.st_ino):
+                return True
+    return False
+
+
 # ------------------------------------------------------------------------------ the plan, before the command runs
 
 def check_plan(outputs: Sequence[Output], inputs: Sequence[tuple[str, Path]]) -> None:
@@ -163,7 +183,8 @@ def check_plan(outputs: Sequence[Output], inputs: Sequence[tuple[str, Path]]) ->
             if ids & iids or entry == _entry(ip):
                 raise InputError(f"{say}: is also {label} {printable(ip)} (the same file); rigsim never writes over its "
                                  "inputs: choose another name")
-            if idir and not o.folder and os.path.lexists(p) and (entry + os.sep).startswith(ireal + os.sep):
+            if idir and not o.folder and os.path.lexists(p) and ((entry + os.sep).startswith(ireal + os.sep)
+                                                                or _linked_into(p, ireal)):
                 raise InputError(f"{say}: is a file of the input folder {label} {printable(ip)}; rigsim never writes over "
                                  "its inputs: choose another name")
         other = seen.get(entry) or next((seen_ids[i] for i in ids if i in seen_ids), None)
@@ -245,6 +266,6 @@ def check_target(path) -> None:
         if ids & iids:
             raise InputError(f"{printable(path)}: is {label} {printable(ip)}, an input of this command; rigsim never "
                              "writes over its inputs")
-        if idir and (entry + os.sep).startswith(ireal + os.sep):
+        if idir and ((entry + os.sep).startswith(ireal + os.sep) or _linked_into(path, ireal)):
             raise InputError(f"{printable(path)}: is a file of the input folder {label} {printable(ip)}; rigsim never "
                              "writes over its inputs")
