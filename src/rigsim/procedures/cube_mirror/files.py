@@ -56,6 +56,16 @@ def angle_columns(rig: CubeMirrorRig) -> list[Column]:
     return [Column(a.label.lower(), "deg") for a in rig.turntable.axes]
 
 
+def _check_degrees(path, t: dict, rig: CubeMirrorRig) -> None:
+    """Every axis column of table ``t`` within ±360°."""
+    for a in rig.turntable.axes:
+        x = t[f"{a.label.lower()}_deg"]
+        bad = np.flatnonzero(np.abs(x) > 360.0)
+        if bad.size:
+            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
+                             "expected -360 to 360 degrees")
+
+
 def read_angle_log(path, rig: CubeMirrorRig) -> tuple[list[str], TurntableReading, np.ndarray]:
     """An angle log (``frame`` and one ``<axis>_deg`` column per axis): (frame names, the readings
     in radians, each row's line). Frame names are unique."""
@@ -66,12 +76,7 @@ def read_angle_log(path, rig: CubeMirrorRig) -> tuple[list[str], TurntableReadin
         if f in seen:
             raise InputError(f"{path}: line {line}, column frame: {f!r} already on line {seen[f]}; one row per frame")
         seen[f] = int(line)
-    for a in rig.turntable.axes:
-        x = t[f"{a.label.lower()}_deg"]
-        bad = np.flatnonzero(np.abs(x) > 360.0)
-        if bad.size:
-            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
-                             "expected -360 to 360 degrees")
+    _check_degrees(path, t, rig)
     reading = TurntableReading({a.label: np.radians(t[f"{a.label.lower()}_deg"]) for a in rig.turntable.axes})
     return frames, reading, t["__line__"]
 
@@ -237,12 +242,7 @@ def read_nulls(path, rig: CubeMirrorRig) -> tuple[list[str], list[TurntableReadi
     for f, line in zip(t["face"], t["__line__"]):
         if f not in FACE_NORMALS:
             raise InputError(f"{path}: line {line}, column face: {f!r}; expected one of {', '.join(FACE_NORMALS)}")
-    for a in rig.turntable.axes:
-        x = t[f"{a.label.lower()}_deg"]
-        bad = np.flatnonzero(np.abs(x) > 360.0)
-        if bad.size:
-            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
-                             "expected -360 to 360 degrees")
+    _check_degrees(path, t, rig)
     if t["face"][0] == t["face"][1]:
         raise InputError(f"{path}: line {t['__line__'][1]}, column face: {t['face'][1]!r} again; expected the nulls of two "
                          "different faces")
