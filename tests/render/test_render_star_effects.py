@@ -94,3 +94,41 @@ def test_a_bad_effects_value_is_named(star_rig):
     data["effects"]["cosmic_rays"]["enabled"] = "yes"
     with pytest.raises(RigError, match=r"effects\.cosmic_rays\.enabled"):
         parse_model(StarRig, data, "star.toml")
+
+
+def _dark(star_rig):
+    d = star_rig.sensor.detector
+    return d.gain_dn_per_e * d.dark_mean_e + d.offset_dn
+
+
+def test_vignetting_dims_the_stars_and_the_sky_by_the_relative_illumination(star_rig, star_sky):
+    ideal, fx, sky = _frames(star_rig, star_sky, ["vignetting"], True, vignetting={"rho2": 0.25, "rho4": 0.1})
+    H, W = sky.shape_hw
+    cx, cy = star_rig.sensor.principal_point_px
+    v, u = np.mgrid[0:H, 0:W]
+    rho2 = ((u - cx) ** 2 + (v - cy) ** 2) / ((W / 2) ** 2 + (H / 2) ** 2)
+    want = 1 - 0.25 * rho2 - 0.1 * rho2**2  # relative illumination, computed here
+    ok = _linear(fx) & _linear(ideal)
+    dark = _dark(star_rig)  # dark signal and offset are not light: they are not dimmed
+    ratio = (fx.detector.expected_dn - dark)[ok] / (ideal.detector.expected_dn - dark)[ok]
+    np.testing.assert_allclose(ratio, want[ok], rtol=1e-6)
+    assert want.min() == pytest.approx(0.65, abs=0.01)  # at the corner: 1 − 0.25 − 0.1
+
+
+def test_sky_glow_raises_the_sky_along_its_direction(star_rig, star_sky):
+    ideal, fx, sky = _frames(star_rig, star_sky, ["sky_glow"], True, sky_glow={"slope_per_deg": 0.05, "direction_deg": 0})
+    H, W = sky.shape_hw
+    d = star_rig.sensor.detector
+    k = d.gain_dn_per_e * d.quantum_efficiency
+    deg = (np.arange(W) - (W - 1) / 2) * sky.pixel_arcsec / 3600.0
+    want = k * sky.background_photons_per_px * 0.05 * deg  # added sky per column, from +u's side
+    diff = fx.detector.expected_dn - ideal.detector.expected_dn
+    ok = _linear(fx) & _linear(ideal)
+    for col in (0, W // 4, W - 1):
+        np.testing.assert_allclose(diff[ok[:, col], col], want[col], rtol=1e-9, atol=1e-12)
+    assert want[-1] == pytest.approx(-want[0])
+
+
+def test_a_vignetting_that_leaves_the_corner_dark_is_refused(star_rig):
+    with pytest.raises(RigError, match="corner"):
+        parse_model(StarRig, {"name": "x", "effects": {"vignetting": {"rho2": 0.9, "rho4": 0.5}}}, "f.toml")

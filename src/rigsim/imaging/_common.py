@@ -27,6 +27,7 @@ class Prepared:
     noise: NoiseModel | None
     x: np.ndarray  # (w,) u coordinate of columns
     y: np.ndarray  # (h,) v coordinate of rows
+    gain: float = 1.0  # K (DN/e-) of the signal's shot noise when there is no NoiseModel
 
     @property
     def n(self) -> int:
@@ -44,7 +45,7 @@ class Prepared:
         else:
             sel = slice(None) if idx is None else idx
             b = self.bg[sel] if bg is None else bg
-            var = (self.bg_sd[sel] ** 2)[:, None, None] + np.maximum(expected - b[:, None, None], 0.0)
+            var = (self.bg_sd[sel] ** 2)[:, None, None] + self.gain * np.maximum(expected - b[:, None, None], 0.0)
             floor = 1e-12 * max(float(np.max(np.abs(self.data), initial=0.0)), 1.0) ** 2  # data <= 1e30
         return np.maximum(var, floor)
 
@@ -52,7 +53,7 @@ class Prepared:
         """Like `variance` for a flat array of pixels belonging to ROIs ``roi``."""
         if self.noise is not None:
             return np.maximum(self.noise.variance(expected), self.noise.min_variance_dn2)
-        var = self.bg_sd[roi] ** 2 + np.maximum(expected - self.bg[roi], 0.0)
+        var = self.bg_sd[roi] ** 2 + self.gain * np.maximum(expected - self.bg[roi], 0.0)
         return np.maximum(var, 1e-300)
 
 
@@ -88,7 +89,13 @@ def prepare(
     background=None,
     noise: NoiseModel | None = None,
     flags=None,
+    background_sd=None,
+    gain: float | None = None,
 ) -> Prepared:
+    """The stack, its usable and saturated pixels, each ROI's background and its noise. Without a
+    ``noise`` model, ``background_sd`` (scalar or per ROI, DN) replaces the ring's measured noise and
+    ``gain`` (K, DN/e-) is the signal's shot-noise gain (e.g. from a position-dependent sky map and
+    a known or measured gain)."""
     stack, single = as_stack(img)
     n, h, w = stack.shape
     if noise is not None and not isinstance(noise, NoiseModel):
@@ -122,27 +129,29 @@ def prepare(
     ring = np.zeros((h, w), dtype=bool)
     if h >= 3 and w >= 3:
         ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
-    ring_ok = good[:, ring] & ~sat[:, ring]
-    rv = data[:, ring]  # (N, nring)
     med = np.full(n, np.nan)
     mad = np.full(n, np.nan)
-    need_mad = noise is None
-    if rv.shape[1]:
-        full = ring_ok.all(axis=1)
-        if full.all():  # fast path: every ring is usable
-            med = np.median(rv, axis=1)
-            if need_mad:
-                mad = np.median(np.abs(rv - med[:, None]), axis=1)
-        else:
-            for i in np.flatnonzero(ring_ok.any(axis=1)):
-                r = rv[i][ring_ok[i]]
-                med[i] = np.median(r)
-                mad[i] = np.median(np.abs(r - med[i]))
+    sd_given = None if noise is not None else _per_roi(background_sd, n, "background_sd")
     bg_given = _per_roi(background, n, "background")
+    need_mad = noise is None and sd_given is None
+    if (bg_given is None or need_mad) and ring.any():
+        ring_ok = good[:, ring] & ~sat[:, ring]
+        rv = data[:, ring]  # (N, nring)
+        full = ring_ok.all(axis=1)
+        if full.any():  # every ring pixel usable: one vectorised median
+            med[full] = np.median(rv[full], axis=1)
+            if need_mad:
+                mad[full] = np.median(np.abs(rv[full] - med[full, None]), axis=1)
+        for i in np.flatnonzero(~full & ring_ok.any(axis=1)):
+            r = rv[i][ring_ok[i]]
+            med[i] = np.median(r)
+            mad[i] = np.median(np.abs(r - med[i]))
     bg = med if bg_given is None else bg_given
     if noise is not None:
         # the noise model is the stated truth about the detector: use it for the background noise
         bg_sd = np.sqrt(noise.variance(np.where(np.isfinite(bg), bg, 0.0)))
+    elif sd_given is not None:
+        bg_sd = sd_given.copy()
     else:
         bg_sd = MAD_TO_SD * mad
     # no usable ring (tiny ROI, or ring all bad): fall back to robust stats of all good pixels
@@ -164,7 +173,10 @@ def prepare(
     fl[all_sat] |= Flag.INVALID
     if h < 3 or w < 3:
         fl |= Flag.EMPTY | Flag.INVALID
-    return Prepared(data, good, sat, bg, bg_sd, fl, single, noise, x, y)
+    k = 1.0 if gain is None else float(gain)
+    if not (np.isfinite(k) and k > 0):
+        raise ValueError(f"gain must be finite and > 0 DN/e-, got {gain!r}")
+    return Prepared(data, good, sat, bg, bg_sd, fl, single, noise, x, y, k)
 
 
 def secondary_peak_flags(p: Prepared, resid: np.ndarray, nsigma: float = 5.0) -> np.ndarray:

@@ -230,7 +230,7 @@ def centroid_wcom(
         du_den = np.sum(wd * (dx * dx / s2 - 1.0), axis=(1, 2))
         dv_den = np.sum(wd * (dy * dy / s2 - 1.0), axis=(1, 2))
         swd = np.sum(wd, axis=(1, 2))
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # a tiny curvature: the step is clipped
             newton_u = -gu / du_den
             newton_v = -gv / dv_den
             # fall back to the SExtractor step (factor 2) where Newton's curvature is not negative
@@ -430,6 +430,20 @@ def _chol_inverse(L: np.ndarray) -> np.ndarray:
     return inv
 
 
+def _solve_spd(A: np.ndarray, g: np.ndarray | None):
+    """(solution of A x = g or None, A⁻¹, ok) for a stack of small symmetric matrices: the
+    row-by-row Cholesky factorisation tells which are finite and positive definite (ok), LAPACK
+    inverts those; the others give NaN."""
+    finite = np.isfinite(A).all(axis=(1, 2))
+    _, ok = _chol(np.where(finite[:, None, None], A, 0.0))
+    ok &= finite
+    inv = np.full_like(A, np.nan)
+    if ok.any():
+        inv[ok] = np.linalg.inv(A[ok])
+    x = None if g is None else np.einsum("nij,nj->ni", inv, g)
+    return x, inv, ok
+
+
 def _gauss_newton(p, use, u, v, F, B, s, fit_sigma, valid, max_iter, tol_px):
     """Iteratively reweighted Gauss-Newton on the spots in ``valid``; only unconverged spots are
     carried to the next iteration. Also returns, per spot, the normal matrix J^T W J and the
@@ -456,8 +470,7 @@ def _gauss_newton(p, use, u, v, F, B, s, fit_sigma, valid, max_iter, tol_px):
         A, g = _normal_equations(wts, wr, Fa, ex, dex, sex, ey, dey, sey, fit_sigma)
         A_last[act] = A
         chi2[act] = np.einsum("nij,nij->n", wr, r)
-        L, ok = _chol(A)
-        step = _chol_solve(L, g)
+        step, _, ok = _solve_spd(A, g)
         step[~ok] = 0.0
         # trust region on position (and sigma) steps
         step[:, 0:2] = np.clip(step[:, 0:2], -1.0, 1.0)
@@ -488,6 +501,8 @@ def centroid_gauss(
     min_snr: float = 5.0,
     max_iter: int = 20,
     tol_px: float = 1e-4,
+    background_sd=None,
+    gain: float | None = None,
 ) -> Centroid | CentroidBatch:
     """Weighted least-squares fit of a pixel-integrated circular Gaussian (vectorised).
 
@@ -499,9 +514,11 @@ def centroid_gauss(
     non-finite pixels are excluded from the fit.
 
     ``sigma_px`` is the PSF sigma (px): required unless ``fit_sigma`` (then it is the start value,
-    default 1.0). ``extra`` holds sigma_px, sigma_flux, chi2_red and n_iter per spot.
+    default 1.0). ``extra`` holds sigma_px, sigma_flux, chi2_red and n_iter per spot. Without a
+    ``noise`` model, ``background_sd`` and ``gain`` set each ROI's noise (see :func:`prepare`).
     """
-    p = prepare(img, mask=mask, saturation=saturation, background=background, noise=noise, flags=flags)
+    p = prepare(img, mask=mask, saturation=saturation, background=background, noise=noise, flags=flags,
+                background_sd=background_sd, gain=gain)
     n, h, w = p.data.shape
     if sigma_px is None and not fit_sigma:
         raise ValueError("centroid_gauss needs sigma_px (PSF sigma in px) unless fit_sigma=True")
@@ -519,8 +536,7 @@ def centroid_gauss(
         p, use, u, v, F, B, s, fit_sigma, valid0, max_iter, tol_px
     )
     # covariance = inverse Fisher matrix of the last iteration
-    L, ok = _chol(np.where(np.isfinite(A), A, 0.0))
-    cov = _chol_inverse(L)
+    _, cov, ok = _solve_spd(A, None)
     dof = use.sum(axis=(1, 2)) - P
     with np.errstate(invalid="ignore", divide="ignore"):
         chi2_red = chi2 / dof

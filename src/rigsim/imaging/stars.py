@@ -15,7 +15,7 @@ import numpy as np
 
 from rigsim.imaging import Flag, NoiseModel, find_spots
 
-__all__ = ["BAD_FLAGS", "POOR_FIT_REFERENCES", "Observations", "extract_stars", "frame_poor_fits"]
+__all__ = ["BACKGROUNDS", "BAD_FLAGS", "POOR_FIT_REFERENCES", "Observations", "extract_stars", "frame_poor_fits"]
 
 POOR_FIT_REFERENCES = ("model", "frame")
 # a star's unexplained share of signal is an outlier of its frame beyond this many robust σ
@@ -43,9 +43,14 @@ class Observations:
         return Observations(self.uv[idx], self.sigma_uv[idx], self.flux[idx], self.flags[idx])
 
 
+BACKGROUNDS = ("model", "map")
+"""``model``: one background, the detector model's offset and noise; ``map``: a position-dependent sky
+level and noise measured on the frame (sky glow, gradients, vignetting; :mod:`rigsim.imaging.star_field`)."""
+
+
 def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "gauss",
                   threshold_sigma: float = 5.0, saturation: float | None = None,
-                  repair_single_pixels: bool = False, poor_fit: str = "model") -> Observations:
+                  repair_single_pixels: bool = False, poor_fit: str = "model", background: str = "model") -> Observations:
     """Detect and centroid every star of a frame (``find_spots`` with the detector's noise model).
 
     ``saturation`` defaults to the ADC's top code. For the Gaussian fit σ starts at ``sigma_px``
@@ -55,15 +60,28 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
     ``poor_fit`` (Gaussian fit only): what a star's fit is judged against before it is flagged
     POOR_FIT. ``"model"``: the noise model (reduced χ² far above 1). ``"frame"``: the frame's other
     stars as well (:func:`frame_poor_fits`), for a PSF that is not a Gaussian at all.
+    ``background``: one of :data:`BACKGROUNDS`; with ``map`` the stars are found by a matched filter
+    against the measured sky and fitted with the frame's PSF width (Gaussian fit only).
     """
     if poor_fit not in POOR_FIT_REFERENCES:
         raise ValueError(f"poor_fit = {poor_fit!r}: allowed {', '.join(POOR_FIT_REFERENCES)}")
+    if background not in BACKGROUNDS:
+        raise ValueError(f"background = {background!r}: allowed {', '.join(BACKGROUNDS)}")
     noise = NoiseModel.from_detector(detector)
     if repair_single_pixels:
         from rigsim.imaging.cosmetics import repair_pixels, single_pixel_events
 
         dn = repair_pixels(dn, single_pixel_events(dn, noise, sigma_px))
     sat = float(2 ** detector.adc_bits - 1) if saturation is None else float(saturation)
+    if background == "map":
+        from rigsim.imaging.star_field import extract_star_field
+
+        sf = extract_star_field(np.asarray(dn), psf_sigma_px=float(sigma_px), threshold_sigma=threshold_sigma,
+                                saturation=sat, gain_dn_per_e=float(detector.gain_dn_per_e))
+        flags = np.asarray(sf.flags, np.int64)
+        if poor_fit == "frame" and len(sf):
+            flags = _frame_poor_fit_flags(flags, sf.chi2_red, sf.flux / sf.sigma_flux)
+        return Observations(sf.uv.astype(float), sf.sigma_uv.astype(float), np.asarray(sf.flux, float), flags)
     kw = {}
     if method == "gauss":
         kw["fit_sigma"] = True
@@ -73,11 +91,15 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
     sig = np.stack([res.sigma_u, res.sigma_v], axis=1) if len(res) else np.zeros((0, 2))
     flags = np.asarray(res.flags, np.int64)
     if poor_fit == "frame" and method == "gauss" and len(res):
-        poor = int(Flag.POOR_FIT)
-        judged = (flags & BAD_FLAGS) == 0
-        outlier = frame_poor_fits(res.extra["chi2_red"], res.flux / res.extra["sigma_flux"], judged)
-        flags = np.where((flags & poor) != 0, np.where(outlier, flags, flags & ~poor), flags)
+        flags = _frame_poor_fit_flags(flags, res.extra["chi2_red"], res.flux / res.extra["sigma_flux"])
     return Observations(uv.astype(float), sig.astype(float), np.asarray(res.flux, float), flags)
+
+
+def _frame_poor_fit_flags(flags: np.ndarray, chi2_red, snr) -> np.ndarray:
+    """POOR_FIT kept only on the stars that are outliers of their frame (:func:`frame_poor_fits`)."""
+    poor = int(Flag.POOR_FIT)
+    outlier = frame_poor_fits(chi2_red, snr, (flags & BAD_FLAGS) == 0)
+    return np.where((flags & poor) != 0, np.where(outlier, flags, flags & ~poor), flags)
 
 
 def frame_poor_fits(chi2_red, snr, judged) -> np.ndarray:

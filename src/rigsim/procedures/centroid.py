@@ -116,13 +116,36 @@ def flag_names(flags: int) -> str:
     return "|".join(f.name for f in Flag if f.value & int(flags)) or ""
 
 
+STAR_METHOD = "star"
+"""``rigsim centroid --method star``: a star field (:func:`rigsim.imaging.star_field.extract_star_field`):
+a position-dependent sky level and noise, a matched filter down to the noise floor, a Gaussian fit
+of every star with the frame's PSF width."""
+METHODS = (*FRAME_METHODS, STAR_METHOD)
+
+
+def _star_spots(img: np.ndarray, settings: DetectorSettings, psf_sigma_px: float, threshold_sigma: float,
+                gain_dn_per_e: float):
+    from rigsim.imaging.result import CentroidBatch
+    from rigsim.imaging.star_field import extract_star_field
+
+    sat = settings.saturation_dn
+    if sat is None and np.issubdtype(img.dtype, np.integer):
+        sat = float(np.iinfo(img.dtype).max)
+    sf = extract_star_field(img, psf_sigma_px=psf_sigma_px, threshold_sigma=threshold_sigma, saturation=sat,
+                            gain_dn_per_e=gain_dn_per_e)
+    return CentroidBatch(sf.u, sf.v, sf.sigma_u, sf.sigma_v, sf.flux, sf.background, sf.flags, STAR_METHOD)
+
+
 def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str = "scurve",
                    threshold_dn: float | None = None, max_spots: int | None = None, progress=None,
-                   warn=None) -> dict[str, list]:
+                   warn=None, psf_sigma_px: float = 1.0, threshold_sigma: float = 5.0,
+                   gain_dn_per_e: float | None = None) -> dict[str, list]:
     """Every spot of every frame file, brightest first per frame: the table's columns
     (frame, spot, u_px, v_px, sigma_u_px, sigma_v_px, flux_dn, flags, flag_names). ``warn(text)``
     hears of the first frame whose background disagrees with the detector model
-    (:meth:`DetectorSettings.mismatch`)."""
+    (:meth:`DetectorSettings.mismatch`). ``method`` ``star`` (:data:`STAR_METHOD`) measures its own sky
+    map on each frame, with the PSF σ ``psf_sigma_px`` and the matched filter's ``threshold_sigma``; the
+    stars' shot noise takes ``gain_dn_per_e`` (default the settings' gain)."""
     cols: dict[str, list] = {k: [] for k in ("frame", "spot", "u_px", "v_px", "sigma_u_px", "sigma_v_px", "flux_dn",
                                              "flags", "flag_names")}
     from rigsim.files.inputs import check_distinct
@@ -131,13 +154,17 @@ def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str =
     warned = False
     for p in paths:
         img = read_image(p, shape=settings.shape)
-        if warn is not None and not warned:
-            text = settings.mismatch(img, threshold_dn)
-            if text is not None:
-                warn(f"{p}: {text}")
-                warned = True
-        spots = measure_frame(img, settings.noise_for(img), method=method, threshold_dn=threshold_dn,
-                              saturation_dn=settings.saturation_dn)
+        if method == STAR_METHOD:
+            spots = _star_spots(img, settings, psf_sigma_px, threshold_sigma,
+                                settings.noise.gain_dn_per_e if gain_dn_per_e is None else gain_dn_per_e)
+        else:
+            if warn is not None and not warned:
+                text = settings.mismatch(img, threshold_dn)
+                if text is not None:
+                    warn(f"{p}: {text}")
+                    warned = True
+            spots = measure_frame(img, settings.noise_for(img), method=method, threshold_dn=threshold_dn,
+                                  saturation_dn=settings.saturation_dn)
         n = len(spots) if max_spots is None else min(len(spots), max_spots)
         for k in range(n):
             for key, val in (("frame", Path(p).name), ("spot", k), ("u_px", spots.u[k]), ("v_px", spots.v[k]),
@@ -161,8 +188,16 @@ def add_cli(groups: dict) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     c.add_argument("frames", nargs="+", metavar="FRAME", help="frame files (8/16-bit PNG or TIFF, FITS)")
     c.add_argument("--out", required=True, metavar="FILE", help="the table (.csv or .parquet)")
-    c.add_argument("--method", default="scurve", choices=FRAME_METHODS,
-                   help="scurve: S-curve corrected first moment (sun disk); tcom, wcom, gauss: rigsim.imaging's")
+    c.add_argument("--method", default=None, choices=METHODS,
+                   help="scurve: S-curve corrected first moment (sun disk); tcom, wcom, gauss: rigsim.imaging's; star: a "
+                        "star field (sky level and noise mapped across the frame, matched-filter detection to the noise "
+                        "floor, Gaussian fit with the frame's PSF width). Default: star with a star-sensor --rig, else "
+                        "scurve")
+    c.add_argument("--psf-sigma-px", type=number(0.2, 20), default=None,
+                   help="--method star: the PSF's σ for the matched filter (default the rig's, else 1 px; each frame's "
+                        "width is then measured on its bright stars)")
+    c.add_argument("--threshold-sigma", type=number(2, 1000), default=5.0,
+                   help="--method star: detection threshold, in σ of the matched filter's noise")
     c.add_argument("--rig", default=None, help="rig file or default rig name: the camera's detector")
     c.add_argument("--camera", default=None, choices=sorted(CAMERAS), help="which camera of the rig (default its main one)")
     c.add_argument("--background", default=None, choices=("model", "frame"),
@@ -204,6 +239,11 @@ def cmd_centroid(args) -> int:
     rig = load_any_rig(args.rig) if args.rig else None
     if args.camera and rig is None:
         raise CliError("--camera needs --rig")
+    star_rig = rig is not None and hasattr(rig, "sensor") and (args.camera in (None, "star-sensor"))
+    method = args.method or (STAR_METHOD if star_rig else "scurve")
+    if method != STAR_METHOD and args.psf_sigma_px is not None:
+        raise CliError("--psf-sigma-px is for --method star")
+    psf = args.psf_sigma_px if args.psf_sigma_px is not None else (rig.sensor.psf_sigma_px if star_rig else 1.0)
     st = detector_settings(rig, args.camera, offset_dn=args.offset_dn, gain_dn_per_e=args.gain_dn_per_e,
                            read_noise_e=args.read_noise_e, saturation_dn=args.saturation_dn)
     if args.background is not None:
@@ -212,15 +252,30 @@ def cmd_centroid(args) -> int:
                            "leave out --offset-dn and --read-noise-e")
         st = replace(st, estimate_background=args.background == "frame")
     t0 = time.perf_counter()
+    gain, gain_note = st.noise.gain_dn_per_e, "gain"
+    if method == STAR_METHOD and rig is None and args.gain_dn_per_e is None:  # nobody stated it: the sky's own noise
+        from rigsim.imaging.star_field import photon_transfer
+
+        first = read_image(args.frames[0], shape=st.shape)
+        sat = st.saturation_dn if st.saturation_dn is not None else (
+            float(np.iinfo(first.dtype).max) if np.issubdtype(first.dtype, np.integer) else None)
+        pt = photon_transfer(first, saturation=sat)
+        if pt is not None:
+            gain, gain_note = pt.gain_dn_per_e, f"gain (photon transfer of {Path(args.frames[0]).name}'s sky)"
+        else:
+            gain_note = "gain (not measurable: the sky is too uniform; give --gain-dn-per-e)"
     warnings: list[str] = []
     with tqdm(total=len(args.frames), desc="centroid", unit="frame", disable=True if args.quiet else None) as pb:
-        cols = centroid_files(args.frames, st, method=args.method, threshold_dn=args.threshold_dn,
-                              max_spots=args.max_spots, progress=pb.update, warn=warnings.append)
+        cols = centroid_files(args.frames, st, method=method, threshold_dn=args.threshold_dn,
+                              max_spots=args.max_spots, progress=pb.update, warn=warnings.append, psf_sigma_px=psf,
+                              threshold_sigma=args.threshold_sigma, gain_dn_per_e=gain)
     for w in warnings:
         print(f"warning: {w}. Use --background frame, or describe the camera that took the frames "
               "(--rig/--camera, --offset-dn, --read-noise-e)", file=sys.stderr)
     write_table(args.out, cols)
     n_frames_with = len(set(cols["frame"]))
-    print(f"{len(cols['frame'])} spots in {n_frames_with} of {len(args.frames)} frames ({args.method}; {st.describe()}) "
+    how = (f"star: sky mapped on each frame, matched filter ≥ {args.threshold_sigma:g}σ, {gain_note} {gain:.4g} DN/e-"
+           if method == STAR_METHOD else f"{method}; {st.describe()}")
+    print(f"{len(cols['frame'])} spots in {n_frames_with} of {len(args.frames)} frames ({how}) "
           f"→ {args.out} [{time.perf_counter() - t0:.2f} s]")
     return 0

@@ -79,9 +79,16 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
     fx = star_frame_effects(sky, seed=int(seed), noiseless=noiseless)
     if fx.photons is not None:
         photons = photons + fx.photons
+    if fx.illumination is not None:
+        photons = photons * fx.illumination
     if traced_truth is not None:
         fx.truth["traced_psf"] = traced_truth
     truth_dict = truth.as_dict()
+    if fx.illumination is not None and len(truth):  # the share of each star's light that reaches the detector
+        H, W = truth.shape_hw
+        iu = np.clip(np.rint(truth.uv[:, 0]).astype(int), 0, W - 1)
+        iv = np.clip(np.rint(truth.uv[:, 1]).astype(int), 0, H - 1)
+        fx.truth["vignetting"]["star_illumination"] = fx.illumination[iv, iu].tolist()
     if fx.truth:
         truth_dict["effects"] = fx.truth
     fr = digitise(photons, s.detector, seed=int(seed), noiseless=noiseless, truth=truth_dict, truth_object=truth,

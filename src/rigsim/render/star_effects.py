@@ -31,6 +31,7 @@ def effects_rng(seed: int, name: str) -> np.random.Generator:
 class FrameEffects:
     photons: np.ndarray | None = None      # added to the expected photons per pixel
     electrons: np.ndarray | None = None    # added to the signal after the shot noise
+    illumination: np.ndarray | None = None  # multiplies the expected photons (stars, sky and added light)
     truth: dict = field(default_factory=dict)
 
 
@@ -49,6 +50,21 @@ def _static_maps(sky) -> dict:
         mag = stray_light_mag_map((H, W), sky.pixel_arcsec / 3600.0, direction_deg=st.direction_deg,
                                   edge_mag_per_arcsec2=st.edge_mag_per_arcsec2, falloff_mag_per_deg=st.falloff_mag_per_deg)
         maps["stray_photons"] = surface_brightness_photons(mag, sky.photons, sky.pixel_arcsec)
+    if eff.sky_glow.enabled:
+        g = eff.sky_glow
+        c, sn = math.cos(math.radians(g.direction_deg)), math.sin(math.radians(g.direction_deg))
+        v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+        d_deg = ((u - (W - 1) / 2.0) * c + (v - (H - 1) / 2.0) * sn) * sky.pixel_arcsec / 3600.0
+        maps["glow_photons"] = sky.background_photons_per_px * g.slope_per_deg * d_deg
+        if float(maps["glow_photons"].min()) < -sky.background_photons_per_px:
+            raise ValueError(f"effects.sky_glow: slope {g.slope_per_deg}/° darkens the sky below zero inside the field")
+    if eff.vignetting.enabled:
+        vg = eff.vignetting
+        cam = sky.camera
+        v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+        half_diag = math.hypot(W / 2.0, H / 2.0)
+        rho2 = ((u - cam.cx) ** 2 + (v - cam.cy) ** 2) / half_diag**2
+        maps["illumination"] = np.clip(1.0 - vg.rho2 * rho2 - vg.rho4 * rho2**2, 0.0, None)
     if eff.hot_pixels.enabled:
         hp = eff.hot_pixels
         maps["hot_rates"] = hot_pixel_rates(s.detector.sensor_seed, W, (0, H), (0, W), fraction=hp.fraction,
@@ -73,6 +89,13 @@ def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffec
         out.photons = static["stray_photons"]
         out.truth["stray_light"] = {"photons_per_px_min": float(out.photons.min()),
                                     "photons_per_px_max": float(out.photons.max())}
+    if eff.sky_glow.enabled:
+        out.photons = static["glow_photons"] if out.photons is None else out.photons + static["glow_photons"]
+        out.truth["sky_glow"] = {"photons_per_px_min": float(static["glow_photons"].min()),
+                                 "photons_per_px_max": float(static["glow_photons"].max())}
+    if eff.vignetting.enabled:
+        out.illumination = static["illumination"]
+        out.truth["vignetting"] = {"illumination_min": float(out.illumination.min())}
     electrons = np.zeros((H, W), dtype=np.float64)
     if eff.hot_pixels.enabled:
         rates = static["hot_rates"]

@@ -12,8 +12,8 @@ from pydantic import Field, StrictBool, model_validator
 
 from rigsim.rig.model import RigModel
 
-__all__ = ["STAR_EFFECTS", "CosmicRays", "Effect", "EffectsTable", "HotPixels", "StarEffects", "StrayLight",
-           "TracedPSF"]
+__all__ = ["STAR_EFFECTS", "CosmicRays", "Effect", "EffectsTable", "HotPixels", "SkyGlow", "StarEffects",
+           "StrayLight", "TracedPSF", "Vignetting"]
 
 
 class Effect(RigModel):
@@ -72,6 +72,33 @@ class StrayLight(Effect):
                                  description="direction towards the source in the image, from +u towards +v")
 
 
+class Vignetting(Effect):
+    """The lens's relative illumination: the share of the on-axis light that reaches each point of the
+    detector, V(ρ) = 1 − rho2 · ρ² − rho4 · ρ⁴, with ρ the distance from the principal point over the
+    detector's half-diagonal. It dims the stars and the sky alike."""
+
+    rho2: float = Field(0.3, ge=-1.0, le=1.0, description="fall-off in ρ² (ρ = 1 at the detector's corner)")
+    rho4: float = Field(0.0, ge=-1.0, le=1.0, description="fall-off in ρ⁴")
+
+    @model_validator(mode="after")
+    def _positive(self):
+        corner = 1.0 - self.rho2 - self.rho4
+        if not 0.02 <= corner <= 1.5:
+            raise ValueError(f"rho2 = {self.rho2}, rho4 = {self.rho4}: the corner would get {corner:.3g} of the "
+                             "on-axis light; allowed 0.02 to 1.5")
+        return self
+
+
+class SkyGlow(Effect):
+    """A night sky's glow across the field (airglow and light pollution brighten towards the horizon):
+    the sky's surface brightness times 1 + slope · d, d the angle (deg) from the field's centre along
+    ``direction_deg``."""
+
+    slope_per_deg: float = Field(0.05, ge=-0.2, le=0.2, description="relative change of the sky per degree")
+    direction_deg: float = Field(90.0, ge=-360.0, le=360.0,
+                                 description="direction of increase in the image, from +u towards +v")
+
+
 class TracedPSF(Effect):
     """The PSF of the traced lens (``rigsim.optics.star_lens``) instead of the Gaussian: field-dependent,
     and the spectrum-weighted sum over the band for each star's colour (B−V). Focal length and entrance
@@ -97,6 +124,8 @@ class StarEffects(EffectsTable):
     cosmic_rays: CosmicRays = Field(default_factory=CosmicRays)
     stray_light: StrayLight = Field(default_factory=StrayLight)
     traced_psf: TracedPSF = Field(default_factory=TracedPSF)
+    sky_glow: SkyGlow = Field(default_factory=SkyGlow)
+    vignetting: Vignetting = Field(default_factory=Vignetting)
 
 
 STAR_EFFECTS = StarEffects.names()

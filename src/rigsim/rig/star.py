@@ -206,6 +206,13 @@ class Calibration(_Model):
     ads_variant: Literal["exact", "improved"] = "exact"
     process_noise_px: float = Field(0.0, ge=0.0, le=100.0, description="EKF process noise per frame (1σ)")
     centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
+    distortion_terms: Literal["auto", "none", "k1", "k1,k2"] = Field(
+        "auto", description="distortion fitted with the intrinsics and attitudes together (the joint fit): 'auto' "
+                            "= k1, and k2 when the data support it (χ² lower by more than 9)")
+    background: Literal["model", "map"] = Field(
+        "model", description="the sky background the stars are found against: 'model' = one level, the detector "
+                             "model's offset and noise; 'map' = a level and noise map measured on each frame (sky "
+                             "glow, gradients, vignetting), stars found by a matched filter (Gaussian fit only)")
     single_pixel_filter: StrictBool = Field(True, description="repair single-pixel events (hot pixels, particle "
                                                                "hits) before extracting the stars")
     reject_poor_fits: StrictBool = Field(True, description="leave out of the calibration the stars whose PSF fit is "
@@ -217,6 +224,14 @@ class Calibration(_Model):
     fixed_pattern: Literal["none", "sequence"] = Field(
         "none", description="subtract the detector's fixed pattern (hot pixels, DSNU) estimated from the sequence "
                             "itself (per-pixel median over the frames) before extracting the stars")
+
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.background == "map" and self.centroid_method != "gauss":
+            raise ValueError(f"background = 'map' fits every star with a Gaussian: centroid_method must be 'gauss', "
+                             f"got {self.centroid_method!r}")
+        return self
 
 
 class Study(_Model):

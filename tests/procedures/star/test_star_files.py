@@ -51,11 +51,11 @@ def test_frames_round_trip_through_star_calibrate(exported, tmp_path, capsys):
     assert main(["star", "calibrate", *sorted(str(p) for p in d.glob("shot-*.png")), "--attitudes", str(d / "log.csv"),
                  "--out", str(d / "cal"), "--opencv", str(d / "cal" / "camera.yml")]) == 0
     got = json.loads((d / "cal" / "calibration.json").read_text())
-    # the batch calibration in OpenCV's form: read back by cv2.FileStorage (through rig import-camera's reader)
+    # the joint calibration in OpenCV's form: read back by cv2.FileStorage (through rig import-camera's reader)
     from rigsim.rig.opencv_camera import read_opencv_camera
 
     cv = read_opencv_camera(d / "cal" / "camera.yml")
-    th = dict(zip(got["theta_names"], got["batch"]["theta"]))
+    th = dict(zip(got["theta_names"], got["joint"]["theta"]))
     assert (cv.fx, cv.fy, cv.cx, cv.cy, cv.dist["k1"], cv.dist["k2"]) == (th["f"], th["f"], th["u0"], th["v0"], th["k1"], th["k2"])
     assert cv.size == (1024, 1024)
     ref = json.loads((exported / "report" / "star_calibration.json").read_text())

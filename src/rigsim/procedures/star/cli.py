@@ -49,25 +49,32 @@ def add_cli(groups: dict) -> None:
     sts = st.add_subparsers(dest="star_command", metavar="ACTION")
     c = sts.add_parser(
         "calibrate", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-        help="extract, identify and calibrate (f, u0, v0, k1, k2) from star frames and an attitude log",
+        help="extract, identify and calibrate (f, u0, v0, k1, k2) from star frames, with or without an attitude log",
         description="The seed-004 pipeline on your frames (PNG/TIFF 16-bit or FITS) with the nominal rig: star "
-                    "extraction, identification from the commanded attitude, AD/ADS EKFs and batch least squares "
-                    "of (f, u0, v0, k1, k2) with covariance. The attitude log has one row per frame: frame, time_s, "
-                    "qw, qx, qy, qz (the commanded R(cam<-ICRS), scalar first).")
+                    "extraction, identification (from the commanded attitude of an attitude log, or lost in space "
+                    "from the frames alone), the intrinsics and every attitude fitted together with a held-out check, "
+                    "and the document's AD/ADS EKFs and batch least squares of (f, u0, v0, k1, k2) with covariance. "
+                    "The attitude log has one row per frame: frame, time_s, qw, qx, qy, qz (the commanded "
+                    "R(cam<-ICRS), scalar first). Frames that cannot be identified are named and left out.")
     c.add_argument("frames", nargs="+", metavar="FRAME", help="star frames of the rig's detector size")
     c.add_argument("--rig", default="star_sensor", help="star-sensor rig file (nominal values only)")
-    c.add_argument("--attitudes", required=True, metavar="FILE", help="attitude log (.csv/.parquet)")
+    c.add_argument("--attitudes", default=None, metavar="FILE",
+                   help="attitude log (.csv/.parquet); without it the frames are identified lost in space, in the "
+                        "order given")
     c.add_argument("--out", required=True, metavar="DIR", help="output folder: stars.csv and calibration.json")
     c.add_argument("--ekf", default="both", choices=["ad", "ads", "both"], help="EKF measurement model(s) to report")
     c.add_argument("--opencv", default=None, metavar="FILE",
                    help="also write the batch calibration as OpenCV's FileStorage camera (.yml/.json/.xml)")
-    c.add_argument("--identify", default="commanded", choices=["commanded", "lost-in-space"],
+    c.add_argument("--identify", default=None, choices=["commanded", "lost-in-space"],
                    help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
-                        "frame and time_s)")
+                        "frame and time_s). Default: commanded with --attitudes, else lost-in-space")
     c.set_defaults(func=cmd_star_calibrate)
     declare(c, "out", folder=True, derived=lambda a: [Output(Path(a.out) / n, f"--out's {n}")
                                                       for n in ("stars.csv", "calibration.json")])
     declare(c, "opencv", suffixes=(".yml", ".yaml", ".json", ".xml"))
+    from rigsim.procedures.star import twin_commands
+
+    twin_commands.add_cli(sts)
     p.set_defaults(func=cmd_run_star_calibration)
     declare(p, "out", folder=True)
     declare(p, "export_frames", folder=True)
@@ -107,28 +114,50 @@ def cmd_star_calibrate(args) -> int:
         raise CliError(f"--out = {out}: exists and is not a folder")
     if args.opencv and Path(args.opencv).suffix.lower() not in (".yml", ".yaml", ".json", ".xml"):
         raise CliError(f"--opencv {args.opencv}: an OpenCV FileStorage name ends in .yml, .yaml, .json or .xml")
+    identify = args.identify or ("commanded" if args.attitudes else "lost-in-space")
+    if identify == "commanded" and not args.attitudes:
+        raise CliError("--identify commanded needs --attitudes (the commanded attitude of every frame)")
     t0 = time.perf_counter()
-    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=args.identify)
+    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=identify)
+    for name, ident in zip(names, res.ident):
+        if not ident.ok:
+            print(f"{name}: not identified ({ident.reason}); left out", file=sys.stderr)
     models = ("ad", "ads") if args.ekf == "both" else (args.ekf,)
     data = star_result_json(res, names, models)
     write_table(out / "stars.csv", stars_table(res, names))
     write_json(out / "calibration.json", data)
+    j = data.get("joint")
     if args.opencv:
         from rigsim.files.opencv import write_opencv_camera
 
-        th = dict(zip(data["theta_names"], res.batch.theta))  # f, u0, v0 (px), k1, k2
+        th = dict(zip(data["theta_names"], j["theta"] if j else res.batch.theta))  # f, u0, v0 (px), k1, k2
         W, H = rig.sensor.resolution_px
         write_opencv_camera(args.opencv, th["f"], th["f"], th["u0"], th["v0"], [th["k1"], th["k2"], 0.0, 0.0, 0.0], W, H)
-        print(f"→ {args.opencv} (OpenCV camera: the batch least-squares calibration)")
+        print(f"→ {args.opencv} (OpenCV camera: the {'joint fit' if j else 'batch least squares'})")
     st = res.ident_stats
-    print(f"{st['frames']} frames, {st['frames_identified']} identified; {st['usable']} usable stars, "
+    print(f"{st['frames']} frames, {st['frames_identified']} identified ({identify}); {st['usable']} usable stars, "
           f"{st['identified']} identified")
+    if j:
+        sig = dict(zip(j["estimated"], j["covariance"]["sigma"]))
+        th = dict(zip(data["theta_names"], j["theta"]))
+        print("joint fit (intrinsics and attitudes): " + ", ".join(
+            f"{n} {th[n]:.5g} ± {sig[n]:.2g}" for n in j["estimated"]) + f"; {j['n_stars']} stars, {j['n_rejected']} left "
+            f"out beyond 5σ")
+        print(f"  χ²/dof {j['chi2_reduced_noise_model']:.2f} under the centroid σ → {j['chi2_reduced']:.2f} with a floor "
+              f"of {j['sigma_floor_px']:.3f} px; {j['verdict']}")
+        fov = j["field_of_view_deg"]
+        print(f"  field of view {fov['horizontal']:.4f}° × {fov['vertical']:.4f}° (edge to edge through the principal point)")
+        if j["held_out"]:
+            h = j["held_out"]
+            print(f"  held out: {h['n_stars']} stars of frames left out of the fit predicted to {h['rms_px']:.3f} px rms, "
+                  f"error/σ rms {h['z_rms']:.2f}")
     b = res.batch
-    print("batch least squares: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in zip(b.names, b.x, b.sigma))
-          + f" (χ²/dof {b.chi2_reduced:.2f})")
+    print("batch least squares (angular distances): " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
+                                                               zip(b.names, b.x, b.sigma)) + f" (χ²/dof {b.chi2_reduced:.2f})")
     for key, e in data["ekf"].items():
         print(f"EKF {key}: " + ", ".join(f"{n} {v:.4f} ± {s:.4f}" for n, v, s in
-                                           zip(e["estimated"], e["state"], e["covariance"]["sigma"])))
+                                           zip(e["estimated"], e["state"], e["covariance"]["sigma"]))
+              + (f" (mean NIS {e['mean_nis']:.2f})" if e.get("mean_nis") is not None else ""))
     print(f"→ {out / 'stars.csv'}, {out / 'calibration.json'} [{time.perf_counter() - t0:.2f} s]")
     return 0
 

@@ -19,7 +19,7 @@ from rigsim.errors import InputError
 from rigsim.estimation.star_calibration import THETA_NAMES
 from rigsim.files import Column, covariance_block, read_image, read_table
 from rigsim.optics.sky import SkyCatalogue
-from rigsim.procedures.star.pipeline import PipelineOutput, StarObservation, calibrate_frames
+from rigsim.procedures.star.pipeline import PipelineOutput, StarObservation, StarPipeline
 from rigsim.rig.star import NominalStarRig
 
 __all__ = [
@@ -74,14 +74,21 @@ def read_attitude_log(path, *, attitude: bool = True) -> dict[str, tuple[float, 
 def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, attitude: bool = True
                       ) -> tuple[list[StarObservation], list[str]]:
     """The frames as the pipeline takes them, in the order of their times, and their names; each
-    frame's size is checked against the rig's detector and each must have a row in the log."""
+    frame's size is checked against the rig's detector and each must have a row in the log. With no
+    log (``log_path`` None) the frames keep the order given, one second apart, with no attitude. Each
+    frame once (by file and by name), and all of them must fit in memory together: checked first."""
     from rigsim.files.inputs import check_distinct
     from rigsim.files.memory import check_frames_kept
 
+    if not paths:
+        raise InputError(f"{log_path or 'star calibrate'}: no frames given")
     check_distinct(paths, "FRAME", what="star frame")
-    log = read_attitude_log(log_path, attitude=attitude)
     W, H = nominal.sensor.resolution_px
     check_frames_kept(len(paths), W, H, 8, what="star calibrate")
+    if log_path is None:
+        return ([StarObservation(k, float(k), read_image(p, shape=(H, W), what="star frame"), None)
+                 for k, p in enumerate(paths)], [Path(p).name for p in paths])
+    log = read_attitude_log(log_path, attitude=attitude)
     rows = []
     for p in paths:
         name = Path(p).name
@@ -89,8 +96,6 @@ def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, att
             raise InputError(f"{p}: frame {name!r} has no row in the attitude log {log_path}")
         dn = read_image(p, shape=(H, W), what="star frame")
         rows.append((log[name][0], name, dn, log[name][1]))
-    if not rows:
-        raise InputError(f"{log_path}: no frames given")
     rows.sort(key=lambda r: r[0])
     return [StarObservation(k, t, dn, R) for k, (t, _, dn, R) in enumerate(rows)], [r[1] for r in rows]
 
@@ -99,12 +104,23 @@ def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, 
                          ) -> tuple[PipelineOutput, list[str]]:
     """The whole pipeline on files: (its output, the frame names in time order). ``identification``:
     ``"commanded"`` (the log's attitude is the prior) or ``"lost-in-space"`` (no prior; the log
-    needs only frame and time_s)."""
+    needs only frame and time_s, and may be None: the frames alone). Raises InputError when no frame
+    can be identified (each frame's reason in the message)."""
     obs, names = star_observations(paths, log_path, nominal, attitude=identification == "commanded")
     sky = SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year)
-    if identification == "commanded":
-        check_attitude_convention(obs, names, log_path, nominal, sky)
-    return calibrate_frames(obs, nominal, sky, identification=identification), names
+    pipe = StarPipeline(nominal, sky, identification=identification)
+    if nominal.calibration.fixed_pattern == "sequence" and identification == "commanded":
+        pipe.set_sequence_pattern(obs)
+    elif nominal.calibration.fixed_pattern == "sequence":
+        pipe.fixed_pattern_note = "none: no commanded attitudes to check that the stars move"
+    for o in obs:
+        pipe.add(o)
+    if not any(i.ok for i in pipe.ident):
+        if identification == "commanded" and log_path is not None:
+            check_attitude_convention(obs, names, log_path, nominal, sky)  # a log in another convention is named
+        why = "; ".join(f"{n}: {i.reason}" for n, i in zip(names, pipe.ident))
+        raise InputError(f"none of the {len(names)} frames could be identified ({why})")
+    return pipe.calibrate(), names
 
 
 CONVENTIONS = {
@@ -113,7 +129,7 @@ CONVENTIONS = {
     "scalar last and conjugated": "the scalar is written last and the quaternions are R(ICRS←cam): reorder the "
                                   "columns to w, x, y, z and negate x, y, z",
 }
-CONVENTION_SAMPLE = 3  # frames tried (first, middle, last) before the pipeline runs
+CONVENTION_SAMPLE = 3  # frames tried (first, middle, last) without a prior
 
 
 def _convention_attitudes(R_log: np.ndarray) -> dict[str, np.ndarray]:
@@ -124,14 +140,13 @@ def _convention_attitudes(R_log: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky: SkyCatalogue) -> None:
-    """Before the pipeline runs: when none of up to :data:`CONVENTION_SAMPLE` frames (first, middle, last)
+    """When no frame identifies from the log: when none of up to :data:`CONVENTION_SAMPLE` frames (first, middle, last)
     identifies with the log's attitude as the prior, the same frames are identified lost in space (no prior), and
     their attitudes from the stars are compared with the log's quaternion read under each convention it might have
     been written in (scalar first or last, R(cam←ICRS) or its inverse). A log that matches under another convention
     is refused with one line naming it; a log that matches under none is refused as not describing these frames.
     With no frame identified lost in space either, nothing can be said here (the pipeline reports the frames)."""
     from rigsim.frames import rotation_angle
-    from rigsim.procedures.star.pipeline import StarPipeline
 
     k = len(obs)
     pick = sorted({0, k // 2, k - 1})[:CONVENTION_SAMPLE]
@@ -183,6 +198,63 @@ def stars_table(out: PipelineOutput, names: Sequence[str]) -> dict[str, list]:
 
 
 STAR_FORMAT = "rigsim.star-calibration/1"
+POOR_FIT_CHI2 = 25.0
+"""A fit whose χ²/dof under the centroider's own σ exceeds this is not explained by the noise model
+(the σ floor the joint fit needed is then many times the centroid σ)."""
+
+
+def joint_verdict(b) -> str:
+    """One sentence on how well the noise model explains the joint fit."""
+    dof = max(b.dof, 1)
+    if not b.success:
+        return f"not converged: {b.message}"
+    if b.chi2_reduced_model <= 1.0 + 3.0 * np.sqrt(2.0 / dof):
+        return "the centroid σ explain the residuals (χ²/dof within 3σ of 1); covariances as fitted"
+    if b.chi2_reduced_model > POOR_FIT_CHI2:
+        return (f"poor: χ²/dof {b.chi2_reduced_model:.1f} under the centroid σ; a floor of {b.sigma_floor_px:.3f} px "
+                "was needed: wrong stars, a wrong camera model or mis-set detector settings; check before use")
+    return (f"the residuals exceed the centroid σ (χ²/dof {b.chi2_reduced_model:.2f}): every centroid σ was widened "
+            f"by a floor of {b.sigma_floor_px:.3f} px in quadrature, estimated from the residuals, and the covariances "
+            "are those of the widened fit")
+
+
+def joint_block(out: PipelineOutput, names: Sequence[str], true_theta=None) -> dict:
+    """The joint fit of the intrinsics and every attitude as JSON: θ, its covariance, the noise floor,
+    χ²/dof under the centroider's σ and with the floor, the verdict, the field of view and the
+    held-out check."""
+    from rigsim.estimation.star_bundle import field_of_view_deg
+
+    j = out.joint
+    b = j.bundle
+    cam = b.camera(out.nominal.sensor.camera())
+    fov = field_of_view_deg(cam)
+    ho = j.held_out
+    r2 = sum(h.rms_px**2 * h.n_stars for h in ho)
+    z2 = sum(h.z_rms**2 * h.n_stars for h in ho)
+    n = sum(h.n_stars for h in ho)
+    units = [THETA_UNITS[THETA_NAMES.index(k)] for k in b.names]
+    return {
+        "method": "intrinsics and every frame's attitude fitted together to the identified stars (weighted least "
+                  "squares, nominal values as priors with their σ); centroid σ widened in quadrature by a floor "
+                  "estimated from the residuals when the centroider's σ do not explain them",
+        "estimated": list(b.names), "theta": np.asarray(b.theta, float).tolist(),
+        "covariance": covariance_block(list(b.names), b.cov, units),
+        "error": None if true_theta is None else (np.asarray(b.theta) - true_theta).tolist(),
+        "chi2_reduced_noise_model": b.chi2_reduced_model, "chi2_reduced": b.chi2_reduced,
+        "sigma_floor_px": b.sigma_floor_px, "dof": b.dof, "n_stars": b.n_stars, "n_rejected": b.n_rejected,
+        "residual_rms_px": b.residual_rms_px, "verdict": joint_verdict(b), "converged": bool(b.success),
+        "k2_delta_chi2": j.k2_delta_chi2,
+        "field_of_view_deg": {"horizontal": fov[0], "vertical": fov[1],
+                              "definition": "angle between the rays through the middles of the detector's outer "
+                                            "edges, on the principal point's row (horizontal) and column (vertical)"},
+        "held_out": None if not ho else {
+            "rms_px": float(np.sqrt(r2 / n)), "z_rms": float(np.sqrt(z2 / n)), "n_stars": int(n),
+            "note": "each frame (or group of frames) left out of the joint fit in turn; its stars predicted with the "
+                    "calibration (its attitude refitted to them); z = error / σ with σ from the centroid σ, the floor "
+                    "and the calibration's covariance",
+            "frames": [{"frame": names[h.frame], "n_stars": h.n_stars, "rms_px": h.rms_px, "z_rms": h.z_rms}
+                       for h in ho]},
+    }
 
 
 def attitude_covariance_rad2(dirs_cam: np.ndarray, sigma_rad: np.ndarray) -> np.ndarray:
@@ -228,6 +300,8 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
             "covariance": covariance_block(list(e.names), e.P, [THETA_UNITS[THETA_NAMES.index(n)] for n in e.names]),
             "mean_nis": float(np.nanmean(e.nis)) if np.isfinite(e.nis).any() else None,
             "error": err(e.theta)}
+    if out.joint is not None:
+        res["joint"] = joint_block(out, names, t)
     res["ekf_cases"] = {"f_nominal": "state (u0, v0), f fixed at the nominal value",
                         "f_joint": "state (f, u0, v0)"}
     # each frame's attitude refitted with the batch-calibrated camera (weighted Wahba, scipy's SVD), beside the
@@ -260,11 +334,16 @@ def star_result_json(out: PipelineOutput, names: Sequence[str], ekf_models: Sequ
             rec["R_cam_from_icrs"] = rotation_block(R, cov, true_k)
             rec["R_cam_from_icrs_nominal"] = rotation_block(ident.R_cam_from_icrs, attitude_covariance_rad2(
                 fo.dirs_icrs @ ident.R_cam_from_icrs.T, fo.sigma_uv.mean(axis=1) / out.nominal.sensor.theta[0]), true_k)
+            if out.joint is not None and np.all(np.isfinite(out.joint.bundle.R[k])):
+                jb = out.joint.bundle
+                rec["R_cam_from_icrs_joint"] = rotation_block(jb.R[k], jb.R_cov[k], true_k)
         else:
             rec["identified"] = False
         att.append(rec)
     res["attitudes"] = att
-    res["attitude_note"] = ("R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
+    res["attitude_note"] = ("R_cam_from_icrs_joint: each frame's R(cam←ICRS) from the joint fit (intrinsics and attitudes "
+                            "together), its covariance the joint fit's marginal; "
+                            "R_cam_from_icrs: each frame's R(cam←ICRS) refitted with the batch-calibrated camera "
                             "(weighted Wahba), covariance = centroid noise + the batch θ covariance propagated; "
                             "R_cam_from_icrs_nominal: the identification's with the nominal camera, covariance from the "
                             "centroid noise only (it is biased by the nominal intrinsics' error). Covariances in arcsec² "

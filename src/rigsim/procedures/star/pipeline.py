@@ -19,6 +19,7 @@ from rigsim.errors import InputError
 from rigsim.estimation.observability import observability
 from rigsim.estimation.star_calibration import MODELS, FrameObs, batch_lsq, run_ekf
 from rigsim.estimation.star_id import IdentResult, identify
+from rigsim.estimation.star_joint import joint_calibration
 from rigsim.estimation.star_lis import identify_lost_in_space
 from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
@@ -85,6 +86,7 @@ class PipelineOutput:
     batch: object = None                       # BatchResult (f, u0, v0, k1, k2)
     observability: dict = field(default_factory=dict)
     times: dict = field(default_factory=dict)
+    joint: object = None                       # JointCalibration: intrinsics and attitudes fitted together
 
     @property
     def R_est(self) -> list:
@@ -122,7 +124,8 @@ class StarPipeline:
         t0 = time.perf_counter()
         c = self.nominal.calibration
         found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, method=c.centroid_method,
-                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference)
+                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference,
+                              background=c.background)
         keep = found.usable
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
@@ -159,6 +162,27 @@ class StarPipeline:
         s, c = self.nominal.sensor, self.nominal.calibration
         weighting = c.weighting if weighting is None else weighting
         p12 = (s.p1, s.p2)
+        t0 = time.perf_counter()
+        joint = None
+        frames_obs = self.frames_obs
+        if any(i.ok for i in self.ident):
+            # intrinsics and every attitude fitted together; without a prior attitude the frames are
+            # identified again with each round's camera (lost in space starts from the nominal one)
+            lis = self.identification == "lost-in-space"
+            joint = joint_calibration(self.usable, self.ident, self.sky, self.camera,
+                                      prior_sigma={"f": s.focal_length_sigma_px, "u0": s.principal_point_sigma_px,
+                                                   "v0": s.principal_point_sigma_px},
+                                      distortion=c.distortion_terms,
+                                      match_tolerance_px=self.nominal.identification.match_tolerance_px,
+                                      reidentify=lis, held_out=len(self.ident) >= 2)
+            if lis:
+                self.ident = joint.ident
+            # every estimator below takes the centroid σ with the noise floor the joint fit found
+            floor = joint.bundle.sigma_floor_px if np.isfinite(joint.bundle.sigma_floor_px) else 0.0
+            frames_obs = [FrameObs(fo.uv[m], np.sqrt(fo.sigma_uv[m] ** 2 + floor**2), fo.dirs_icrs[m],
+                                   None if fo.flux is None else fo.flux[m])
+                          for fo, m in zip(joint.frames_obs, joint.bundle.used)]
+        self.times["joint fit"] = time.perf_counter() - t0
         ident_stats = {"frames": len(self.ident), "frames_identified": int(sum(i.ok for i in self.ident)),
                        **self.counts, "identified": int(sum(len(i) for i in self.ident)),
                        "attitude_error_deg": self.nominal.identification.attitude_error_deg,
@@ -166,22 +190,23 @@ class StarPipeline:
                        "centroid_map": "none" if s.centroid_map is None else
                        f"ground map of the traced lens (B−V {s.centroid_map.reference_bv:g}, σ {s.centroid_map.sigma_px:g} px)",
                        "reasons": [i.reason for i in self.ident if not i.ok]}
-        out = PipelineOutput(self.nominal, self.usable, self.ident, self.frames_obs, ident_stats, times=dict(self.times))
+        out = PipelineOutput(self.nominal, self.usable, self.ident, frames_obs, ident_stats, times=dict(self.times),
+                             joint=joint)
         t0 = time.perf_counter()
         for case in PIPELINE_CASES:
             th0, est, ps = pipeline_case_setup(self.nominal, case)
             for model in MODELS:
-                out.ekf[(case, model)] = run_ekf(self.frames_obs, th0, model=model, estimate=est, prior_sigma=ps,
+                out.ekf[(case, model)] = run_ekf(frames_obs, th0, model=model, estimate=est, prior_sigma=ps,
                                                  weighting=weighting, process_sigma=c.process_noise_px, p12=p12,
                                                  max_stars=c.max_stars_per_frame, equations=equations)
         out.times[f"ekf ({len(out.ekf)} runs)"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        out.batch = batch_lsq(self.frames_obs, np.array(s.theta, dtype=float), weighting=weighting, p12=p12,
+        out.batch = batch_lsq(frames_obs, np.array(s.theta, dtype=float), weighting=weighting, p12=p12,
                               max_stars=c.max_stars_per_frame, equations=equations)
         out.times["batch LSQ"] = time.perf_counter() - t0
         for model in MODELS:
             for label, est in OBSERVABILITY_STATES:
-                out.observability[(model, label)] = observability(self.frames_obs, out.batch.theta, model=model,
+                out.observability[(model, label)] = observability(frames_obs, out.batch.theta, model=model,
                                                                   estimate=est, weighting=weighting, p12=p12,
                                                                   max_stars=c.max_stars_per_frame)
         return out
