@@ -115,9 +115,10 @@ def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, 
         pipe.fixed_pattern_note = "none: no commanded attitudes to check that the stars move"
     for o in obs:
         pipe.add(o)
-    if not any(i.ok for i in pipe.ident):
-        if identification == "commanded" and log_path is not None:
-            check_attitude_convention(obs, names, log_path, nominal, sky)  # a log in another convention is named
+    ok = [i.ok for i in pipe.ident]
+    if identification == "commanded" and log_path is not None and sum(ok) < 0.5 * len(ok):
+        check_attitude_convention(obs, names, log_path, nominal, sky, ok)  # a log in another convention is named
+    if not any(ok):
         why = "; ".join(f"{n}: {i.reason}" for n, i in zip(names, pipe.ident))
         raise InputError(f"none of the {len(names)} frames could be identified ({why})")
     return pipe.calibrate(), names
@@ -139,20 +140,21 @@ def _convention_attitudes(R_log: np.ndarray) -> dict[str, np.ndarray]:
     return {"as written": R_log, "scalar last": last, "conjugated": R_log.T, "scalar last and conjugated": last.T}
 
 
-def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky: SkyCatalogue) -> None:
-    """When no frame identifies from the log: when none of up to :data:`CONVENTION_SAMPLE` frames (first, middle, last)
-    identifies with the log's attitude as the prior, the same frames are identified lost in space (no prior), and
-    their attitudes from the stars are compared with the log's quaternion read under each convention it might have
-    been written in (scalar first or last, R(cam←ICRS) or its inverse). A log that matches under another convention
-    is refused with one line naming it; a log that matches under none is refused as not describing these frames.
-    With no frame identified lost in space either, nothing can be said here (the pipeline reports the frames)."""
+def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky: SkyCatalogue,
+                              identified: Sequence[bool]) -> None:
+    """When most frames do not identify from the log (``identified``: each frame's identification with the log's
+    attitude as the prior): up to :data:`CONVENTION_SAMPLE` of the frames that did not (first, middle, last) are
+    identified lost in space (no prior), and their attitudes from the stars are compared with the log's quaternion
+    read under each convention it might have been written in (scalar first or last, R(cam←ICRS) or its inverse). A
+    log that matches under another convention is refused with one line naming it; a log that matches under none is
+    refused as not describing these frames. When the stars agree with the log as written, or no frame identifies
+    lost in space either, nothing can be said here."""
     from rigsim.frames import rotation_angle
 
-    k = len(obs)
-    pick = sorted({0, k // 2, k - 1})[:CONVENTION_SAMPLE]
-    prior = StarPipeline(nominal, sky, identification="commanded")
-    if any(prior.add(obs[i]).ok for i in pick):
+    failing = [i for i, ok in enumerate(identified) if not ok]
+    if not failing:
         return
+    pick = sorted({failing[0], failing[len(failing) // 2], failing[-1]})[:CONVENTION_SAMPLE]
     lis = StarPipeline(nominal, sky, identification="lost-in-space")
     tol = max(5.0 * nominal.identification.attitude_error_deg, 1.0)
     seen = []
@@ -170,7 +172,8 @@ def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky
     if best == "as written" and err[best] <= tol:
         return  # the log is right; the frames fail to identify for another reason
     if best != "as written" and err[best] <= tol and all(min(e, key=e.get) == best for _, e in seen):
-        raise InputError(f"{log_path}: no frame identifies with its attitudes as written (R(cam←ICRS), scalar first); "
+        raise InputError(f"{log_path}: {sum(identified)} of {len(identified)} frames identify with its attitudes as "
+                         "written (R(cam←ICRS), scalar first); "
                          f"read {best}, they agree with the stars of {len(seen)} frame(s) identified without a prior "
                          f"({name}: {err[best]:.3g}° instead of {err['as written']:.3g}°): {CONVENTIONS[best]}")
     raise InputError(f"{log_path}: its attitudes are {err['as written']:.3g}° from the attitude the stars of {name} give "
