@@ -307,7 +307,6 @@ class _Heartbeat:
         """Off a terminal: one line every ``log_interval`` seconds, while the command runs."""
         import time
 
-        t0 = time.monotonic()
         k = 0
         while not self.stop.wait(self.log_interval):
             k += 1

@@ -419,6 +419,8 @@ def scenarios(fix: Path):
         ("triad", "two equal nulls", ["triad", "--nulls", "n.csv"],
          {"n.csv": "face,x_deg,y_deg\n+Z,181.398,0.528\n+Y,181.398,0.528\n"}),
         ("triad", "θ of two equal nulls", ["triad", "181.398", "0.528", "181.398", "0.528"], {}),
+        ("calibrate sun-sensor", "centroid 1e300", ["calibrate", "sun-sensor", "--angles", "angles.csv", "--centroids",
+                                                    "c.csv", "--out", "o.json"], {"c.csv": _cell(cen, 3, 1, "1e300")}),
         ("boresight solve", "spot 1e308", ["boresight", "solve", "--reference", "spots.csv", "--measured", "m.csv"],
          {"m.csv": _cell(spots, 1, 4, "1e308")}),
         ("star calibrate", "log scalar last", ["star", "calibrate", *star_in, "--attitudes", "q.csv", "--out", "cal"],

@@ -92,3 +92,14 @@ def test_a_centroid_table_listing_a_frame_twice_is_refused(tmp_path, capsys):
     c.write_text("\n".join([*lines, lines[5]]) + "\n")
     _one_line(capsys, ["calibrate", "sun-sensor", "--angles", str(a), "--centroids", str(c), "--out",
                        str(tmp_path / "s.json")], "spot 0 already on line 6")
+
+
+def test_a_centroid_off_the_sun_sensor_is_refused(tmp_path, capsys):
+    a, c = V.sweep_tables(tmp_path)
+    lines = c.read_text().splitlines()
+    f = lines[5].split(",")
+    f[1] = "1e300"
+    lines[5] = ",".join(f)
+    c.write_text("\n".join(lines) + "\n")
+    _one_line(capsys, ["calibrate", "sun-sensor", "--angles", str(a), "--centroids", str(c), "--out",
+                       str(tmp_path / "s.json")], "line 6, columns u_px, v_px: (1e+300,")

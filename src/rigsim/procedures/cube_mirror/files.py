@@ -134,9 +134,13 @@ def sun_sensor_inputs(rig: CubeMirrorRig, angles_path, centroids_path) -> SunSen
     frames, reading, _ = read_angle_log(angles_path, rig)
     spots = read_spot_table(centroids_path)
     known = set(frames)
-    for f, (_, _, _, line, _, _) in spots.items():
+    W, H = rig.sun_sensor.resolution_px
+    for f, (u, v, _, line, _, _) in spots.items():
         if f not in known:
             raise InputError(f"{centroids_path}: line {line}, column frame: {f!r} has no row in the angle log {angles_path}")
+        if np.isfinite(u) and np.isfinite(v) and not (-1.0 <= u <= W and -1.0 <= v <= H):
+            raise InputError(f"{centroids_path}: line {line}, columns u_px, v_px: ({u:.6g}, {v:.6g}) px lies off the sun "
+                             f"sensor's {W}×{H} px detector (u from -0.5 to {W - 0.5}, v from -0.5 to {H - 0.5})")
     keep, uv, sig, rejected = [], [], [], []
     for i, f in enumerate(frames):
         s = spots.get(f)
