@@ -71,6 +71,10 @@ RIG_DESTS = {"rig"}
 VALID = {  # a valid value for a required option, so that the other options' cases reach the command's body
     ("render", "target", "target"): "chessboard:8x6:10",
     ("boresight", "centroid", "camera"): "forward",
+    ("rig", "import-camera", "out"): "new.toml",  # outputs of the kind each command writes: past its suffix check
+    ("centroid", "out"): "o.csv",
+    ("boresight", "centroid", "out"): "o.csv",
+    ("calibrate", "sun-sensor", "out"): "o.json",
 }
 OUTPUT_DESTS = {"out", "json_out", "xml", "preview", "export_frames"}  # where the user names the destination
 
@@ -433,6 +437,36 @@ def scenarios(fix: Path):
     for cmd, what, argv, write in strict:
         yield cmd, "value", f"strict: {what}", argv, {"copy": base + ["ds"], "inputs": [], "outputs": ["o.json", "o.csv", "cal"],
                                                       "refuse": True, "write": write}
+    # a hostile file in a command whose other inputs are valid: it reaches the reader
+    hostile = {"png-bomb": "bomb.png", "tiff-bomb": "bomb.tif", "fits-bomb": "bomb.fits", "png-16k": "z16k.png",
+               "tiff-pages": "pages.tif", "fits-1e300": "huge.fits"}
+    for key, name in hostile.items():
+        f = f"h/{name}"
+        for cmd, argv in (("centroid", ["centroid", f, "--out", "o.csv"]),
+                          ("centroid", ["centroid", f, "--rig", RIG, "--camera", "aiming-camera", "--out", "o.csv"]),
+                          ("concentricity", ["concentricity", f, "spot.png", "--json", "o.json"]),
+                          ("autocollimator read", ["autocollimator", "read", f, "--json", "o.json"]),
+                          ("boresight centroid", ["boresight", "centroid", "--camera", "forward", "--m1", f, "--m2", "m2.png",
+                                                  "--out", "o.csv"]),
+                          ("star calibrate", ["star", "calibrate", *star_in[:-1], f, "--out", "cal"])):
+            yield cmd, "frame", f"hostile file: {key}", argv, {"copy": ["spot.png", "m2.png", *star_in], "inputs": [],
+                                                               "outputs": ["o.csv", "o.json", "cal"], "refuse": True,
+                                                               "hostile": {f: key}}
+    for key in ("deep-json", "long-int-json", "deep-yaml", "deep-xml", "matrix-bomb"):
+        f = {"deep-json": "h/c.json", "long-int-json": "h/c.json", "deep-yaml": "h/c.yml", "deep-xml": "h/c.xml",
+             "matrix-bomb": "h/c.yml"}[key]
+        yield "rig import-camera", "camera", f"hostile file: {key}", ["rig", "import-camera", f, "--out", "new.toml"], \
+            {"copy": [], "inputs": [], "outputs": ["new.toml"], "refuse": True, "hostile": {f: key}}
+    for key in ("deep-json", "long-int-json"):
+        yield "compose", "--cube-from-rot", f"hostile file: {key}", ["compose", "--cube-from-rot", "h/c.json",
+                                                                      "--sun-from-rot", "sun.json", "--out", "o.json"], \
+            {"copy": ["sun.json"], "inputs": [], "outputs": ["o.json"], "refuse": True, "hostile": {"h/c.json": key}}
+        for part in ("manifest.json", "plan.json"):
+            for cmd, argv in (("dataset verify", ["dataset", "verify", "ds"]), ("dataset info", ["dataset", "info", "ds"]),
+                              ("dataset score", ["dataset", "score", "ds", "pred.csv"])):
+                yield cmd, "DIR", f"hostile file: {key} {part}", argv, {  # info and score do not read the plan
+                    "copy": ["ds", "pred.csv"], "inputs": [], "outputs": [],
+                    "refuse": part == "manifest.json" or cmd == "dataset verify", "hostile": {f"ds/{part}": key}}
     # a CRLF stream: solved, and no carriage return in the result
     rows = "camera,u_m1_px,v_m1_px,u_m2_px,v_m2_px,sample\r\n" + "".join(
         f"forward,{ln.split(',')[4]},{ln.split(',')[5]},{ln.split(',')[6]},{ln.split(',')[7]},{k}\r\n"
@@ -460,6 +494,18 @@ def setup_scenario(cwd: Path, spec: dict) -> dict:
         (cwd / d).mkdir(parents=True, exist_ok=True)
     for name, text in spec.get("write", {}).items():
         (cwd / name).write_text(text, encoding="utf-8")
+    if spec.get("hostile"):
+        import hostile_inputs as H
+
+        makers = {"png-bomb": H.png_header_bomb, "tiff-bomb": H.tiff_header_bomb, "fits-bomb": H.fits_header_bomb,
+                  "png-16k": H.png_zero_bomb, "tiff-pages": H.tiff_pages, "fits-1e300": H.fits_huge_values,
+                  "deep-json": H.deep_json, "long-int-json": H.long_integer_json, "deep-yaml": H.deep_yaml,
+                  "deep-xml": H.deep_xml, "matrix-bomb": H.opencv_matrix_bomb}
+        for name, key in spec["hostile"].items():
+            (cwd / name).parent.mkdir(parents=True, exist_ok=True)
+            if (cwd / name).exists():
+                (cwd / name).unlink()
+            makers[key](cwd / name)
     for name, src in spec.get("copies", {}).items():
         (cwd / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(cwd / src, cwd / name)
