@@ -132,3 +132,25 @@ def test_sky_glow_raises_the_sky_along_its_direction(star_rig, star_sky):
 def test_a_vignetting_that_leaves_the_corner_dark_is_refused(star_rig):
     with pytest.raises(RigError, match="corner"):
         parse_model(StarRig, {"name": "x", "effects": {"vignetting": {"rho2": 0.9, "rho4": 0.5}}}, "f.toml")
+
+
+def test_faint_stars_follow_the_counts_law_and_add_their_light(star_rig, star_sky):
+    from scipy import stats
+
+    from rigsim.render.star_effects import draw_faint_stars, effects_rng
+
+    ideal, fx, sky = _frames(star_rig, star_sky, ["faint_stars"], True,
+                             faint_stars={"density_per_deg2_per_mag": 3.0, "slope_per_mag": 0.4, "faint_limit_mag": 9.5})
+    H, W = sky.shape_hw
+    m0, m1, s = star_rig.sky.magnitude_limit, 9.5, 0.4
+    area = H * W * (sky.pixel_arcsec / 3600) ** 2
+    want_n = 3.0 * area * (10 ** (s * (m1 - m0)) - 1) / (s * np.log(10))  # ∫ ρ0 10^(s(m−m0)) dm over the field
+    mags = np.concatenate([draw_faint_stars(sky, effects_rng(k, "faint_stars"))[1] for k in range(20)])
+    assert abs(mags.size / 20 - want_n) < 4 * np.sqrt(want_n / 20)
+    cdf = lambda m: (10 ** (s * (np.asarray(m) - m0)) - 1) / (10 ** (s * (m1 - m0)) - 1)  # noqa: E731
+    assert stats.kstest(mags, cdf).pvalue > 1e-3
+    added = (fx.detector.expected_dn - ideal.detector.expected_dn).sum()
+    d = star_rig.sensor.detector
+    truth = fx.sidecar["truth"]["effects"]["faint_stars"]
+    light = d.gain_dn_per_e * d.quantum_efficiency * sky.photons(np.array(truth["mag"])).sum()
+    assert added == pytest.approx(light, rel=0.02)  # (stars at the edge lose a little of their light)

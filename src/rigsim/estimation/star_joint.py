@@ -36,9 +36,10 @@ class JointCalibration:
     k2_delta_chi2: float | None  # χ² gained by fitting k2 ("auto"), None when not tried
 
 
-def _frame_obs(usable, ident: IdentResult) -> FrameObs:
+def _frame_obs(usable, ident: IdentResult, k: int, dirs_transform=None) -> FrameObs:
     o = ident.obs_index
-    return FrameObs(usable.uv[o], usable.sigma_uv[o], ident.dirs_icrs, usable.flux[o])
+    dirs = ident.dirs_icrs if dirs_transform is None else dirs_transform(k, ident.dirs_icrs)
+    return FrameObs(usable.uv[o], usable.sigma_uv[o], dirs, usable.flux[o])
 
 
 def _fit(frames, camera0, R0, estimate, prior_sigma) -> BundleResult:
@@ -47,12 +48,14 @@ def _fit(frames, camera0, R0, estimate, prior_sigma) -> BundleResult:
 
 def joint_calibration(usable: list, ident: list, sky: SkyCatalogue, camera0: PinholeBrown, *,
                       prior_sigma: dict, distortion: str = "auto", match_tolerance_px: float = 2.0,
-                      rounds: int = 2, held_out: bool = True, reidentify: bool = True) -> JointCalibration:
+                      rounds: int = 2, held_out: bool = True, reidentify: bool = True,
+                      dirs_transform=None) -> JointCalibration:
     """``usable``: per frame, the extracted stars (anything with ``uv``, ``sigma_uv``, ``flux``);
     ``ident``: per frame, its first identification (frames not identified stay out); ``camera0``: the
     nominal camera (the fit's start and prior mean, with ``prior_sigma`` name → 1σ). ``reidentify``
-    False: one fit on the identifications as given. Returns the last round's fit, identifications and
-    stars."""
+    False: one fit on the identifications as given. ``dirs_transform(k, dirs)``: the directions frame
+    k's stars are seen in (e.g. refracted by the air), applied to the catalogue's before the fit.
+    Returns the last round's fit, identifications and stars."""
     if distortion not in DISTORTION_TERMS:
         raise ValueError(f"distortion = {distortion!r}: allowed {', '.join(DISTORTION_TERMS)}")
     base = ("f", "u0", "v0")
@@ -71,8 +74,9 @@ def joint_calibration(usable: list, ident: list, sky: SkyCatalogue, camera0: Pin
             cur = [identify(u.uv, sky, i.R_cam_from_icrs, cam, search_radius_px=4.0 * match_tolerance_px,
                             match_tolerance_px=match_tolerance_px, min_matches=3) if i.ok else i
                    for u, i in zip(usable, cur)]
-        frames = [_frame_obs(u, i) if i.ok else FrameObs(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)))
-                  for u, i in zip(usable, cur)]
+        frames = [_frame_obs(u, i, k, dirs_transform) if i.ok else FrameObs(np.zeros((0, 2)), np.zeros((0, 2)),
+                                                                               np.zeros((0, 3)))
+                  for k, (u, i) in enumerate(zip(usable, cur))]
         R0 = [i.R_cam_from_icrs for i in cur]
         fit = _fit(frames, camera0, R0, est, prior_sigma)
         if distortion == "auto" and fit.success:

@@ -79,6 +79,8 @@ def render_frame(sky: StarSky, R_cam_from_icrs, *, seed: int, index: int = 0, ti
     fx = star_frame_effects(sky, seed=int(seed), noiseless=noiseless)
     if fx.photons is not None:
         photons = photons + fx.photons
+    if fx.stars_uv is not None and len(fx.stars_uv):  # stars beyond the catalogue, with the catalogue stars' PSF
+        photons = photons + render_stars(fx.stars_uv, fx.stars_photons, truth.shape_hw, sigma)
     if fx.illumination is not None:
         photons = photons * fx.illumination
     if traced_truth is not None:

@@ -17,9 +17,10 @@ import numpy as np
 from rigsim.detector.defects import deposit_cosmic_rays, draw_cosmic_rays, hot_pixel_electrons, hot_pixel_rates
 from rigsim.optics.stray_light import stray_light_mag_map, surface_brightness_photons
 
-__all__ = ["FrameEffects", "effects_rng", "star_frame_effects", "traced_psf_table", "traced_star_psfs"]
+__all__ = ["FrameEffects", "draw_faint_stars", "effects_rng", "star_frame_effects", "traced_psf_table",
+           "traced_star_psfs"]
 
-_STREAMS = {"hot_pixels": 0x407, "cosmic_rays": 0xC05}
+_STREAMS = {"hot_pixels": 0x407, "cosmic_rays": 0xC05, "faint_stars": 0xFA1}
 
 
 def effects_rng(seed: int, name: str) -> np.random.Generator:
@@ -32,6 +33,8 @@ class FrameEffects:
     photons: np.ndarray | None = None      # added to the expected photons per pixel
     electrons: np.ndarray | None = None    # added to the signal after the shot noise
     illumination: np.ndarray | None = None  # multiplies the expected photons (stars, sky and added light)
+    stars_uv: np.ndarray | None = None      # (M, 2) px: stars the catalogue does not hold, drawn with the PSF
+    stars_photons: np.ndarray | None = None  # (M,)
     truth: dict = field(default_factory=dict)
 
 
@@ -96,6 +99,10 @@ def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffec
     if eff.vignetting.enabled:
         out.illumination = static["illumination"]
         out.truth["vignetting"] = {"illumination_min": float(out.illumination.min())}
+    if eff.faint_stars.enabled:
+        out.stars_uv, mags = draw_faint_stars(sky, effects_rng(seed, "faint_stars"))
+        out.stars_photons = sky.photons(mags)
+        out.truth["faint_stars"] = {"n": int(mags.size), "uv": out.stars_uv.tolist(), "mag": mags.tolist()}
     electrons = np.zeros((H, W), dtype=np.float64)
     if eff.hot_pixels.enabled:
         rates = static["hot_rates"]
@@ -111,6 +118,27 @@ def star_frame_effects(sky, *, seed: int, noiseless: bool = False) -> FrameEffec
     if eff.hot_pixels.enabled or eff.cosmic_rays.enabled:
         out.electrons = electrons
     return out
+
+
+def draw_faint_stars(sky, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (px) and magnitudes of the stars fainter than the catalogue on one frame of ``sky``:
+    a Poisson number over the detector's solid angle, uniform in position, magnitudes from
+    dN/dm = ρ0 · 10^(s (m − m_lim)) per deg² (inverse transform sampling)."""
+    fs = sky.rig.effects.faint_stars
+    H, W = sky.shape_hw
+    m0, m1, s_ = float(sky.rig.sky.magnitude_limit), float(fs.faint_limit_mag), float(fs.slope_per_mag)
+    if m1 <= m0 or fs.density_per_deg2_per_mag <= 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    area_deg2 = H * W * (sky.pixel_arcsec / 3600.0) ** 2
+    per_mag = (10.0 ** (s_ * (m1 - m0)) - 1.0) / (s_ * math.log(10.0)) if s_ > 0 else (m1 - m0)
+    n = int(rng.poisson(fs.density_per_deg2_per_mag * area_deg2 * per_mag))
+    uv = np.stack([rng.uniform(-0.5, W - 0.5, n), rng.uniform(-0.5, H - 0.5, n)], axis=1)
+    x = rng.uniform(0.0, 1.0, n)
+    if s_ > 0:
+        mag = m0 + np.log10(1.0 + x * (10.0 ** (s_ * (m1 - m0)) - 1.0)) / s_
+    else:
+        mag = m0 + x * (m1 - m0)
+    return uv, mag
 
 
 @functools.lru_cache(maxsize=4)

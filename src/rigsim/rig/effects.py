@@ -12,7 +12,7 @@ from pydantic import Field, StrictBool, model_validator
 
 from rigsim.rig.model import RigModel
 
-__all__ = ["STAR_EFFECTS", "CosmicRays", "Effect", "EffectsTable", "HotPixels", "SkyGlow", "StarEffects",
+__all__ = ["STAR_EFFECTS", "CosmicRays", "Effect", "EffectsTable", "FaintStars", "HotPixels", "SkyGlow", "StarEffects",
            "StrayLight", "TracedPSF", "Vignetting"]
 
 
@@ -99,6 +99,17 @@ class SkyGlow(Effect):
                                  description="direction of increase in the image, from +u towards +v")
 
 
+class FaintStars(Effect):
+    """Stars fainter than the catalogue: at random places on the detector, with the sky's counts per
+    magnitude, dN/dm ∝ 10^(slope · m), from the catalogue's magnitude limit down to ``faint_limit_mag``.
+    They add the light and the unidentified detections a real sky has beyond any catalogue."""
+
+    density_per_deg2_per_mag: float = Field(1.0, ge=0.0, le=1e5,
+                                            description="stars per square degree per magnitude at the catalogue's limit")
+    slope_per_mag: float = Field(0.35, ge=0.0, le=1.0, description="log10 of the counts' growth per magnitude")
+    faint_limit_mag: float = Field(13.0, ge=-2.0, le=25.0, description="the faintest star drawn")
+
+
 class TracedPSF(Effect):
     """The PSF of the traced lens (``rigsim.optics.star_lens``) instead of the Gaussian: field-dependent,
     and the spectrum-weighted sum over the band for each star's colour (B−V). Focal length and entrance
@@ -126,6 +137,7 @@ class StarEffects(EffectsTable):
     traced_psf: TracedPSF = Field(default_factory=TracedPSF)
     sky_glow: SkyGlow = Field(default_factory=SkyGlow)
     vignetting: Vignetting = Field(default_factory=Vignetting)
+    faint_stars: FaintStars = Field(default_factory=FaintStars)
 
 
 STAR_EFFECTS = StarEffects.names()

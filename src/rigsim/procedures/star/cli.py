@@ -7,8 +7,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from rigsim.errors import CliError
-from rigsim.files.options import SEED, SPP, integer
+from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.files.outputs import Output, declare
 
 __all__ = ["add_cli", "cmd_run_star_calibration"]
@@ -68,6 +70,13 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--identify", default=None, choices=["commanded", "lost-in-space"],
                    help="identification: from the log's commanded attitude, or with no prior (the log then needs only "
                         "frame and time_s). Default: commanded with --attitudes, else lost-in-space")
+    c.add_argument("--site", default=None, metavar="LAT,LON[,HEIGHT_M]",
+                   help="ground frames: the site (geodetic degrees, metres); with --utc the stars are refracted by the "
+                        "air before the joint fit (off when not given)")
+    c.add_argument("--utc", default=None, metavar="ISO8601", help="the first frame's time (UTC), with --site")
+    c.add_argument("--pressure-hpa", type=number(100, 1100), default=None,
+                   help="air pressure at the site (default the standard atmosphere at its height)")
+    c.add_argument("--temperature-c", type=number(-60, 60), default=10.0, help="air temperature at the site")
     c.set_defaults(func=cmd_star_calibrate)
     declare(c, "out", folder=True, derived=lambda a: [Output(Path(a.out) / n, f"--out's {n}")
                                                       for n in ("stars.csv", "calibration.json")])
@@ -103,6 +112,35 @@ def _check(args) -> None:
         raise CliError(f"--mitsuba-spp = {spp}: must be a power of 4 between 1 and 65536 (e.g. 64, 256, 1024)")
 
 
+def _site(args):
+    """--site and --utc (both or neither) as a refraction Site; None without them."""
+    if (args.site is None) != (args.utc is None):
+        raise CliError("--site and --utc go together: refraction needs where and when (leave both out when unknown)")
+    if args.site is None:
+        return None
+    from astropy.time import Time
+
+    from rigsim.optics.refraction import Site
+
+    from rigsim.files.numbers import parse_float
+
+    parts = args.site.split(",")
+    try:
+        vals = [parse_float(x) for x in parts]  # ASCII digits only
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3) or not all(np.isfinite(vals)):
+        raise CliError(f"--site = {args.site!r}: expected LAT,LON[,HEIGHT_M] in degrees and metres")
+    lat, lon, hgt = (*vals, 0.0)[:3]
+    if not (-90 <= lat <= 90 and -180 <= lon <= 360 and -500 <= hgt <= 9000):
+        raise CliError(f"--site = {args.site!r}: latitude −90 to 90°, longitude −180 to 360°, height −500 to 9000 m")
+    try:
+        Time(args.utc, scale="utc")
+    except ValueError:
+        raise CliError(f"--utc = {args.utc!r}: expected an ISO 8601 time, e.g. 2019-07-29T20:47:26") from None
+    return Site(lat, lon, hgt, pressure_hpa=args.pressure_hpa, temperature_c=args.temperature_c)
+
+
 def cmd_star_calibrate(args) -> int:
     from rigsim.files import write_json, write_table
     from rigsim.procedures.star.files import calibrate_star_files, star_result_json, stars_table
@@ -114,11 +152,13 @@ def cmd_star_calibrate(args) -> int:
         raise CliError(f"--out = {out}: exists and is not a folder")
     if args.opencv and Path(args.opencv).suffix.lower() not in (".yml", ".yaml", ".json", ".xml"):
         raise CliError(f"--opencv {args.opencv}: an OpenCV FileStorage name ends in .yml, .yaml, .json or .xml")
+    site = _site(args)
     identify = args.identify or ("commanded" if args.attitudes else "lost-in-space")
     if identify == "commanded" and not args.attitudes:
         raise CliError("--identify commanded needs --attitudes (the commanded attitude of every frame)")
     t0 = time.perf_counter()
-    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=identify)
+    res, names = calibrate_star_files(args.frames, args.attitudes, rig.nominal_rig(), identification=identify,
+                                      site=site, utc=args.utc)
     for name, ident in zip(names, res.ident):
         if not ident.ok:
             print(f"{name}: not identified ({ident.reason}); left out", file=sys.stderr)

@@ -100,15 +100,25 @@ def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, att
     return [StarObservation(k, t, dn, R) for k, (t, _, dn, R) in enumerate(rows)], [r[1] for r in rows]
 
 
-def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, identification: str = "commanded"
-                         ) -> tuple[PipelineOutput, list[str]]:
+def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, identification: str = "commanded",
+                         site=None, utc=None) -> tuple[PipelineOutput, list[str]]:
     """The whole pipeline on files: (its output, the frame names in time order). ``identification``:
     ``"commanded"`` (the log's attitude is the prior) or ``"lost-in-space"`` (no prior; the log
-    needs only frame and time_s, and may be None: the frames alone). Raises InputError when no frame
-    can be identified (each frame's reason in the message)."""
+    needs only frame and time_s, and may be None: the frames alone). ``site``
+    (:class:`rigsim.optics.refraction.Site`) and ``utc`` (the first frame's time; the others follow by
+    their time_s): the stars are refracted by the air before the joint fit. Raises InputError when no
+    frame can be identified (each frame's reason in the message)."""
     obs, names = star_observations(paths, log_path, nominal, attitude=identification == "commanded")
     sky = SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year)
-    pipe = StarPipeline(nominal, sky, identification=identification)
+    refraction = None
+    if site is not None:
+        import astropy.units as u
+        from astropy.time import Time
+
+        t0 = Time(utc, scale="utc")
+        times = [t0 + (o.time_s - obs[0].time_s) * u.s for o in obs]
+        refraction = (site, lambda k: times[k])
+    pipe = StarPipeline(nominal, sky, identification=identification, refraction=refraction)
     if nominal.calibration.fixed_pattern == "sequence" and identification == "commanded":
         pipe.set_sequence_pattern(obs)
     elif nominal.calibration.fixed_pattern == "sequence":

@@ -97,7 +97,8 @@ class StarPipeline:
     """The seed-004 pipeline, frame by frame: :meth:`add` extracts and identifies one
     :class:`StarObservation`; :meth:`calibrate` runs the estimators over all frames added."""
 
-    def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue, *, identification: str = "commanded"):
+    def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue, *, identification: str = "commanded",
+                 refraction=None):
         if not isinstance(nominal, NominalStarRig):
             raise TypeError("the pipeline takes the nominal rig (StarRig.nominal_rig()), not the rig with its truth")
         if identification not in IDENTIFICATION:
@@ -113,6 +114,16 @@ class StarPipeline:
         self.times = {"extract": 0.0, "identify": 0.0}
         self.fixed_pattern = None  # a DN image subtracted from every frame before extraction (or None)
         self.fixed_pattern_note = "none"  # what was subtracted, for the output
+        # (Site, frame index → UTC time): the air's refraction of every identified star before the joint fit
+        self.refraction = refraction
+
+    def _refract(self, k: int, dirs: np.ndarray) -> np.ndarray:
+        if self.refraction is None:
+            return dirs
+        from rigsim.optics.refraction import apparent_directions
+
+        site, time_of = self.refraction
+        return apparent_directions(dirs, site, time_of(k))
 
     def set_sequence_pattern(self, observations) -> None:
         """Subtract the fixed pattern of these observations (:func:`sequence_pattern`) from every frame."""
@@ -174,7 +185,7 @@ class StarPipeline:
                                                    "v0": s.principal_point_sigma_px},
                                       distortion=c.distortion_terms,
                                       match_tolerance_px=self.nominal.identification.match_tolerance_px,
-                                      reidentify=lis, held_out=len(self.ident) >= 2)
+                                      reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
             if lis:
                 self.ident = joint.ident
             # every estimator below takes the centroid σ with the noise floor the joint fit found
@@ -189,7 +200,11 @@ class StarPipeline:
                        "fixed_pattern": self.fixed_pattern_note,
                        "centroid_map": "none" if s.centroid_map is None else
                        f"ground map of the traced lens (B−V {s.centroid_map.reference_bv:g}, σ {s.centroid_map.sigma_px:g} px)",
-                       "reasons": [i.reason for i in self.ident if not i.ok]}
+                       "reasons": [i.reason for i in self.ident if not i.ok],
+                       "refraction": "off (no site and time)" if self.refraction is None else
+                       "on: {:.4f}°, {:.4f}°, {:.0f} m, {:.1f} hPa, {:.1f} °C".format(
+                           self.refraction[0].latitude_deg, self.refraction[0].longitude_deg, self.refraction[0].height_m,
+                           self.refraction[0].pressure, self.refraction[0].temperature_c)}
         out = PipelineOutput(self.nominal, self.usable, self.ident, frames_obs, ident_stats, times=dict(self.times),
                              joint=joint)
         t0 = time.perf_counter()

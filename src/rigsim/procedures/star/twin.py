@@ -29,11 +29,11 @@ from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sky import SkyCatalogue, star_photons
 
 __all__ = ["MAG_BINS", "RHO_BINS", "TOLERANCES", "CameraDescription", "FrameStats", "compare", "describe_camera",
-           "frame_stats", "render_twin", "twin_rig"]
+           "fit_faint_density", "frame_stats", "render_twin", "twin_rig"]
 
 MAG_BINS = (3.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0)
 RHO_BINS = tuple(np.round(np.linspace(0.0, 1.0, 6), 3))
-TOLERANCES = {"stars per magnitude bin": 0.25, "PSF FWHM": 0.10, "background profile": 0.10,
+TOLERANCES = {"stars per magnitude bin": 0.25, "detected stars": 0.25, "PSF FWHM": 0.10, "background profile": 0.10,
               "identification rate": 0.20, "centroid scatter": 0.20}
 """Relative agreement asked of the twin, per quantity."""
 BAD = int(Flag.INVALID | Flag.SATURATED | Flag.EDGE | Flag.BLENDED)
@@ -61,6 +61,7 @@ class CameraDescription:
     psf_sigma_spread_px: float
     n_psf_stars: int
     notes: list = field(default_factory=list)
+    faint_density_per_deg2_per_mag: float = 0.0  # stars beyond the catalogue (fitted by :func:`fit_faint_density`)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -164,7 +165,19 @@ def describe_camera(images, camera: PinholeBrown, attitudes, sky: SkyCatalogue, 
                              int(sig.size), notes)
 
 
-def twin_rig(base, desc: CameraDescription, camera: PinholeBrown, frame: int, *, magnitude_limit: float = 12.0):
+CATALOGUE_COMPLETE_MAG = 9.0
+"""Hipparcos is complete to about this magnitude; the twin draws its stars from the catalogue to here
+and the fainter ones as a random field with the sky's counts (``[effects.faint_stars]``)."""
+FAINT_LIMIT_MAG = 11.0
+"""The faintest star the twin draws: about a magnitude beyond what the frames detect; fainter stars are
+part of the sky's level the frames already measure."""
+FAINT_SLOPE_PER_MAG = 0.35
+"""log10 growth of the star counts per magnitude near V ≈ 10 at mid galactic latitudes (Allen's
+Astrophysical Quantities, star counts: ~0.3–0.45); the density at 9 mag is fitted to the frames."""
+
+
+def twin_rig(base, desc: CameraDescription, camera: PinholeBrown, frame: int, *,
+             magnitude_limit: float = CATALOGUE_COMPLETE_MAG):
     """The rig of the twin of frame ``frame``: ``base`` (a star rig of the camera: resolution, pitch,
     aperture, detector bits) with the calibrated intrinsics and what :func:`describe_camera` measured."""
     s = base.sensor
@@ -187,8 +200,11 @@ def twin_rig(base, desc: CameraDescription, camera: PinholeBrown, frame: int, *,
         "focal_length_mm": camera.fx * s.pixel_pitch_um / 1000.0, "principal_point_px": [camera.cx, camera.cy],
         "k1": camera.k1, "k2": camera.k2, "p1": 0.0, "p2": 0.0,
         "psf": s.psf.model_copy(update={"sigma_px": desc.psf_sigma_px}), "detector": detector})
-    eff = base.effects.only(["vignetting", "sky_glow"])
+    eff = base.effects.only(["vignetting", "sky_glow"] + (["faint_stars"] if desc.faint_density_per_deg2_per_mag > 0 else []))
     eff = eff.model_copy(update={
+        "faint_stars": eff.faint_stars.model_copy(update={
+            "density_per_deg2_per_mag": desc.faint_density_per_deg2_per_mag, "slope_per_mag": FAINT_SLOPE_PER_MAG,
+            "faint_limit_mag": FAINT_LIMIT_MAG}),
         "vignetting": eff.vignetting.model_copy(update={"rho2": desc.rho2, "rho4": desc.rho4}),
         "sky_glow": eff.sky_glow.model_copy(update={"slope_per_deg": float(np.clip(desc.glow_slope_per_deg[frame], -0.2, 0.2)),
                                                     "direction_deg": float(desc.glow_direction_deg[frame])})})
@@ -262,6 +278,21 @@ def frame_stats(img, camera: PinholeBrown, R, sky: SkyCatalogue, *, psf_sigma_px
                       float(np.median(sf.sky.rms[centre])), noise_hist, scatter)
 
 
+def fit_faint_density(unidentified: callable, real_unidentified: int, *, trial: float = 1.0, rounds: int = 3) -> float:
+    """The density (stars per deg² per magnitude at the catalogue's completeness) for which the twin's
+    frames have as many detections without a catalogue star as the real ones: ``unidentified(ρ)``
+    renders and counts them. Secant steps from ρ = 0 and ``trial`` (the count is nearly linear in ρ)."""
+    x0, x1 = 0.0, float(trial)
+    u0, u1 = unidentified(x0), unidentified(x1)
+    for _ in range(rounds):
+        if u1 == u0:
+            break
+        x2 = max(0.0, x1 + (real_unidentified - u1) * (x1 - x0) / (u1 - u0))
+        x0, u0, x1 = x1, u1, x2
+        u1 = unidentified(x1)
+    return x1
+
+
 def _rel(a, b):
     return abs(a - b) / abs(b) if b else float("inf")
 
@@ -278,6 +309,9 @@ def compare(real: list[FrameStats], twin: list[FrameStats], *, ident_real: float
         if R[k] >= 10:  # too few stars for a ±25 % statement otherwise
             rows.append({"quantity": "stars per magnitude bin", "bin": f"Hp {a:g}–{b:g}", "real": int(R[k]),
                          "twin": int(T[k]), "difference": _rel(T[k], R[k])})
+    nd_r, nd_t = sum(r.n_detected for r in real), sum(t.n_detected for t in twin)
+    rows.append({"quantity": "detected stars", "bin": "all frames, identified or not", "real": nd_r, "twin": nd_t,
+                 "difference": _rel(nd_t, nd_r)})
     for k, (a, b) in enumerate(zip(RHO_BINS[:-1], RHO_BINS[1:])):
         fr = [r.fwhm_px_by_rho[k] for r in real if r.fwhm_px_by_rho[k] is not None]
         ft = [t.fwhm_px_by_rho[k] for t in twin if t.fwhm_px_by_rho[k] is not None]

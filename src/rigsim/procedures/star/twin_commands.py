@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 import sys
 import time
 from pathlib import Path
@@ -60,7 +61,8 @@ def cmd_star_twin(args) -> int:
     from rigsim.files.atomic import atomic_write_bytes
     from rigsim.optics.sky import SkyCatalogue
     from rigsim.procedures.star.pipeline import StarObservation, StarPipeline
-    from rigsim.procedures.star.twin import compare, describe_camera, frame_stats, render_twin, twin_rig
+    from rigsim.procedures.star.twin import (compare, describe_camera, fit_faint_density, frame_stats, render_twin,
+                                             twin_rig)
     from rigsim.procedures.star.twin_report import frames_figure, profiles_figure, table_markdown
     from rigsim.rig.load import load_star_rig
 
@@ -80,14 +82,24 @@ def cmd_star_twin(args) -> int:
     print(f"measuring {len(images)} real frames …", file=sys.stderr)
     desc = describe_camera(images, camera, Rs, sky, psf_sigma_px=nominal.sensor.psf_sigma_px, saturation=sat)
     out = Path(args.out)
-    twins = []
-    for k, (name, R) in enumerate(zip(names, Rs)):
-        dn = render_twin(twin_rig(rig, desc, camera, k), R, seed=int(args.seed) + k)
-        twins.append(dn)
-        write_image(out / "frames" / f"twin_{Path(name).stem}.tiff", dn)
-    print(f"rendered {len(twins)} twin frames → {out / 'frames'}", file=sys.stderr)
     stats_kw = {"psf_sigma_px": desc.psf_sigma_px, "gain": desc.gain_dn_per_e, "saturation": sat}
     real_s = [frame_stats(im, camera, R, sky, **stats_kw) for im, R in zip(images, Rs)]
+
+    def render_all(density):
+        d = replace(desc, faint_density_per_deg2_per_mag=float(density))
+        return [render_twin(twin_rig(rig, d, camera, k), R, seed=int(args.seed) + k) for k, R in enumerate(Rs)]
+
+    def unidentified(density):
+        st = [frame_stats(im, camera, R, sky, **stats_kw) for im, R in zip(render_all(density), Rs)]
+        return sum(s.n_detected - s.n_identified for s in st)
+
+    # the stars beyond the catalogue: as many detections without a catalogue star as the real frames have
+    desc = replace(desc, faint_density_per_deg2_per_mag=fit_faint_density(
+        unidentified, sum(s.n_detected - s.n_identified for s in real_s)))
+    twins = render_all(desc.faint_density_per_deg2_per_mag)
+    for name, dn in zip(names, twins):
+        write_image(out / "frames" / f"twin_{Path(name).stem}.tiff", dn)
+    print(f"rendered {len(twins)} twin frames → {out / 'frames'}", file=sys.stderr)
     twin_s = [frame_stats(im, camera, R, sky, **stats_kw) for im, R in zip(twins, Rs)]
     # the pipeline on the twin frames, as on the real ones (frames alone, the same rig)
     pipe = StarPipeline(nominal, SkyCatalogue.load(nominal.sky.magnitude_limit, nominal.sky.epoch_year),
@@ -118,6 +130,8 @@ def cmd_star_twin(args) -> int:
           f"- vignetting V = 1 − {desc.rho2:.3f} ρ² − {desc.rho4:.3f} ρ⁴ (corner {1 - desc.rho2 - desc.rho4:.2f})",
           f"- PSF σ {desc.psf_sigma_px:.3f} px (FWHM {2.3548 * desc.psf_sigma_px:.2f} px) from {desc.n_psf_stars} bright stars",
           f"- zero point log10(DN of an Hp = 0 star) {desc.zero_point_log10_dn:.3f}, scatter {desc.zero_point_scatter_dex:.3f} dex",
+          f"- stars beyond the catalogue's completeness: {desc.faint_density_per_deg2_per_mag:.2f} per deg² per magnitude "
+          "at 9 mag (fitted to the detections with no catalogue star)",
           *[f"- {n}" for n in desc.notes], "",
           "![frames](frames.png)", "", "![frames, centre at full resolution](frames_crop.png)", "",
           "![profiles](profiles.png)", ""]
