@@ -153,6 +153,7 @@ def test_json_is_bounded_before_it_is_parsed(tmp_path, text, words):
     (lambda p: H.deep_json(p / "c.json"), "nested 10000[01] deep"),
     (lambda p: H.deep_xml(p / "c.xml"), "nested 100001 deep"),
     (lambda p: H.opencv_matrix_bomb(p / "c.yml"), r"a matrix claims 1000000000000 values \(rows 1000000, cols 1000000\)"),
+    (lambda p: (p / "c.json").write_text("[1, 2, 3]") and p / "c.json", "the top level is not a map"),
 ])
 def test_opencv_camera_files_are_bounded_before_opencv_parses_them(tmp_path, make, words):
     """OpenCV's FileStorage parser recurses (a 10⁵-deep file crashes the process) and allocates a matrix's claimed

@@ -55,9 +55,14 @@ def read_opencv_camera(path) -> OpenCVCamera:
         cause = exc.__cause__ or exc
         raise InputError(f"{path}: not an OpenCV FileStorage file ({str(cause).strip().splitlines()[-1][:120]})") from None
     try:
+        if not fs.root().isMap():  # a list or a scalar at the top: OpenCV's getNode would assert
+            raise InputError(f"{path}: the top level is not a map of named nodes; expected an OpenCV FileStorage "
+                             "camera (camera_matrix, distortion_coefficients, image_width, image_height)")
         K = _matrix(fs, MATRIX_KEYS)
         D = _matrix(fs, DIST_KEYS)
         size = tuple(_integer(fs, k) for k in ("image_width", "image_height"))
+    except cv2.error as exc:
+        raise InputError(f"{path}: not an OpenCV FileStorage camera ({str(exc).strip().splitlines()[-1][:120]})") from None
     finally:
         fs.release()
     if K is None:
