@@ -111,11 +111,13 @@ def cmd_view(args) -> int:
         from rigsim.view.display import render_window_class
         from rigsim.view.plot import make_plotter
 
+        from rigsim.view.plot import save_screenshot
+
         out = Path(args.screenshot)
         output_folder(out.parent)
         pl = make_plotter(scene, off_screen=True, size=size)
         try:
-            pl.screenshot(str(out), return_img=False)
+            save_screenshot(pl, out)
             rw = render_window_class(pl)
         finally:
             pl.close()
