@@ -61,7 +61,6 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
-from rigsim.files.atomic import output_folder
 from rigsim.optics.cube_ghosts import normal_reflectance, slab_reflectance
 from rigsim.optics.meshes import figured_cube_mesh, screen_with_hole_mesh, tilt_cube_faces
 from rigsim.render.frame import Frame, digitise
