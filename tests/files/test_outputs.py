@@ -118,3 +118,31 @@ def test_a_second_name_of_a_file_inside_an_input_folder_is_refused(tmp_path):
     with guard([("DIR", ds)]):
         with pytest.raises(InputError, match="is a file of the input folder DIR"):
             atomic_write_bytes(tmp_path / "m.json", b"x")
+
+
+def test_every_option_that_names_an_output_is_declared():
+    """A command's output options are checked only when the command declares them (rigsim.files.outputs.declare):
+    every option of every subcommand whose name says it is a destination must be declared, so a new command cannot
+    forget. Flags (store_true) are not paths."""
+    import argparse
+
+    from rigsim.cli import build_parser
+
+    names = {"out", "json_out", "opencv", "errors_out", "preview", "xml", "export_frames", "screenshot", "html", "export",
+             "json"}
+    missing = []
+
+    def walk(p, path):
+        subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        for a in subs:
+            for name, sp in a.choices.items():
+                walk(sp, (*path, name))
+        if subs:
+            return
+        declared = {d for d, *_ in (p.get_default("_rigsim_outputs") or ())}
+        for a in p._actions:
+            if a.dest in names and a.nargs != 0 and a.dest not in declared:
+                missing.append(f"{' '.join(path)} {a.option_strings[0]}")
+
+    walk(build_parser(), ())
+    assert missing == []
