@@ -13,7 +13,7 @@ import rigsim
 from rigsim.dataset import cli as dataset_cli
 from rigsim.errors import CliError, RigsimError
 from rigsim.families import FAMILIES, family_of
-from rigsim.files.options import number
+from rigsim.files.options import integer, number
 from rigsim.files.outputs import declare
 from rigsim.procedures import centroid as centroid_stage
 from rigsim.procedures import readings_commands, robustness_commands
@@ -35,10 +35,12 @@ examples:
   rigsim star calibrate frames/*.fits --attitudes attitudes.csv --out cal                docs/user-data.md
   rigsim render target --target chessboard:10x7:20 --poses poses.csv --out board   a target through the true camera
   rigsim rig check my_rig.toml                  validate a rig file (and print its geometry)
+  rigsim rig copy star_sensor my.toml           a packaged rig as the start of your own
+  rigsim rig new star-sensor --resolution 1024x768 --pixel-pitch-um 6.9 --focal-length-mm 35 --out my.toml
   rigsim doctor                                 versions, libLLVM, Mitsuba variant, where the default rigs are installed
 
---rig takes a rig file's path, or the name of a default rig installed with rigsim (rigsim rig list; their
-folder: rigsim doctor). The guides (docs/*.md) are in rigsim's source repository, not in the installed package.
+--rig takes a rig file's path, or the name of a default rig installed with rigsim (rigsim rig list; rigsim rig
+copy NAME DEST makes one yours). The guides (docs/*.md) are in rigsim's source repository, not in the installed package.
 """
 
 
@@ -48,6 +50,7 @@ def cmd_rig_check(args) -> int:
     from rigsim.reporting import safe_text
     from rigsim.rig.cube_mirror import CubeMirrorRig
     from rigsim.rig.load import load_any_rig, resolve_rig_path
+    from rigsim.rig.star import StarRig
 
     rig = load_any_rig(args.rig)
     extra = ""
@@ -55,14 +58,22 @@ def cmd_rig_check(args) -> int:
         from rigsim.rig.geometry import check_geometry, geometry_summary
 
         extra = f", {rig.turntable.kind} turntable, method {rig.procedure.method}"
-        lines = geometry_summary(rig)
-        w = max(len(g.item) for g in lines)
-        for g in lines:
-            mark = {"ok": " ", "warning": "!", "error": "✗"}[g.status]
-            print(f"{mark} {g.item:{w}s}  {g.value}")
+        _print_lines(geometry_summary(rig))
         check_geometry(rig, resolve_rig_path(args.rig))
+    elif isinstance(rig, StarRig):
+        from rigsim.rig.star_check import star_summary
+
+        _print_lines(star_summary(rig))
     print(f"{args.rig}: OK — '{safe_text(rig.name)}' (seed {rig.seed_document}, family {family_of(rig).name}{extra})")
     return 0
+
+
+def _print_lines(lines) -> None:
+    """``rig check``'s lines: a mark (blank, ``!`` a warning, ``✗`` an error), the item, the value."""
+    w = max(len(g.item) for g in lines)
+    for g in lines:
+        mark = {"ok": " ", "warning": "!", "error": "✗"}[g.status]
+        print(f"{mark} {g.item:{w}s}  {g.value}")
 
 
 def cmd_rig_list(args) -> int:
@@ -90,7 +101,8 @@ def cmd_rig_import_camera(args) -> int:
     if out.exists() and out.resolve() == src.resolve():
         raise CliError(f"--out {out}: is the rig file itself; write a new file (the original stays as it was)")
     cam = read_opencv_camera(args.camera)
-    text, changes = import_camera(read_rig_text(src), src, cam, pixel_pitch_um=args.pixel_pitch_um, source=args.camera)
+    text, changes, left = import_camera(read_rig_text(src), src, cam, pixel_pitch_um=args.pixel_pitch_um,
+                                        source=args.camera)
     data = parse_rig_text(text, out)  # the new rig is checked as `rig check` would, before anything is written
     rig = parse_model(RIG_MODELS.get(str(data.get("seed_document", "")), CubeMirrorRig), data, out)
     if isinstance(rig, CubeMirrorRig):
@@ -98,9 +110,88 @@ def cmd_rig_import_camera(args) -> int:
 
         check_geometry(rig, out)
     atomic_write_text(out, text)
+    print("changed:")
     for c in changes:
         print(f"  {c}")
+    print("left as it was:")
+    for c in left:
+        print(f"  {c}")
     print(f"wrote {out}: {src.name} with the camera of {args.camera}; check it: rigsim rig check {out}")
+    return 0
+
+
+def _destination(out: str, force: bool) -> "Path":
+    """``--out``/DEST of a new rig file: a ``.toml`` name; an existing file only with ``--force``, and never
+    anything but a regular file (a folder, a device, a FIFO)."""
+    import stat
+    from pathlib import Path
+
+    p = Path(out)
+    if p.suffix != ".toml":
+        raise CliError(f"{out}: a rig file name ends in .toml")
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        return p
+    except OSError as exc:
+        raise CliError(f"{out}: cannot be used ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise CliError(f"{out}: exists and is not a regular file (a folder, device or FIFO): give another name")
+    if not force:
+        raise CliError(f"{out}: exists; give --force to replace it")
+    return p
+
+
+def cmd_rig_new(args) -> int:
+    from rigsim.files.atomic import atomic_write_text
+    from rigsim.rig.load import parse_rig_text, parse_star_rig
+    from rigsim.rig.star_check import star_summary
+    from rigsim.rig.star_design import StarDesign, design_values, star_rig_text
+
+    out = _destination(args.out, args.force)
+    keys = ("focal_length_mm", "fov_deg", "f_number", "adc_bits", "container_bits", "offset_dn", "gain_dn_per_e",
+            "full_well_e", "read_noise_e", "exposure_s", "magnitude_limit", "name")
+    given = [k for k in keys if getattr(args, k) is not None]
+    design = StarDesign(args.resolution, args.pixel_pitch_um, given=given, **{k: getattr(args, k) for k in keys})
+    try:
+        values = design_values(design)
+    except ValueError as exc:
+        raise CliError(f"rig new star-sensor: {exc}") from None
+    shown = " ".join([f"--resolution {args.resolution[0]}x{args.resolution[1]}", f"--pixel-pitch-um {args.pixel_pitch_um:g}"]
+                     + [f"--{k.replace('_', '-')} {getattr(args, k):g}" for k in given if k != "name"])
+    text = star_rig_text(values, shown)
+    rig = parse_star_rig(parse_rig_text(text, out), out)  # checked as `rig check` would, before anything is written
+    atomic_write_text(out, text)
+    _print_lines(star_summary(rig))
+    sm = values["_summary"]
+    instrument = ("sensor", "sensor.psf", "sensor.detector", "nominal", "sky")
+    defaults = "; ".join(f"[{t}] " + " ".join(k for k, (_, n) in values[t].items() if n.startswith("default"))
+                         for t in instrument)
+    print(f"  given           {shown}")
+    print(f"  derived         f = {sm['f_px']:.2f} px, FOV {sm['fov_deg'][0]:.3f}° × {sm['fov_deg'][1]:.3f}°, PSF σ "
+          f"{sm['psf_sigma_px']:.2f} px, stars to Hp {sm['magnitude_limit']:g} (≈ {sm['stars_per_frame']:.0f} per frame)")
+    print(f"  defaults        {defaults}; and the procedure: [sequence] [identification] [calibration] [study] "
+          "(each marked `default` in the file: review them)")
+    if sm["stars_per_frame"] < 10:
+        print(f"! few stars: ≈ {sm['stars_per_frame']:.1f} per frame; identification needs 4 and calibration many more "
+              "(a longer --exposure-s, a faster lens, or a wider field)")
+    print(f"wrote {out}; next: rigsim rig check {out}, rigsim render star-field --rig {out}, "
+          f"rigsim run star-calibration --rig {out}")
+    return 0
+
+
+def cmd_rig_copy(args) -> int:
+    from rigsim.files.atomic import atomic_write_text
+    from rigsim.rig import default_rigs
+    from rigsim.rig.load import read_rig_text
+
+    known = {p.stem: p for p in default_rigs()}
+    name = args.name.removesuffix(".toml")
+    if name not in known:
+        raise CliError(f"rig copy: no packaged rig {args.name!r}; the packaged rigs are {', '.join(sorted(known))}")
+    out = _destination(args.dest, args.force)
+    atomic_write_text(out, read_rig_text(known[name]))
+    print(f"wrote {out}: a copy of the packaged rig {name}; edit it, then: rigsim rig check {out}")
     return 0
 
 
@@ -112,7 +203,7 @@ def cmd_doctor(args) -> int:
 
     info: dict = {"rigsim": rigsim.__version__, "python": platform.python_version(),
                   "installed at": str(Path(rigsim.__file__).resolve().parent),
-                  "default rigs": f"{SCENES_DIR} (rigsim rig list; copy one to start your own)",
+                  "default rigs": f"{SCENES_DIR} (rigsim rig list; rigsim rig copy NAME DEST to start your own)",
                   "result schemas": str(Path(rigsim.__file__).resolve().parent / "schemas"),
                   "guides": "docs/ of rigsim's source repository (not installed with the package)"}
     try:
@@ -148,6 +239,18 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {safe_text(message, 2000)} (see {self.prog} --help)\n")
 
 
+def _resolution(text: str) -> tuple[int, int]:
+    """``WxH`` in pixels, each 16 to 8192."""
+    w, sep, h = text.lower().replace("×", "x").partition("x")
+    try:
+        wh = (int(w), int(h)) if sep else None
+    except ValueError:
+        wh = None
+    if wh is None or not all(16 <= v <= 8192 for v in wh):
+        raise argparse.ArgumentTypeError(f"{text!r} is not WxH with each from 16 to 8192 px (e.g. 1024x768)")
+    return wh
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="rigsim",
@@ -162,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--json", action="store_true", help="machine-readable output")
     d.set_defaults(func=cmd_doctor)
 
-    g = sub.add_parser("rig", help="rig files: list the defaults, validate a file")
+    g = sub.add_parser("rig", help="rig files: list and copy the defaults, write a new one, validate a file")
     gs = g.add_subparsers(dest="rig_command", metavar="ACTION")
     gc = gs.add_parser("check", help="validate a rig file")
     gc.add_argument("rig")
@@ -181,6 +284,47 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the detector's pixel pitch, if not the rig's (OpenCV's matrix is in pixels)")
     gi.set_defaults(func=cmd_rig_import_camera)
     declare(gi, "out", suffixes=(".toml",))
+    gn = gs.add_parser("new", help="a complete rig file from what you know of the camera (star-sensor)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="Write a complete star-sensor rig file from the detector size, the pixel pitch and the "
+                                   "focal length (or the field of view across the width) and, if you know them, the "
+                                   "f-number and the detector's values. Everything else gets a default scaled to the "
+                                   "field of view; the file says which values were given, derived or defaulted.",
+                       epilog="example (FLIR Blackfly S BFS-U3-31S4M binned 2×2, a 35 mm f/1.9 lens, 12-bit codes in\n"
+                              "16-bit frames):\n  rigsim rig new star-sensor --resolution 1024x768 --pixel-pitch-um 6.9 "
+                              "--focal-length-mm 35 \\\n      --f-number 1.9 --adc-bits 12 --container-bits 16 --out my.toml")
+    gn.add_argument("kind", choices=["star-sensor"], help="the kind of rig (star-sensor)")
+    gn.add_argument("--resolution", type=_resolution, required=True, metavar="WxH", help="detector size in px, e.g. 1024x768")
+    gn.add_argument("--pixel-pitch-um", type=number(0.6, 100.0), required=True, metavar="UM", help="pixel pitch (µm)")
+    fl = gn.add_mutually_exclusive_group(required=True)
+    fl.add_argument("--focal-length-mm", type=number(1.5, 5000.0), metavar="MM", help="the lens's focal length")
+    fl.add_argument("--fov-deg", type=number(0.1, 120.0), metavar="DEG",
+                    help="or the full field of view across the width: f = (W/2) / tan(FOV/2)")
+    gn.add_argument("--f-number", type=number(0.5, 64.0), metavar="N", help="f-number (default 2)")
+    gn.add_argument("--adc-bits", type=integer(8, 16), metavar="BITS", help="the ADC's bit depth (default 12)")
+    gn.add_argument("--container-bits", type=integer(8, 16), metavar="BITS",
+                    help="frames hold the codes MSB-aligned in words of this many bits (a 12-bit ADC in 16-bit frames: "
+                         "16; default: the codes as they are)")
+    gn.add_argument("--offset-dn", type=number(0.0, 65535.0), metavar="CODES", help="black level, in ADC codes (default 1/64 of the range)")
+    gn.add_argument("--gain-dn-per-e", type=number(1e-4, 100.0), metavar="K",
+                    help="system gain, ADC codes per electron (default: the top code at the full well)")
+    gn.add_argument("--full-well-e", type=number(100.0, 1e7), metavar="E", help="full well, electrons (default 40000)")
+    gn.add_argument("--read-noise-e", type=number(0.0, 1e4), metavar="E", help="read noise, electrons rms (default 10)")
+    gn.add_argument("--exposure-s", type=number(1e-5, 3600.0), metavar="S", help="exposure (default 0.1 s)")
+    gn.add_argument("--magnitude-limit", type=number(-2.0, 12.0), metavar="HP",
+                    help="faintest star rendered (default: the magnitude at SNR 10)")
+    gn.add_argument("--name", default=None, help="the rig's name (default from its size and focal length)")
+    gn.add_argument("--out", required=True, metavar="NEW.toml", help="the new rig file")
+    gn.add_argument("--force", action="store_true", help="replace --out if it exists")
+    gn.set_defaults(func=cmd_rig_new)
+    gp = gs.add_parser("copy", help="copy a packaged default rig to a file of yours, as a starting point",
+                       description="Copy one of the rigs packaged with rigsim (rigsim rig list) to DEST, comments and all.")
+    gp.add_argument("name", metavar="NAME", help="a packaged rig (rigsim rig list), e.g. star_sensor")
+    gp.add_argument("dest", metavar="DEST.toml", help="the new file")
+    gp.add_argument("--force", action="store_true", help="replace DEST if it exists")
+    gp.set_defaults(func=cmd_rig_copy)
+    declare(gn, "out", suffixes=(".toml",))
+    declare(gp, "dest", suffixes=(".toml",))
 
     r = sub.add_parser("run", help="run a documented procedure end to end")
     rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")

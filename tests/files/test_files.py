@@ -135,3 +135,18 @@ def test_written_files_take_the_umask_like_any_other_file(tmp_path):
     finally:
         os.umask(old)
     assert {(p.name, p.stat().st_mode & 0o777) for p in tmp_path.iterdir()} == {("r.json", 0o640), ("f.png", 0o640)}
+
+
+def test_cache_dir_follows_rigsim_then_xdg_then_home(tmp_path, monkeypatch):
+    from pathlib import Path
+
+    from rigsim.files import cache_dir
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("RIGSIM_CACHE_DIR", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    assert cache_dir() == Path(tmp_path / "home" / ".cache" / "rigsim")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == tmp_path / "xdg" / "rigsim"
+    monkeypatch.setenv("RIGSIM_CACHE_DIR", str(tmp_path / "mine"))
+    assert cache_dir() == tmp_path / "mine"

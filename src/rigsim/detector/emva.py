@@ -2,7 +2,8 @@
 
 Notation as in EMVA 1288 (release 3.1/4.0 linear model): mu_p photons per pixel, eta quantum
 efficiency, K system gain (DN/e-), mu_d mean dark electrons, sigma_d^2 temporal dark variance
-(read noise^2 + dark shot noise mu_d), sigma_q^2 = 1/12 DN^2 quantisation noise.
+(read noise^2 + dark shot noise mu_d), sigma_q^2 = 1/12 DN^2 quantisation noise. DN here are the ADC's codes
+(a camera that writes them MSB-aligned, ``container_bits``, holds code × ``code_step_dn`` in its frames).
 """
 
 from __future__ import annotations

@@ -110,6 +110,15 @@ def _add_normals_run(rng: np.random.Generator, x: np.ndarray, sigma: float) -> N
     x[m:] += g[:n - m]
 
 
+def _align_codes(dn: np.ndarray, top_code: np.ndarray, cfg: DetectorConfig) -> None:
+    """Codes written MSB-aligned (``cfg.container_bits``), in place: code × code_step_dn, the top code as
+    the container's all-ones word (as a camera that writes a 12-bit ADC into 16-bit words does)."""
+    if cfg.container_bits is None:
+        return
+    np.left_shift(dn, cfg.container_bits - cfg.adc_bits, out=dn)
+    np.putmask(dn, top_code, (1 << cfg.container_bits) - 1)
+
+
 def _noisy_block(ph, eg, dark, rng_shot, cfg, rng_read, dn, saturated, mean_kdn, added=None, clamp=True,
                  work: Scratch | None = None):
     """The noisy chain over one block of pixels (flat views); writes the outputs in place and
@@ -133,7 +142,7 @@ def _noisy_block(ph, eg, dark, rng_shot, cfg, rng_read, dn, saturated, mean_kdn,
     else:
         np.add(e, added, out=t)
         np.minimum(t, fw, out=t)
-    np.multiply(t, np.float32(K), out=mean_kdn)      # float32 K·electrons: offset_dn is added on reading
+    np.multiply(t, np.float32(K * cfg.code_step_dn), out=mean_kdn)  # float32 K·electrons (frame DN): the offset is added on reading
     poisson_inverse_cdf(e, u, out=n, work=w)
     if added is not None:
         n += added
@@ -147,6 +156,7 @@ def _noisy_block(ph, eg, dark, rng_shot, cfg, rng_read, dn, saturated, mean_kdn,
     np.greater_equal(n, top, out=adc)
     np.clip(n, np.float32(0.0), top, out=n)
     dn[:] = n
+    _align_codes(dn, adc, cfg)
     np.logical_or(well, adc, out=saturated)
     return int(np.count_nonzero(well)), int(np.count_nonzero(adc))
 
@@ -157,7 +167,9 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
     """Digitise an image of expected photon counts per pixel (over the exposure).
 
     Chain: photons x QE x PRNU -> Poisson; dark: Poisson(dark_current x t + DSNU); sum clipped at
-    the full well; + N(0, read_noise); x gain + offset; round half up; clip to [0, 2^bits - 1].
+    the full well; + N(0, read_noise); x gain + offset; round half up; clip to [0, 2^bits - 1]; with
+    ``cfg.container_bits``, the codes written MSB-aligned (× ``code_step_dn``, the top code as all ones).
+    ``dn`` and ``expected_dn`` are in frame DN.
 
     ``seed`` drives the temporal noise of this frame (required unless ``noiseless``): the same
     seed and input give an identical frame. The fixed patterns come from ``cfg.sensor_seed``.
@@ -195,11 +207,13 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
             e_mean = e_mean + added
         electrons = np.minimum(e_mean, cfg.full_well_e)
         well_clip = e_mean >= cfg.full_well_e
-        expected_dn = K * electrons + cfg.offset_dn
-        q = np.floor(expected_dn + 0.5)
+        codes = K * electrons + cfg.offset_dn
+        q = np.floor(codes + 0.5)
         top = cfg.max_dn
         adc_clip = q >= top
         dn = np.clip(q, 0, top).astype(np.uint16)
+        _align_codes(dn, adc_clip, cfg)
+        expected_dn = codes * cfg.code_step_dn if cfg.container_bits is not None else codes
         saturated = well_clip | adc_clip
         n_well, n_adc = int(well_clip.sum()), int(adc_clip.sum())
     else:
@@ -237,6 +251,6 @@ def apply_detector(photons_per_px: np.ndarray, cfg: DetectorConfig, seed: int | 
         "saturated_pixels": int(np.count_nonzero(saturated)),
         "full_well_pixels": n_well,
         "adc_clipped_pixels": n_adc,
-        "config": cfg.model_dump(),
+        "config": cfg.model_dump(exclude={"container_bits"} if cfg.container_bits is None else None),
     }
-    return DetectorFrame(dn, saturated, expected_dn, meta, 0.0 if noiseless else float(cfg.offset_dn))
+    return DetectorFrame(dn, saturated, expected_dn, meta, 0.0 if noiseless else float(cfg.offset_dn) * cfg.code_step_dn)

@@ -48,6 +48,9 @@ class IdentResult:
     residual_rms_px: float
     n_voted: int
     reason: str = ""
+    f_px: float = float("nan")   # lost in space: the focal length the matched stars imply (nominal distortion)
+    false_match_probability: float = float("nan")  # lost in space: chance that the match is a coincidence
+    seconds: float = float("nan")  # lost in space: identification time
 
     def __len__(self) -> int:
         return int(self.obs_index.shape[0])

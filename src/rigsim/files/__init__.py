@@ -5,6 +5,7 @@ rigsim but :mod:`rigsim.errors`; every problem with a user's file is one
 docs/formats.md lists the files."""
 
 from .atomic import atomic_write_bytes
+from .cache import cache_dir
 from .images import FRAME_SUFFIXES, read_image, write_image
 from .results import covariance_block, read_json, write_json
 from .tables import Column, read_table, write_table
@@ -13,6 +14,7 @@ __all__ = [
            "FRAME_SUFFIXES",
            "Column",
            "atomic_write_bytes",
+           "cache_dir",
            "covariance_block",
            "read_image",
            "read_json",

@@ -5,6 +5,7 @@ centroid each spot on its own pixels (``scurve``) or on a window around them (``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -20,8 +21,9 @@ thresholded, windowed and Gaussian-fit centroiders on a window around the spot."
 
 
 def default_threshold_dn(noise: NoiseModel) -> float:
-    """5σ of the read noise, at least 3 DN (above the offset)."""
-    return max(3.0, 5.0 * noise.read_noise_dn)
+    """5σ of the read noise, at least 3 quantisation steps (3 DN; 48 DN for 12-bit codes in 16-bit words)
+    above the offset."""
+    return max(3.0 * noise.quantum_dn, 5.0 * noise.read_noise_dn)
 
 
 def _scurve(a: np.ndarray, sel: np.ndarray, var: np.ndarray, x0: int, y0: int):
@@ -81,7 +83,7 @@ def measure_frame(img, noise: NoiseModel, *, method: str = "scurve", threshold_d
             continue
         m = margin_px
         ys, xs = slice(max(0, y0 - m), min(h, y0 + bh + m)), slice(max(0, x0 - m), min(w, x0 + bw + m))
-        kw = {"noise": NoiseModel(noise.gain_dn_per_e, noise.read_noise_e, 0.0, noise.extra_variance_dn2),
+        kw = {"noise": dataclasses.replace(noise, offset_dn=0.0),
               "flags": int(fl), "origin_uv": (xs.start + ou, ys.start + ov),
               "saturation": None if saturation_dn is None else saturation_dn - noise.offset_dn}
         if method == "tcom":

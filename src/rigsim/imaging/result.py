@@ -40,31 +40,38 @@ class NoiseModel:
 
     K = ``gain_dn_per_e`` (system gain, DN per electron). ``expected_DN`` includes the background
     (sky and dark signal, assumed Poisson) and the ``offset_dn`` black level (noise-free).
-    ``extra_variance_dn2`` adds e.g. ADC quantisation (1/12 DN^2).
+    ``extra_variance_dn2`` adds e.g. ADC quantisation (1/12 DN^2). ``quantum_dn``: the step
+    between the values a frame can hold (1 DN; 16 DN for 12-bit codes written into 16-bit words).
     """
 
     gain_dn_per_e: float = 1.0
     read_noise_e: float = 0.0
     offset_dn: float = 0.0
     extra_variance_dn2: float = 0.0
+    quantum_dn: float = 1.0
 
     def __post_init__(self) -> None:
         for name, lo_ok in (("gain_dn_per_e", lambda x: x > 0), ("read_noise_e", lambda x: x >= 0),
-                            ("offset_dn", lambda x: True), ("extra_variance_dn2", lambda x: x >= 0)):
+                            ("offset_dn", lambda x: True), ("extra_variance_dn2", lambda x: x >= 0),
+                            ("quantum_dn", lambda x: x > 0)):
             val = getattr(self, name)
             if not (isinstance(val, (int, float, np.floating, np.integer)) and np.isfinite(val) and lo_ok(val)):
-                rng = "> 0" if name == "gain_dn_per_e" else (">= 0" if name != "offset_dn" else "finite")
+                rng = "> 0" if name in ("gain_dn_per_e", "quantum_dn") else (">= 0" if name != "offset_dn" else "finite")
                 raise ValueError(f"NoiseModel.{name} must be {rng}, got {val!r}")
 
     @classmethod
     def from_detector(cls, cfg) -> "NoiseModel":
         """From any object with ``gain_dn_per_e``, ``read_noise_e`` and ``offset_dn`` (e.g.
-        `rigsim.detector.DetectorConfig`); adds the 1/12 DN^2 quantisation variance."""
+        `rigsim.detector.DetectorConfig`), in the frame's DN: a detector that writes its codes
+        MSB-aligned (``code_step_dn`` frame DN per code) has its gain and offset scaled by the step,
+        and the quantisation variance step²/12 (1/12 DN² without one)."""
+        step = float(getattr(cfg, "code_step_dn", 1))
         return cls(
-            gain_dn_per_e=float(cfg.gain_dn_per_e),
+            gain_dn_per_e=float(cfg.gain_dn_per_e) * step,
             read_noise_e=float(cfg.read_noise_e),
-            offset_dn=float(getattr(cfg, "offset_dn", 0.0)),
-            extra_variance_dn2=1.0 / 12.0,
+            offset_dn=float(getattr(cfg, "offset_dn", 0.0)) * step,
+            extra_variance_dn2=step * step / 12.0,
+            quantum_dn=step,
         )
 
     @property

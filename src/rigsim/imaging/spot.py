@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rigsim.imaging import Background, Flag, centroid_tcom, detect, estimate_background, extract_rois
+from rigsim.imaging import Background, Flag, NoiseModel, centroid_tcom, detect, estimate_background, extract_rois
 
 THRESHOLD_SIGMA = 3.0
 """Thresholded centre of mass: pixels above background + 3σ count (their excess over it)."""
@@ -57,8 +57,8 @@ def measure_spot(dn: np.ndarray, detector, *, roi_px: int, threshold_sigma: floa
     a = np.asarray(dn)
     if a.ndim != 2:
         raise ValueError(f"dn must be a 2-D frame, got shape {a.shape}")
-    max_dn = float(detector.max_dn)
-    floor = math.sqrt((detector.gain_dn_per_e * detector.read_noise_e) ** 2 + 1.0 / 12.0)
+    max_dn = float(detector.saturation_dn)  # frame DN (the ADC's top code, MSB-aligned when the camera does)
+    floor = math.sqrt(NoiseModel.from_detector(detector).variance(0.0))
     bg = estimate_background(a, saturation=max_dn)
     level = float(bg.level) if np.isfinite(bg.level) else float(np.median(a))
     rms = max(float(bg.rms), floor) if np.isfinite(bg.rms) else floor

@@ -53,7 +53,7 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
                   repair_single_pixels: bool = False, poor_fit: str = "model", background: str = "model") -> Observations:
     """Detect and centroid every star of a frame (``find_spots`` with the detector's noise model).
 
-    ``saturation`` defaults to the ADC's top code. For the Gaussian fit σ starts at ``sigma_px``
+    ``saturation`` defaults to the ADC's top code (in the frame's DN). For the Gaussian fit σ starts at ``sigma_px``
     and is fitted (smeared spots are slightly wider than the static PSF). ``repair_single_pixels``:
     first replace the pixels no PSF could have lit alone (hot pixels, particle hits:
     :func:`rigsim.imaging.cosmetics.single_pixel_events`) by their neighbours' mean.
@@ -72,12 +72,12 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
         from rigsim.imaging.cosmetics import repair_pixels, single_pixel_events
 
         dn = repair_pixels(dn, single_pixel_events(dn, noise, sigma_px))
-    sat = float(2 ** detector.adc_bits - 1) if saturation is None else float(saturation)
+    sat = float(detector.saturation_dn) if saturation is None else float(saturation)
     if background == "map":
         from rigsim.imaging.star_field import extract_star_field
 
         sf = extract_star_field(np.asarray(dn), psf_sigma_px=float(sigma_px), threshold_sigma=threshold_sigma,
-                                saturation=sat, gain_dn_per_e=float(detector.gain_dn_per_e))
+                                saturation=sat, gain_dn_per_e=noise.gain_dn_per_e)  # the frame's DN per electron
         flags = np.asarray(sf.flags, np.int64)
         if poor_fit == "frame" and len(sf):
             flags = _frame_poor_fit_flags(flags, sf.chi2_red, sf.flux / sf.sigma_flux)

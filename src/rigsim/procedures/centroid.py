@@ -80,7 +80,7 @@ class DetectorSettings:
             return self.noise
         med, sd = frame_background(img)
         g = self.noise.gain_dn_per_e
-        return NoiseModel(g, sd / g, med, self.noise.extra_variance_dn2)
+        return replace(self.noise, read_noise_e=sd / g, offset_dn=med)
 
 
 def detector_settings(rig=None, camera: str | None = None, *, offset_dn=None, gain_dn_per_e=None, read_noise_e=None,
@@ -101,14 +101,10 @@ def detector_settings(rig=None, camera: str | None = None, *, offset_dn=None, ga
                 raise CliError(f"--camera = {camera!r}: this rig ({rig.name}) has {', '.join(have)}")
             det = part.detector
             shape = tuple(part.resolution_px[::-1])
-    def pick(value, attr, default):
-        if value is not None:
-            return float(value)
-        return float(getattr(det, attr)) if det is not None else default
-
-    noise = NoiseModel(pick(gain_dn_per_e, "gain_dn_per_e", 1.0), pick(read_noise_e, "read_noise_e", 0.0),
-                       pick(offset_dn, "offset_dn", 0.0), 1.0 / 12.0)
-    sat = float(saturation_dn) if saturation_dn is not None else (float(det.max_dn) if det is not None else None)
+    base = NoiseModel.from_detector(det) if det is not None else NoiseModel(1.0, 0.0, 0.0, 1.0 / 12.0)  # in frame DN
+    noise = replace(base, **{k: float(v) for k, v in (("gain_dn_per_e", gain_dn_per_e), ("read_noise_e", read_noise_e),
+                                                      ("offset_dn", offset_dn)) if v is not None})
+    sat = float(saturation_dn) if saturation_dn is not None else (float(det.saturation_dn) if det is not None else None)
     return DetectorSettings(noise, sat, shape, estimate_background=det is None and offset_dn is None)
 
 
@@ -124,7 +120,7 @@ METHODS = (*FRAME_METHODS, STAR_METHOD)
 
 
 def _star_spots(img: np.ndarray, settings: DetectorSettings, psf_sigma_px: float, threshold_sigma: float,
-                gain_dn_per_e: float):
+                gain_dn_per_e: float, psf_sigmas: list | None = None):
     from rigsim.imaging.result import CentroidBatch
     from rigsim.imaging.star_field import extract_star_field
 
@@ -133,19 +129,24 @@ def _star_spots(img: np.ndarray, settings: DetectorSettings, psf_sigma_px: float
         sat = float(np.iinfo(img.dtype).max)
     sf = extract_star_field(img, psf_sigma_px=psf_sigma_px, threshold_sigma=threshold_sigma, saturation=sat,
                             gain_dn_per_e=gain_dn_per_e)
-    return CentroidBatch(sf.u, sf.v, sf.sigma_u, sf.sigma_v, sf.flux, sf.background, sf.flags, STAR_METHOD)
+    if len(sf) and psf_sigmas is not None:
+        psf_sigmas.append(float(np.median(sf.psf_sigma)))
+    ok = np.isfinite(sf.u) & np.isfinite(sf.v)  # a detection no fit could place has no position to write
+    return CentroidBatch(sf.u[ok], sf.v[ok], sf.sigma_u[ok], sf.sigma_v[ok], sf.flux[ok], sf.background[ok],
+                         sf.flags[ok], STAR_METHOD)
 
 
 def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str = "scurve",
                    threshold_dn: float | None = None, max_spots: int | None = None, progress=None,
                    warn=None, psf_sigma_px: float = 1.0, threshold_sigma: float = 5.0,
-                   gain_dn_per_e: float | None = None) -> dict[str, list]:
+                   gain_dn_per_e: float | None = None, psf_sigmas: list | None = None) -> dict[str, list]:
     """Every spot of every frame file, brightest first per frame: the table's columns
     (frame, spot, u_px, v_px, sigma_u_px, sigma_v_px, flux_dn, flags, flag_names). ``warn(text)``
     hears of the first frame whose background disagrees with the detector model
     (:meth:`DetectorSettings.mismatch`). ``method`` ``star`` (:data:`STAR_METHOD`) measures its own sky
     map on each frame, with the PSF σ ``psf_sigma_px`` and the matched filter's ``threshold_sigma``; the
-    stars' shot noise takes ``gain_dn_per_e`` (default the settings' gain)."""
+    stars' shot noise takes ``gain_dn_per_e`` (default the settings' gain); each frame's PSF σ (px, from
+    its bright stars) is appended to ``psf_sigmas``."""
     cols: dict[str, list] = {k: [] for k in ("frame", "spot", "u_px", "v_px", "sigma_u_px", "sigma_v_px", "flux_dn",
                                              "flags", "flag_names")}
     from rigsim.files.inputs import check_distinct
@@ -156,7 +157,7 @@ def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str =
         img = read_image(p, shape=settings.shape)
         if method == STAR_METHOD:
             spots = _star_spots(img, settings, psf_sigma_px, threshold_sigma,
-                                settings.noise.gain_dn_per_e if gain_dn_per_e is None else gain_dn_per_e)
+                                settings.noise.gain_dn_per_e if gain_dn_per_e is None else gain_dn_per_e, psf_sigmas)
         else:
             if warn is not None and not warned:
                 text = settings.mismatch(img, threshold_dn)
@@ -207,7 +208,7 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--offset-dn", type=number(0, 1e6), default=None, help="black level (default the rig's, else 0)")
     c.add_argument("--gain-dn-per-e", type=number(1e-6, 1e3), default=None, help="system gain (default the rig's, else 1)")
     c.add_argument("--read-noise-e", type=number(0, 1e5), default=None, help="read noise (default the rig's, else 0)")
-    c.add_argument("--saturation-dn", type=number(1, 1e9), default=None, help="raw DN of a saturated pixel (default the rig's ADC top)")
+    c.add_argument("--saturation-dn", type=number(1, 1e9), default=None, help="raw DN of a saturated pixel (default the rig's: its ADC's top code, in the frame's DN)")
     c.add_argument("--threshold-dn", type=number(1e-3, 1e6), default=None, help="detection threshold above the offset (default 5σ read noise, ≥ 3 DN)")
     c.add_argument("--max-spots", type=integer(1, 1_000_000), default=None, help="keep the N brightest spots per frame")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -252,6 +253,7 @@ def cmd_centroid(args) -> int:
                            "leave out --offset-dn and --read-noise-e")
         st = replace(st, estimate_background=args.background == "frame")
     t0 = time.perf_counter()
+    psf_sigmas: list[float] = []
     gain, gain_note = st.noise.gain_dn_per_e, "gain"
     if method == STAR_METHOD and rig is None and args.gain_dn_per_e is None:  # nobody stated it: the sky's own noise
         from rigsim.imaging.star_field import photon_transfer
@@ -268,13 +270,14 @@ def cmd_centroid(args) -> int:
     with tqdm(total=len(args.frames), desc="centroid", unit="frame", disable=True if args.quiet else None) as pb:
         cols = centroid_files(args.frames, st, method=method, threshold_dn=args.threshold_dn,
                               max_spots=args.max_spots, progress=pb.update, warn=warnings.append, psf_sigma_px=psf,
-                              threshold_sigma=args.threshold_sigma, gain_dn_per_e=gain)
+                              threshold_sigma=args.threshold_sigma, gain_dn_per_e=gain, psf_sigmas=psf_sigmas)
     for w in warnings:
         print(f"warning: {w}. Use --background frame, or describe the camera that took the frames "
               "(--rig/--camera, --offset-dn, --read-noise-e)", file=sys.stderr)
     write_table(args.out, cols)
     n_frames_with = len(set(cols["frame"]))
     how = (f"star: sky mapped on each frame, matched filter ≥ {args.threshold_sigma:g}σ, {gain_note} {gain:.4g} DN/e-"
+           + (f", PSF σ {np.median(psf_sigmas):.3f} px (median of the frames' bright stars)" if psf_sigmas else "")
            if method == STAR_METHOD else f"{method}; {st.describe()}")
     print(f"{len(cols['frame'])} spots in {n_frames_with} of {len(args.frames)} frames ({how}) "
           f"→ {args.out} [{time.perf_counter() - t0:.2f} s]")

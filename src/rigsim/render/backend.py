@@ -147,11 +147,9 @@ def llvm_candidates() -> list[LLVMCandidate]:
 
 
 def cache_path() -> Path:
-    base = os.environ.get("RIGSIM_CACHE_DIR")
-    if base:
-        return Path(base) / "llvm.json"
-    xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(xdg) / "rigsim" / "llvm.json"
+    from rigsim.files.cache import cache_dir
+
+    return cache_dir() / "llvm.json"
 
 
 def _pkg_version(name: str) -> str:

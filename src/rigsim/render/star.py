@@ -115,8 +115,10 @@ def star_fits_cards(rig, R_cam_from_icrs, *, seed: int, time_s: float = 0.0, cam
     d = s.detector
     t = Time(rig.sky.epoch_year, format="jyear", scale="tt") + time_s * u.s
     model = f"QE {d.quantum_efficiency:g} K {d.gain_dn_per_e:g}/e read {d.read_noise_e:g}e {d.adc_bits}b"
+    if d.container_bits is not None:
+        model += f" in {d.container_bits}b"
     cards = [list(c) for c in star_frame_header(s.camera() if camera is None else camera, R_cam_from_icrs,
-                                                 exposure_s=d.exposure_s, gain_e_per_dn=1.0 / d.gain_dn_per_e,
+                                                 exposure_s=d.exposure_s, gain_e_per_dn=1.0 / (d.gain_dn_per_e * d.code_step_dn),
                                                  date_obs=t.utc.isot, seed=seed, detector=model)]
     if wcs_name:
         cards.append(["WCSNAME", wcs_name[:68], "where the WCS comes from"])

@@ -165,8 +165,14 @@ def _integer(fs, key) -> int | None:
 
 
 def import_camera(rig_text: str, rig_path, cam: OpenCVCamera, *, pixel_pitch_um: float | None = None,
-                  source: str = "camera") -> tuple[str, list[str]]:
-    """The rig file's text with ``cam``'s intrinsics in its camera, and the lines that say what changed."""
+                  source: str = "camera") -> tuple[str, list[str], list[str]]:
+    """The rig file's text with ``cam``'s intrinsics in its camera, the lines that say what changed and the
+    lines that say what was left as it was (what an OpenCV file does not hold).
+
+    A star rig's ``[nominal]`` (what the estimators start from) takes the same intrinsics as ``[sensor]``: an
+    imported calibration is both the best description of the instrument and what the user believes. A camera
+    whose image size differs from the rig's detector needs ``pixel_pitch_um`` (the rig's pitch belongs to its
+    own detector; a crop of it keeps the pitch: give it again)."""
     import tomlkit
 
     doc = tomlkit.parse(rig_text)
@@ -185,13 +191,18 @@ def import_camera(rig_text: str, rig_path, cam: OpenCVCamera, *, pixel_pitch_um:
                          "has k1, k2, p1, p2, k3 only (OpenCV's 5-coefficient model)")
     if abs(cam.skew) > 1e-9 * cam.fx:
         raise InputError(f"{source}: camera_matrix skew = {cam.skew:g}: rigsim's camera has none")
-    changes = []
+    old_size = _plain(sec.get("resolution_px"))
+    if cam.size is not None and old_size is not None and list(cam.size) != list(old_size) and pixel_pitch_um is None:
+        raise InputError(f"{source}: the camera's image is {cam.size[0]}×{cam.size[1]} px, the rig's {name} "
+                         f"{old_size[0]}×{old_size[1]} px: give --pixel-pitch-um (the camera's pixel pitch; the rig's "
+                         f"{pitch:g} µm belongs to its own detector, a crop of it keeps it)")
+    changes: list[str] = []
 
-    def put(table, key, value, text):
+    def put(table, key, value, text, prefix=name):
         old = _plain(table.get(key))
         table[key] = value
         if old != value:
-            changes.append(f"{name}.{text}: {old} → {value}")
+            changes.append(f"{prefix}.{text}: {old} → {value}")
 
     if cam.size is not None:
         put(sec, "resolution_px", list(cam.size), "resolution_px")
@@ -213,7 +224,52 @@ def import_camera(rig_text: str, rig_path, cam: OpenCVCamera, *, pixel_pitch_um:
             raise InputError(f"{source}: distortion k3 = {k['k3']:g}; the star sensor's model has k1, k2, p1, p2")
         for n in ("k1", "k2", "p1", "p2"):
             put(sec, n, k[n], n)
-    return tomlkit.dumps(doc), changes
+        _star_nominal(doc, sec, cam, k, put, changes)
+    return tomlkit.dumps(doc), changes, _left_as_it_was(doc, name, pitch)
+
+
+def _star_nominal(doc, sec, cam: OpenCVCamera, k: dict, put, changes: list[str]) -> None:
+    """A star rig's [nominal] takes the imported intrinsics (created, with the schema's σ, if the rig has none)."""
+    import tomlkit
+
+    if "nominal" not in doc:
+        doc["nominal"] = tomlkit.table()
+        doc["nominal"]["focal_length_sigma_px"] = 10.0
+        doc["nominal"]["principal_point_sigma_px"] = 10.0
+        changes.append("nominal: a new table (the rig had none: its nominal was the design); σ 10 px each")
+    nom = doc["nominal"]
+    put(nom, "focal_length_mm", _plain(sec["focal_length_mm"]), "focal_length_mm", "nominal")
+    put(nom, "principal_point_px", [round(cam.cx, 6), round(cam.cy, 6)], "principal_point_px", "nominal")
+    for n in ("k1", "k2", "p1", "p2"):
+        put(nom, n, k[n], n, "nominal")
+
+
+def _left_as_it_was(doc, name: str, pitch_um: float) -> list[str]:
+    """What an OpenCV file does not say, as the rig had it: the detector, the optics, the nominal's σ."""
+    sec = doc[name]
+    det = _plain(sec.get("detector")) or {}
+    bits = det.get("adc_bits", 12)
+    words = f" in {det['container_bits']}-bit words" if det.get("container_bits") is not None else ""
+    left = [f"{name}.detector: {bits}-bit ADC{words}, offset {det.get('offset_dn', 64.0):g}, gain "
+            f"{det.get('gain_dn_per_e', 0.2):g} DN/e⁻, read noise {det.get('read_noise_e', 5.0):g} e⁻, exposure "
+            f"{det.get('exposure_s', 0.01):g} s: an OpenCV file has no detector; set your camera's"]
+    if name == "sensor":
+        ap = _plain(sec.get("aperture_diameter_mm"))
+        if ap is not None:
+            from rigsim.rig.star import PSF, psf_sigma_px
+
+            N = _plain(sec["focal_length_mm"]) / ap
+            try:
+                sigma = f"σ now {psf_sigma_px(PSF(**(_plain(sec.get('psf')) or {})), N, pitch_um):.2f} px"
+            except (ValueError, TypeError):  # an invalid [sensor.psf]: the rig's validation names it
+                sigma = "invalid"
+            left.append(f"sensor.aperture_diameter_mm: {ap:g} mm, now f/{N:.2f}; sensor.psf as it was ({sigma})")
+        nom = doc["nominal"]
+        left.append(f"nominal.focal_length_sigma_px {_plain(nom.get('focal_length_sigma_px', 10.0)):g} px, "
+                    f"nominal.principal_point_sigma_px {_plain(nom.get('principal_point_sigma_px', 10.0)):g} px: "
+                    "set them to your calibration's σ")
+        left.append("[sky] [sequence] [identification] [calibration]: as they were (set for the rig's own field)")
+    return left
 
 
 def _plain(v):

@@ -174,6 +174,18 @@ class Identification(_Model):
     search_radius_px: float = Field(60.0, gt=0.0, le=2000.0, description="largest offset of a star from its predicted position")
     match_tolerance_px: float = Field(2.0, gt=0.0, le=50.0, description="final residual tolerance after the attitude fit")
     min_matches: int = Field(4, ge=3, le=1000)
+    focal_length_tolerance: float = Field(0.05, ge=0.0, le=0.3, description="lost in space: the nominal focal length's "
+                                          "largest relative error (the true f is searched in f / (1 ± this))")
+    pattern_tolerance_px: float = Field(1.0, gt=0.0, le=10.0, description="lost in space: centroid error allowed in "
+                                        "a 4-star pattern's edges (noise and distortion the nominal model leaves)")
+    false_match_probability: float = Field(1e-9, gt=0.0, le=1e-3, description="lost in space: the largest accepted "
+                                           "chance that an identification is a coincidence")
+
+    def lost_in_space_settings(self) -> dict:
+        """The keyword arguments of :func:`rigsim.estimation.star_lis.identify_lost_in_space`."""
+        return {"focal_length_tolerance": self.focal_length_tolerance, "match_tolerance_px": self.match_tolerance_px,
+                "min_matches": self.min_matches, "pattern_tolerance_px": self.pattern_tolerance_px,
+                "false_match_probability": self.false_match_probability}
 
 
 class Nominal(_Model):

@@ -37,7 +37,7 @@ def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.n
     if rig.procedure.method != "diaphragm" or ac is None:
         raise InputError(f"rig {rig.name!r} has no diaphragm screen and aiming camera (seed 000's method)")
     return hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
-                            offset_dn=ac.detector.offset_dn, background=ac.hole_background)
+                            offset_dn=ac.detector.offset_dn * ac.detector.code_step_dn, background=ac.hole_background)
 
 
 def null_step(rig: CubeMirrorRig, reading_rad: Mapping[str, float], offset_px, axis_order: str | None = None) -> dict:

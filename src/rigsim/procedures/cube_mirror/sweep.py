@@ -149,8 +149,8 @@ def render_sweep(
             photons, origin = detector_part(photons, origin_w, shape)
             dn = apply_detector(photons, det, seed=fseed, noiseless=noiseless, origin_uv=origin,
                                 detector_shape=shape).dn
-        spots = measure_frame(dn, noise_model, method=centroider, saturation_dn=det.max_dn,
-                              threshold_dn=0.5 if noiseless else None, origin_uv=origin, detector_shape=shape)
+        spots = measure_frame(dn, noise_model, method=centroider, saturation_dn=det.saturation_dn,
+                              threshold_dn=0.5 * det.code_step_dn if noiseless else None, origin_uv=origin, detector_shape=shape)
         k = single_spot(spots)
         if on_frame is not None:
             on_frame(fr, spots, k, {ax: float(r[i]) for ax, r in read.items()}, int(i))

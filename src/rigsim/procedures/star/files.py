@@ -130,7 +130,7 @@ def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, 
         check_attitude_convention(obs, names, log_path, nominal, sky, ok)  # a log in another convention is named
     if not any(ok):
         why = "; ".join(f"{n}: {i.reason}" for n, i in zip(names, pipe.ident))
-        raise InputError(f"none of the {len(names)} frames could be identified ({why})")
+        raise InputError(f"none of the {len(names)} frames could be identified{_likely_cause(pipe)} ({why})")
     return pipe.calibrate(), names
 
 
@@ -189,6 +189,27 @@ def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky
     raise InputError(f"{log_path}: its attitudes are {err['as written']:.3g}° from the attitude the stars of {name} give "
                      f"(identified without a prior), and {min(err[c] for c in CONVENTIONS):.3g}° at best read scalar "
                      "last or conjugated: is the log for these frames (rows, times, frame names)?")
+
+
+def _likely_cause(pipe) -> str:
+    """When no frame identifies: whether the frames identify once mirrored (left to right or top to
+    bottom), the commonest way a frame reaches a pipeline flipped; '' when that does not help either."""
+    from rigsim.estimation.star_lis import identify_lost_in_space
+
+    W, H = pipe.nominal.sensor.resolution_px
+    kw = pipe.nominal.identification.lost_in_space_settings()
+    for usable in pipe.usable[:3]:
+        order = np.argsort(-usable.flux, kind="stable")
+        uv = usable.uv[order]
+        for flip, what in (((W - 1, None), "left to right (u → W − 1 − u)"), ((None, H - 1), "top to bottom (v → H − 1 − v)")):
+            m = uv.copy()
+            if flip[0] is not None:
+                m[:, 0] = flip[0] - m[:, 0]
+            else:
+                m[:, 1] = flip[1] - m[:, 1]
+            if identify_lost_in_space(m, pipe.sky, pipe.camera, **kw).ok:
+                return f": mirrored {what} they identify: are the frames flipped?"
+    return ""
 
 
 def stars_table(out: PipelineOutput, names: Sequence[str]) -> dict[str, list]:

@@ -57,7 +57,7 @@ def bench_centroids(psfs, oversample: int, radius_px: int, nominal: NominalStarR
         chief[m] = (bu / os_ + radius_px - 0.5, bv / os_ + radius_px - 0.5)              # bin b's centre: (b + ½)/os − ½
     px = img.reshape(rows * cell, os_, per_row * cell, os_).sum(axis=(1, 3))
     d = s.detector
-    dn = d.offset_dn + d.gain_dn_per_e * BENCH_SIGNAL_E * px
+    dn = (d.offset_dn + d.gain_dn_per_e * BENCH_SIGNAL_E * px) * d.code_step_dn  # frame DN
     found = extract_stars(dn, d, s.psf_sigma_px, method=c.centroid_method, repair_single_pixels=c.single_pixel_filter)
     out = np.full((k, 2), np.nan)
     if len(found):

@@ -144,15 +144,14 @@ class StarPipeline:
         if self.centroid_map is not None:  # the ground calibration of the lens's centroid shift ([nominal] centroid_map)
             usable = replace(usable, uv=corrected_centroids(usable.uv, self.centroid_map, self.camera))
         t1 = time.perf_counter()
-        kw = {"search_radius_px": idc.search_radius_px, "match_tolerance_px": idc.match_tolerance_px,
-              "min_matches": idc.min_matches}
-        if self.identification == "lost-in-space":  # no prior: geometric voting of the brightest stars
+        if self.identification == "lost-in-space":  # no prior: 4-star patterns of the brightest stars
             order = np.argsort(-usable.flux, kind="stable")
-            ident = identify_lost_in_space(usable.uv[order], self.sky, self.camera, **kw)
+            ident = identify_lost_in_space(usable.uv[order], self.sky, self.camera, **idc.lost_in_space_settings())
             if ident.ok:
                 ident = replace(ident, obs_index=order[ident.obs_index])
         else:
-            ident = identify(usable.uv, self.sky, obs.R_commanded, self.camera, **kw)
+            ident = identify(usable.uv, self.sky, obs.R_commanded, self.camera, search_radius_px=idc.search_radius_px,
+                             match_tolerance_px=idc.match_tolerance_px, min_matches=idc.min_matches)
         self.times["extract"] += t1 - t0
         self.times["identify"] += time.perf_counter() - t1
         self.counts["detected"] += len(found)

@@ -28,7 +28,7 @@ def _plot_frame(path, res):
 
     fr = res.sample_frame
     dn = fr.dn.astype(float)
-    off = res.rig.sensor.detector.offset_dn
+    off = res.rig.sensor.detector.offset_dn * res.rig.sensor.detector.code_step_dn  # frame DN
     img = np.log10(np.clip(dn - off, 1, None))
     fig, ax = plt.subplots(1, 2, figsize=(12, 6), gridspec_kw={"width_ratios": [1.6, 1]})
     ax[0].imshow(img, cmap="gray", origin="upper", vmin=0.3, vmax=np.percentile(img, 99.97))
