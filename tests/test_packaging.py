@@ -41,6 +41,14 @@ def test_wheel_ships_the_default_rigs(tmp_path):
     assert out.returncode == 0, out.stderr
     for name in ("sun_sensor_2axis_diaphragm", "sun_sensor_3axis_autocollimator", "dual_line_array_prism", "star_sensor"):
         assert name in out.stdout
+    # doctor and --help point at what the wheel installed, not at a repository's scenes/ the user does not have
+    import json as _json
+
+    doc = _json.loads(subprocess.run([str(rigsim), "doctor", "--json"], cwd=work, env=env, capture_output=True, text=True,
+                                     timeout=300, check=True).stdout)
+    assert doc["default rigs"].startswith(str(venv)) and Path(doc["default rigs"].split(" (")[0], "star_sensor.toml").is_file()
+    assert "rigsim rig list" in subprocess.run([str(rigsim), "--help"], cwd=work, env=env, capture_output=True, text=True,
+                                               timeout=300).stdout
     run = subprocess.run([str(rigsim), "run", "cube-mirror", "--analytic", "--no-budget"], cwd=work, env=env,
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]

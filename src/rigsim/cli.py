@@ -14,6 +14,7 @@ from rigsim.dataset import cli as dataset_cli
 from rigsim.errors import CliError, RigsimError
 from rigsim.families import FAMILIES, family_of
 from rigsim.files.options import integer, number
+from rigsim.files.outputs import declare
 from rigsim.procedures import centroid as centroid_stage
 from rigsim.procedures import readings_commands, robustness_commands
 from rigsim.procedures import target_commands
@@ -33,12 +34,13 @@ examples:
   rigsim calibrate sun-sensor --angles angles.csv --centroids centroids.csv --out sun.json
   rigsim star calibrate frames/*.fits --attitudes attitudes.csv --out cal                docs/user-data.md
   rigsim render target --target chessboard:10x7:20 --poses poses.csv --out board   a target through the true camera
-  rigsim rig check scenes/my_rig.toml           validate a rig file (and print its geometry)
+  rigsim rig check my_rig.toml                  validate a rig file (and print its geometry)
   rigsim rig copy star_sensor my.toml           a packaged rig as the start of your own
   rigsim rig new star-sensor --resolution 1024x768 --pixel-pitch-um 6.9 --focal-length-mm 35 --out my.toml
-  rigsim doctor                                 versions, libLLVM and Mitsuba variant
+  rigsim doctor                                 versions, libLLVM, Mitsuba variant, where the default rigs are installed
 
-Rig files live in scenes/; give a path or a default rig's name. Docs: docs/.
+--rig takes a rig file's path, or the name of a default rig installed with rigsim (rigsim rig list; rigsim rig
+copy NAME DEST makes one yours). The guides (docs/*.md) are in rigsim's source repository, not in the installed package.
 """
 
 
@@ -195,8 +197,15 @@ def cmd_rig_copy(args) -> int:
 
 def cmd_doctor(args) -> int:
     import platform
+    from pathlib import Path
 
-    info: dict = {"rigsim": rigsim.__version__, "python": platform.python_version()}
+    from rigsim.rig.load import SCENES_DIR
+
+    info: dict = {"rigsim": rigsim.__version__, "python": platform.python_version(),
+                  "installed at": str(Path(rigsim.__file__).resolve().parent),
+                  "default rigs": f"{SCENES_DIR} (rigsim rig list; rigsim rig copy NAME DEST to start your own)",
+                  "result schemas": str(Path(rigsim.__file__).resolve().parent / "schemas"),
+                  "guides": "docs/ of rigsim's source repository (not installed with the package)"}
     try:
         from rigsim.render.backend import doctor_report
     except ImportError as exc:  # render package not available
@@ -261,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
     gc = gs.add_parser("check", help="validate a rig file")
     gc.add_argument("rig")
     gc.set_defaults(func=cmd_rig_check)
-    gl = gs.add_parser("list", help="list the default rigs in scenes/")
+    gl = gs.add_parser("list", help="list the default rigs installed with rigsim (their folder: rigsim doctor)")
     gl.set_defaults(func=cmd_rig_list)
     gi = gs.add_parser("import-camera", help="a rig file with the intrinsics of an OpenCV camera (FileStorage YAML/JSON)",
                        description="Write a copy of RIG whose sun sensor (or star sensor) has the camera matrix, "
@@ -274,6 +283,7 @@ def build_parser() -> argparse.ArgumentParser:
     gi.add_argument("--pixel-pitch-um", type=number(0.1, 100.0), default=None, metavar="UM",
                     help="the detector's pixel pitch, if not the rig's (OpenCV's matrix is in pixels)")
     gi.set_defaults(func=cmd_rig_import_camera)
+    declare(gi, "out", suffixes=(".toml",))
     gn = gs.add_parser("new", help="a complete rig file from what you know of the camera (star-sensor)",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        description="Write a complete star-sensor rig file from the detector size, the pixel pitch and the "
@@ -313,6 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("dest", metavar="DEST.toml", help="the new file")
     gp.add_argument("--force", action="store_true", help="replace DEST if it exists")
     gp.set_defaults(func=cmd_rig_copy)
+    declare(gn, "out", suffixes=(".toml",))
+    declare(gp, "dest", suffixes=(".toml",))
 
     r = sub.add_parser("run", help="run a documented procedure end to end")
     rs = r.add_subparsers(dest="procedure", metavar="PROCEDURE")
@@ -341,10 +353,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from rigsim.files.outputs import guard
         from rigsim.render.threads import command_threads
 
+        inputs = _checked_files(parser, args)
         with _Heartbeat(" ".join(a for a in (argv if argv is not None else sys.argv[1:])[:2] if not a.startswith("-"))), \
-                command_threads():
+                command_threads(), guard(inputs):
             rc = int(args.func(args) or 0)
         sys.stdout.flush()
         return rc
@@ -374,20 +388,79 @@ def main(argv: list[str] | None = None) -> int:
         raise
 
 
+def _leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The subcommand's own parser (``rigsim calibrate sun-sensor`` → that of ``sun-sensor``)."""
+    p = parser
+    while True:
+        subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        name = getattr(args, subs[0].dest, None) if subs else None
+        if name is None or name not in subs[0].choices:
+            return p
+        p = subs[0].choices[name]
+
+
+def _checked_files(parser: argparse.ArgumentParser, args) -> list:
+    """Before the command runs: its inputs (every file or folder named by an option or positional that is not one
+    of its declared outputs) as (label, path), after :func:`rigsim.files.outputs.check_plan` has refused any output
+    that would destroy one of them or another output, or that cannot be written."""
+    from pathlib import Path
+
+    from rigsim.files.outputs import check_plan, declared_outputs
+
+    leaf = _leaf_parser(parser, args)
+    labels = {a.dest: (a.option_strings[0] if a.option_strings else (a.metavar if isinstance(a.metavar, str) else
+                                                                        a.dest.upper()))
+              for a in leaf._actions if a.dest != "help"}
+    outputs, out_dests = declared_outputs(args, labels)
+    inputs = []
+    for dest, label in labels.items():
+        if dest in out_dests:
+            continue
+        v = getattr(args, dest, None)
+        for x in (v if isinstance(v, (list, tuple)) else [v]):
+            if isinstance(x, str) and x and os.path.lexists(x):
+                inputs.append((label, Path(x)))
+    check_plan(outputs, inputs)
+    return inputs
+
+
 _PATH_ERRNOS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.ELOOP, errno.EACCES, errno.EPERM,
                 errno.EROFS, errno.EEXIST, errno.ENXIO}
 
 
+HEARTBEAT_ENV = "RIGSIM_HEARTBEAT_S"
+"""Seconds between the heartbeat lines of a command whose stderr is not a terminal (default 30; 0: none)."""
+
+
 class _Heartbeat:
     """On a terminal, a command that runs longer than ``delay`` seconds without a progress bar of its own shows
-    the seconds it has been working on stderr (one line, rewritten in place, erased at the end)."""
+    the seconds it has been working on stderr (one line, rewritten in place, erased at the end). When stderr is not
+    a terminal (a log file, a batch job, a pipe), a long command writes a note line every ``log_interval`` seconds
+    (``RIGSIM_HEARTBEAT_S``, default 30): a hung run and a slow one no longer look the same in a log."""
 
-    def __init__(self, label: str, delay: float = 2.0, interval: float = 0.5, stream=None):
+    def __init__(self, label: str, delay: float = 2.0, interval: float = 0.5, stream=None,
+                 log_interval: float | None = None):
         import threading
 
         self.label, self.delay, self.interval = f"rigsim {label}".strip(), delay, interval
         self.stream = stream if stream is not None else sys.stderr
+        self.log_interval = _heartbeat_seconds() if log_interval is None else float(log_interval)
         self.stop, self.shown, self.thread = threading.Event(), False, None
+
+    def _log(self) -> None:
+        """Off a terminal: one line every ``log_interval`` seconds, while the command runs."""
+        import time
+
+        k = 0
+        while not self.stop.wait(self.log_interval):
+            k += 1
+            m, s = divmod(int(round(k * self.log_interval)), 60)
+            try:
+                self.stream.write(f"rigsim: note: {self.label} still working ({f'{m} min ' if m else ''}{s} s; "
+                                  f"{time.strftime('%H:%M:%S')})\n")
+                self.stream.flush()
+            except (OSError, ValueError):  # the log went away: the command goes on
+                return
 
     def _run(self) -> None:
         import time
@@ -418,6 +491,9 @@ class _Heartbeat:
         if tty:
             self.thread = threading.Thread(target=self._run, name="rigsim-heartbeat", daemon=True)
             self.thread.start()
+        elif self.log_interval > 0:
+            self.thread = threading.Thread(target=self._log, name="rigsim-heartbeat", daemon=True)
+            self.thread.start()
         return self
 
     def __exit__(self, *exc) -> None:
@@ -427,6 +503,19 @@ class _Heartbeat:
             if self.shown:
                 self.stream.write("\r\x1b[K")
                 self.stream.flush()
+
+
+def _heartbeat_seconds() -> float:
+    text = os.environ.get(HEARTBEAT_ENV, "").strip()
+    if not text:
+        return 30.0
+    try:
+        from rigsim.files.numbers import parse_float
+
+        v = parse_float(text, special=False)
+    except ValueError:
+        return 30.0
+    return v if 0 <= v <= 86400 else 30.0
 
 
 def _silence_stdout() -> None:

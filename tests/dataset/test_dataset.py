@@ -158,7 +158,7 @@ def test_score_bad_csv(clean, tmp_path, content, msg):
     assert msg in str(e.value)
 
 
-@pytest.mark.parametrize("header", ["u,v", "u_px,v_px", "xcentroid,ycentroid", "x,y"])
+@pytest.mark.parametrize("header", ["u,v", "u_px,v_px", "x_centroid,y_centroid", "xcentroid,ycentroid", "x,y"])
 def test_score_reads_the_column_names_of_opencv_photutils_and_sep(clean, tmp_path, header):
     root, _ = clean
     t = open_dataset(root).truth_numpy()
@@ -190,8 +190,11 @@ def test_score_counts_nan_rows_as_failed_fits_and_writes_every_error(clean, tmp_
     assert json.loads((tmp_path / "s.json").read_text())["failed"] == [N - 2, N - 1]
 
 
-@pytest.mark.parametrize("shift,expect", [((1.0, 1.0), "1-based pixel indices"), ((0.5, 0.5), "corner-origin"),
-                                          ((-1.0, 0.0), "u look shifted by 1 px")])
+@pytest.mark.parametrize("shift,expect", [((1.0, 1.0), "shifted u by +1 px (subtract 1) and v by +1 px (subtract 1) — 1-based"),
+                                          ((0.5, 0.5), "u by +0.5 px (subtract 0.5) and v by +0.5 px (subtract 0.5) — a corner"),
+                                          ((-1.0, 0.0), "shifted u by -1 px (add 1) — an index shifted the wrong way"),
+                                          ((-0.5, -0.5), "u by -0.5 px (add 0.5) and v by -0.5 px (add 0.5)"),
+                                          ((1.0, -1.0), "u by +1 px (subtract 1) and v by -1 px (add 1)")])
 def test_score_names_a_pixel_convention_mistake(clean, tmp_path, shift, expect):
     root, _ = clean
     t = open_dataset(root).truth_numpy()
@@ -291,6 +294,20 @@ def test_star_frames_are_fits_with_one_truth_row_per_star_and_scored_by_matching
     s = score(tmp_path, p)
     assert s.detection["false_detections"] == 1 and s.detection["missed"] == 0
     assert s.rms == pytest.approx(np.sqrt(2) * 0.05, rel=0.15)
+    assert s.hints == []
+    # star frames name a pixel-convention mistake too, with the sign that undoes it
+    for (du, dv), words in (((1.0, 1.0), "u by +1 px (subtract 1) and v by +1 px (subtract 1)"),
+                            ((-0.5, -0.5), "u by -0.5 px (add 0.5) and v by -0.5 px (add 0.5)")):
+        p.write_text("frame,u,v\n" + "".join(f"{f},{u + du + rng.normal(0, 0.02)},{v + dv + rng.normal(0, 0.02)}\n"
+                                             for f, u, v in zip(t["frame"][sel], t["u"][sel], t["v"][sel])))
+        s = score(tmp_path, p)
+        assert any(words in h for h in s.hints), s.hints
+    p.write_text("frame,u,v\n" + "".join(f"{f},{v},{u}\n" for f, u, v in zip(t["frame"][sel], t["u"][sel], t["v"][sel])))
+    try:
+        s = score(tmp_path, p)
+        assert any("u and v look swapped" in h for h in s.hints), s.hints
+    except DatasetError as e:  # no prediction matched: the error names the cause
+        assert "with u and v exchanged: u and v look swapped" in str(e), e
     # the file chain: `star calibrate` reads the dataset's FITS frames (a lab's log: the frames' attitudes)
     from file_chain import rigsim
 

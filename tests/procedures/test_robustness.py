@@ -192,6 +192,25 @@ def test_a_killed_run_resumes_from_its_stored_trials(tmp_path):
     assert not (tmp_path / "trials").exists()
 
 
+def test_an_edited_kept_trial_is_run_again_never_reused(tmp_path):
+    """A kept trial carries its own checksum: a value changed by hand (the file still valid JSON, same rig key)
+    is not reused; the trial is run again and its true value is what the summary gets."""
+    from rigsim.procedures.robustness import run_configs
+    from rigsim.procedures.trial_store import TrialStore
+
+    store = TrialStore(tmp_path / "trials", "key-1")
+    truth = run_configs(_square_trial, ("ideal", "fx"), [0, 1], store=store)
+    p = tmp_path / "trials" / "fx-seed1.json"
+    doc = json.loads(p.read_text())
+    doc["values"]["v"] += 2.5  # a published mean moved by an edit
+    p.write_text(json.dumps(doc))
+    assert store.get("fx", 1) is None and store.get("fx", 0) is not None
+    calls: list = []
+    again = run_configs(_crashing_trial(calls, 0), ("ideal", "fx"), [0, 1], store=store)
+    assert calls == [("fx", 1)] and again == truth
+    assert store.get("fx", 1) == truth[("fx", 1)]  # rewritten with its checksum
+
+
 def test_the_trial_store_never_writes_through_a_link(tmp_path):
     from rigsim.errors import InputError
     from rigsim.procedures.trial_store import TrialStore

@@ -7,6 +7,7 @@ import json
 import sys
 
 from rigsim.files.options import SEED, SPP, integer, number
+from rigsim.files.outputs import declare
 
 EPILOG = """\
 examples:
@@ -108,6 +109,7 @@ def add_cli(groups: dict) -> None:
     g.add_argument("--retries", type=integer(0, 20), default=2, help="retries of a failed task")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=_gen)
+    declare(g, "out", folder=True)
     s = ds.add_parser("score", help="score an external pipeline's predictions CSV against the truth")
     s.add_argument("dataset", metavar="DIR")
     s.add_argument("predictions", metavar="CSV",
@@ -125,6 +127,8 @@ def add_cli(groups: dict) -> None:
     s.add_argument("--errors-out", default=None, metavar="CSV",
                    help="every frame's (star frames: every matched star's) prediction, truth and error")
     s.set_defaults(func=_score)
+    declare(s, "json_out")
+    declare(s, "errors_out", suffixes=(".csv", ".parquet"))
     v = ds.add_parser("verify", help="check every file against the manifest's checksums")
     v.add_argument("dataset", metavar="DIR")
     v.set_defaults(func=_verify)

@@ -20,8 +20,10 @@ BOOKKEEPING = (LOCK_FILE, OWNER_FILE)
 
 
 def _holder(root: Path, owner_file: str = OWNER_FILE) -> str:
+    from rigsim.files.results import parse_json
+
     try:
-        o = json.loads((root / owner_file).read_text())
+        o = parse_json((root / owner_file).read_bytes(), root / owner_file, "lock note", max_bytes=1 << 16)
         return f"pid {int(o['pid'])} on {o['host']}, {o['command']}, since {o['since_utc']}"
     except (OSError, ValueError, KeyError, TypeError):
         return "holder unknown"

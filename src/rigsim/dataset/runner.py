@@ -170,7 +170,7 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
                                                                              else "has one renderer (no --renderer)"))
     if workers is not None and not (1 <= workers <= 512):
         raise DatasetError(f"--workers = {workers}: allowed range is 1 to 512")
-    if isinstance(scheduler, str) and not re.fullmatch(r"((tcp|tls|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}", scheduler):
+    if isinstance(scheduler, str) and not re.fullmatch(r"((tcp|tls|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:[0-9]{1,5}", scheduler):
         raise DatasetError(f"--scheduler {scheduler!r}: expected a Dask scheduler address HOST:PORT or tcp://HOST:PORT")
     if not (0 <= retries <= 20):
         raise DatasetError(f"--retries = {retries}: allowed range is 0 to 20")
@@ -360,6 +360,62 @@ def _dask_task(kind, rig_text, rig_source, opts, root, fmt, items):
     return render_chunk(kind, rig_text, rig_source, opts, root, fmt, items)
 
 
+PROBE_PREFIX = ".rigsim-worker-probe."
+WORKER_WAIT_S = 30.0  # how long the client waits for a first worker to join the scheduler
+
+
+def probe_folder(root: str, token: str) -> str | None:
+    """Run on a Dask worker: None when ``root`` is the client's dataset folder (the token file the client wrote
+    there is visible, with the client's token) and the worker can create files in its ``frames`` folder; else why
+    not, in a few words."""
+    import tempfile
+
+    p = Path(root)
+    if not p.is_absolute():
+        return f"{root} is not an absolute path"
+    if not p.is_dir():
+        return f"no folder {root} on this worker"
+    try:
+        if (p / f"{PROBE_PREFIX}{token}.tmp").read_text() != token:
+            raise OSError
+    except OSError:
+        return f"{root} on this worker is not the client's folder (another file system: the folder is not shared)"
+    try:
+        (p / "frames").mkdir(exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=p / "frames", prefix=PROBE_PREFIX, suffix=".tmp")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        return f"cannot write in {p / 'frames'} ({e.strerror or e})"
+    return None
+
+
+def check_workers(client, root: Path, scheduler) -> int:
+    """Before any task is sent: every worker of the cluster sees the dataset folder at the client's absolute path
+    and can write in it (:func:`probe_folder`); one line naming the first that cannot. Returns the worker count."""
+    import secrets
+
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except (TimeoutError, OSError) as e:
+        raise DatasetError(f"--scheduler {scheduler!r}: no worker joined the scheduler within {WORKER_WAIT_S:g} s "
+                           f"({type(e).__name__}); start workers (dask worker {scheduler})") from None
+    token = secrets.token_hex(16)
+    marker = Path(root) / f"{PROBE_PREFIX}{token}.tmp"
+    atomic_write_bytes(marker, token.encode())
+    try:
+        answers = client.run(probe_folder, str(root), token)
+    finally:
+        marker.unlink(missing_ok=True)
+    bad = {w: why for w, why in sorted(answers.items()) if why}
+    if bad:
+        w, why = next(iter(bad.items()))
+        more = f" (and {len(bad) - 1} other worker(s))" if len(bad) > 1 else ""
+        raise DatasetError(f"--scheduler {scheduler!r}: worker {w} cannot reach --out: {why}{more}; put --out on a "
+                           "file system every worker mounts at the same path")
+    return len(answers)
+
+
 def _run_dask(scheduler, kind, rig_text, rig_source, opts, root, fmt, chunks, retries, bar) -> int:
     try:
         from distributed import Client, as_completed
@@ -367,6 +423,7 @@ def _run_dask(scheduler, kind, rig_text, rig_source, opts, root, fmt, chunks, re
         raise DatasetError("--scheduler needs dask.distributed (pip install 'dask[distributed]')") from None
     client = scheduler if not isinstance(scheduler, str) else None  # a Client object is used as is
     own = False
+    root = Path(os.path.abspath(root))  # the workers run in other folders (and on other hosts): never a relative path
     if client is None:
         try:
             client = Client(scheduler, timeout="10s")
@@ -374,6 +431,7 @@ def _run_dask(scheduler, kind, rig_text, rig_source, opts, root, fmt, chunks, re
         except (OSError, ValueError, TypeError) as e:
             raise DatasetError(f"--scheduler {scheduler!r}: cannot connect ({e})") from None
     try:
+        check_workers(client, root, scheduler if isinstance(scheduler, str) else "(client)")
         futs = client.map(_dask_task, [kind] * len(chunks), [rig_text] * len(chunks), [rig_source] * len(chunks),
                           [opts] * len(chunks), [str(root)] * len(chunks), [fmt] * len(chunks), chunks,
                           retries=retries, pure=False)

@@ -81,7 +81,8 @@ class Score:
         return {k: v for k, v in self.__dict__.items() if k not in ("per_frame", "rows")}
 
 
-CENTROID_COLUMNS = (("u", "v"), ("u_px", "v_px"), ("xcentroid", "ycentroid"), ("x", "y"))  # rigsim/OpenCV, photutils, sep
+CENTROID_COLUMNS = (("u", "v"), ("u_px", "v_px"), ("x_centroid", "y_centroid"), ("xcentroid", "ycentroid"), ("x", "y"))
+"""rigsim/OpenCV; photutils ≥ 3 (x_centroid) and before (xcentroid); sep."""
 DIRECTION_COLUMNS = ("x", "y", "z")
 
 
@@ -116,6 +117,15 @@ def read_predictions(path, mode: str | None = None, multi: bool = False, names: 
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); expected the predictions CSV") from None
+    try:
+        return _read_predictions(path, text, mode, multi)
+    except csv.Error as exc:  # a field longer than the csv module's limit (131072 characters), a stray NUL
+        raise DatasetError(f"{path}: not a readable CSV ({str(exc)[:100]})") from None
+
+
+def _read_predictions(path, text: str, mode, multi):
+    from rigsim.files.numbers import parse_float, parse_int
+
     rd = csv.reader(io.StringIO(text, newline=""))
     try:
         header = [h.strip() for h in next(rd)]
@@ -138,17 +148,18 @@ def read_predictions(path, mode: str | None = None, multi: bool = False, names: 
         if spot_col is not None and spot_col < len(row) and row[spot_col].strip() not in ("0", ""):
             continue  # a fainter spot of a one-spot frame
         try:
-            fr = int(vals[0])
+            fr = parse_int(vals[0])
         except ValueError:
             fr = (names or {}).get(Path(vals[0]).name)
             if fr is None:
-                raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0]!r} is neither a frame index nor a frame "
+                raise DatasetError(f"{path}:{line}: column 'frame' = {vals[0][:40]!r} is neither a frame index nor a frame "
                                    "file of the dataset (frames/frame_NNNNNN.EXT)") from None
         try:
-            v = np.array([float(x) if x else math.nan for x in vals[1:]])
+            v = np.array([parse_float(x) if x else math.nan for x in vals[1:]])
         except ValueError:
             bad = next(c for c, x in zip(cols, vals[1:]) if x and not _isfloat(x))
-            raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols.index(bad)]!r} is not a number") from None
+            raise DatasetError(f"{path}:{line}: column '{bad}' = {vals[1 + cols.index(bad)][:40]!r} is not a number in "
+                               "ASCII digits") from None
         if np.any(np.isnan(v)):  # a failed fit: the frame has no prediction
             failed.append(fr)
             continue
@@ -181,8 +192,10 @@ def _frame_names(ds) -> dict[str, int]:
 
 
 def _isfloat(x) -> bool:
+    from rigsim.files.numbers import parse_float
+
     try:
-        float(x)
+        parse_float(x)
         return True
     except ValueError:
         return False
@@ -258,15 +271,24 @@ def convention_hints(P: np.ndarray, T: np.ndarray) -> list[str]:
     m = d.mean(axis=0)
     spread = float(np.sqrt(np.mean(np.sum((d - m) ** 2, axis=1))))
     if len(d) >= 3 and spread < 0.25 * float(np.hypot(*m)):
-        for target, cause in ((1.0, "1-based pixel indices (FITS, MATLAB, IRAF): subtract 1"),
-                              (0.5, "a corner-origin convention (pixel (0, 0) spans 0 to 1): subtract 0.5")):
+        causes = {1.0: ("1-based pixel indices (FITS, MATLAB, IRAF)", "an index shifted the wrong way (1 subtracted "
+                                                                         "twice, or 0-based read as 1-based)"),
+                  0.5: ("a corner-origin convention (pixel (0, 0) spans 0 to 1)", "a corner-origin convention the other "
+                                                                                  "way (pixel (0, 0) spans -1 to 0)")}
+        for target, (high, low) in causes.items():
             near = [abs(abs(x) - target) < 0.15 for x in m]
-            if any(near):
-                axes = "u and v" if all(near) else ("u" if near[0] else "v")
-                out.append(f"the error is a constant offset of ({m[0]:+.3f}, {m[1]:+.3f}) px (scatter {spread:.3f} px): "
-                           f"{axes} look shifted by {target:g} px — {cause} (rigsim's pixel centres are integers, "
-                           "0-based, OpenCV's convention)")
-                break
+            if not any(near):
+                continue
+            parts = []
+            for ax, x, n in zip("uv", m, near):
+                if n:
+                    parts.append(f"{ax} by {np.sign(x) * target:+g} px ({'subtract' if x > 0 else 'add'} {target:g})")
+            cause = high if all(m[k] > 0 for k in (0, 1) if near[k]) else (
+                low if all(m[k] < 0 for k in (0, 1) if near[k]) else f"{high}, or {low}")
+            out.append(f"the error is a constant offset of ({m[0]:+.3f}, {m[1]:+.3f}) px (scatter {spread:.3f} px): "
+                       f"shifted {' and '.join(parts)} — {cause} (rigsim's pixel centres are integers, 0-based, OpenCV's "
+                       "convention)")
+            break
     swapped = P[:, ::-1] - T
     rms_sw = float(np.sqrt(np.mean(np.sum(swapped**2, axis=1))))
     if len(d) >= 2 and rms_sw < 0.1 * rms:
@@ -328,8 +350,11 @@ def _score_stars(ds, predictions, outlier, match_radius_px: float, outlier_abs: 
         else:
             false_det += len(P)
         missed += int((valid & ~matched).sum())
+    n_pred = sum(len(p) for p in pred.values())
+    better = _star_convention_hint(pred, t, n, match_radius_px, len(errs), n_pred)
     if not errs:
-        raise DatasetError(f"no predicted centroid lies within {match_radius_px} px of a valid true star")
+        raise DatasetError(f"no predicted centroid lies within {match_radius_px} px of a valid true star"
+                           + (f"; {better}" if better else ""))
     d_all = np.array(d_all)
     extra = {"valid_stars": n_valid, "matched": len(errs), "missed": missed, "false_detections": false_det,
              "match_radius_px": match_radius_px}
@@ -338,4 +363,43 @@ def _score_stars(ds, predictions, outlier, match_radius_px: float, outlier_abs: 
     sc.per_frame = {"_detection": extra}
     sc.detection = extra
     sc.columns, sc.failed, sc.rows = ["frame", *cols], failed, rows
+    P = np.array([[r["u_pred_px"], r["v_pred_px"]] for r in rows])
+    T = np.array([[r["u_true_px"], r["v_true_px"]] for r in rows])
+    sc.hints = ([better] if better else []) + convention_hints(P, T)
     return sc
+
+
+STAR_TRANSFORMS = {"u and v exchanged": lambda P: P[:, ::-1], "1 subtracted from u and v": lambda P: P - 1.0,
+                   "1 added to u and v": lambda P: P + 1.0, "0.5 subtracted from u and v": lambda P: P - 0.5,
+                   "0.5 added to u and v": lambda P: P + 0.5}
+"""Corrections tried when few star predictions match: the commonest convention mistakes undone."""
+
+
+def _star_convention_hint(pred, t, n, radius, matched: int, n_pred: int) -> str | None:
+    """When fewer than half the predictions match a true star: the correction of :data:`STAR_TRANSFORMS` under
+    which most would (more than half, and twice as many as now), as a sentence; else None."""
+    from scipy.spatial import cKDTree
+
+    if n_pred == 0 or matched >= 0.5 * n_pred:
+        return None
+    fr_col = t["frame"].astype(int)
+    trees = {}
+    for f in pred:
+        sel = np.flatnonzero((fr_col == f) & (t["star"] >= 0) & t["valid"].astype(bool))
+        if len(sel):
+            trees[f] = cKDTree(np.stack([t["u"][sel], t["v"][sel]], axis=1))
+    counts = {}
+    for name, fn in STAR_TRANSFORMS.items():
+        k = 0
+        for f, P in pred.items():
+            if f in trees and len(P):
+                d, _ = trees[f].query(fn(np.asarray(P, float)), distance_upper_bound=radius)
+                k += int(np.isfinite(d).sum())
+        counts[name] = k
+    best = max(counts, key=counts.get)
+    if counts[best] > 0.5 * n_pred and counts[best] > 2 * matched:
+        return (f"only {matched} of {n_pred} predictions lie within {radius:g} px of a true star, {counts[best]} with "
+                f"{best}: " + ("u and v look swapped (u is the column, v the row)" if "exchanged" in best else
+                               "the predictions look shifted by a pixel convention (rigsim's pixel centres are integers, "
+                               "0-based, OpenCV's convention)"))
+    return None

@@ -69,18 +69,11 @@ def encode_image(img: np.ndarray, fmt: str, header=None) -> bytes:
 
 
 def decode_image(path) -> np.ndarray:
-    path = Path(path)
-    if path.suffix == ".fits":
-        from astropy.io import fits
+    """A dataset frame's pixels (through :func:`rigsim.files.read_image`: its header checked before decoding)."""
+    from rigsim.files import read_image
 
-        with fits.open(path, memmap=False) as h:
-            return np.asarray(h[0].data).astype(np.uint16)
-    import cv2
-
-    a = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if a is None:
-        raise DatasetError(f"{path}: not a readable image (corrupt or truncated)")
-    return a
+    a = read_image(path, what="dataset frame")
+    return a.astype(np.uint16) if Path(path).suffix == ".fits" else a
 
 
 def frame_stem(index: int) -> str:
@@ -115,8 +108,10 @@ def sidecar_problem(jp, index: int, params=None) -> str | None:
     plan entry, or edited since it was written (its own checksum no longer matches)."""
     from rigsim.render.frame import _jsonable
 
+    from rigsim.files.results import parse_json
+
     try:
-        sc = json.loads(Path(jp).read_text())
+        sc = parse_json(Path(jp).read_bytes(), jp, "sidecar", max_bytes=SIDECAR_MAX_BYTES)
         ds = sc["dataset"]
         want = ds.pop("sidecar_sha256")
         if not isinstance(want, str) or not isinstance(ds.get("image_sha256"), str):
@@ -142,15 +137,23 @@ def frame_complete(root, index: int, fmt: str, verify: bool = True, params=None)
         return False
     if not verify:
         return True
-    want = json.loads(jp.read_text())["dataset"]["image_sha256"]
+    from rigsim.files.results import parse_json
+
+    want = parse_json(jp.read_bytes(), jp, "sidecar", max_bytes=SIDECAR_MAX_BYTES)["dataset"]["image_sha256"]
     return sha256_file(ip) == want
 
 
-def read_json(path, what: str) -> dict:
+SIDECAR_MAX_BYTES = 1 << 20  # a frame's sidecar is a few kB (a star frame's truth: up to some 100 kB)
+
+
+def read_json(path, what: str):
+    """A dataset's JSON file (plan, manifest, sidecar) within :func:`rigsim.files.results.parse_json`'s nesting and
+    integer bounds (no size bound: a plan grows with the frames)."""
+    from rigsim.files.results import parse_json
+
     path = Path(path)
     if not path.exists():
         raise DatasetError(f"{path}: missing ({what})")
-    try:
-        return json.loads(path.read_text())
-    except ValueError as e:
-        raise DatasetError(f"{path}: corrupt JSON ({what}): {e}") from None
+    if not path.is_file():
+        raise DatasetError(f"{path}: not a regular file ({what})")
+    return parse_json(path.read_bytes(), path, what, max_bytes=None, error=DatasetError)

@@ -1,5 +1,7 @@
 """One way to write a file: a temporary file created exclusively in the target's folder (never
-following a symlink), fsync, then an atomic rename over the target."""
+following a symlink), fsync, then an atomic rename over the target. Only a regular file (or a link,
+which is replaced, not followed) is ever replaced; a folder, a device node, a FIFO or a socket at the
+target is refused, and so is an input of the running command (:mod:`rigsim.files.outputs`)."""
 
 from __future__ import annotations
 
@@ -37,10 +39,11 @@ def output_folder(path, what: str = "output folder") -> Path:
 
 def atomic_write_bytes(path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; the folder is created if missing. Returns the path."""
+    from .outputs import check_target
+
     path = Path(path)
+    check_target(path)
     output_folder(path.parent)
-    if path.is_dir():
-        raise InputError(f"{path}: is a folder; expected a file name")
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         os.fchmod(fd, _file_mode())

@@ -25,6 +25,11 @@ def _regular_file(path: Path) -> None:
         raise InputError(f"{path}: not a regular file (a folder, FIFO or device); expected an image file")
 
 
+FITS_MAX_ABS = 1e9
+"""Largest |pixel| of a float FITS frame: no detector counts more; beyond it a frame is a unit or scaling error
+(and squares of 1e300 overflow)."""
+
+
 def _read_fits(path: Path) -> np.ndarray:
     from astropy.io import fits
 
@@ -36,16 +41,22 @@ def _read_fits(path: Path) -> np.ndarray:
                     break
             else:
                 raise InputError(f"{path}: no image HDU with data; expected a 2-D image")
-    except (OSError, TypeError, ValueError) as exc:
+    except (OSError, TypeError, ValueError, MemoryError) as exc:
         if isinstance(exc, InputError):
             raise
         raise InputError(f"{path}: not a readable FITS file ({exc})") from None
     if data.ndim != 2:
         raise InputError(f"{path}: FITS image of shape {data.shape}; expected a 2-D (rows, cols) image")
     if data.dtype.kind == "f":
-        data = data.astype(np.float64)
-        if not np.all(np.isfinite(data)):
-            raise InputError(f"{path}: FITS image holds NaN or infinite pixels; expected finite values")
+        with np.errstate(all="ignore"):
+            data = data.astype(np.float64)
+            finite = np.isfinite(data)
+            if not np.all(finite):
+                raise InputError(f"{path}: FITS image holds NaN or infinite pixels; expected finite values")
+            big = float(np.max(np.abs(data))) if data.size else 0.0
+        if big > FITS_MAX_ABS:
+            raise InputError(f"{path}: FITS pixel values up to {big:.3g} in magnitude; expected at most "
+                             f"{FITS_MAX_ABS:.0e} (DN or electrons): check BSCALE/BZERO and the units")
         return data
     if data.dtype.kind in "iu":
         lo, hi = int(data.min()), int(data.max())
@@ -55,21 +66,50 @@ def _read_fits(path: Path) -> np.ndarray:
     raise InputError(f"{path}: FITS data type {data.dtype}; expected integer or float pixels")
 
 
+def _check_header(path: Path, suffix: str, shape, what: str) -> None:
+    """The image's header against the rig's detector (``shape`` = (rows, cols)), the page count and the
+    memory budget, before any pixel is decoded."""
+    from .image_header import read_header
+    from .memory import check_frame_pixels
+
+    try:
+        h = read_header(path, suffix)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if h.pages > 1:
+        kind = "a multi-page TIFF" if suffix in (".tif", ".tiff") else "a FITS file with several images"
+        raise InputError(f"{path}: {kind} ({h.pages} {'pages' if suffix != '.fits' else 'image HDUs with data'}); "
+                         f"rigsim reads one {what} per file: split it into single-image files")
+    if shape is not None and (h.height, h.width) != tuple(shape):
+        raise InputError(f"{path}: {h.width}×{h.height} px (width×height); expected {shape[1]}×{shape[0]} px, the rig's "
+                         "detector")
+    check_frame_pixels(path, h.width, h.height, h.channels, what=what)
+
+
 def read_image(path, *, shape: tuple[int, int] | None = None, allowed_bits=(8, 16), what: str = "frame") -> np.ndarray:
     """A single-channel frame as an array ``img[v, u]``: uint8/uint16 for PNG and TIFF (and
-    integer FITS), float64 for float FITS. ``shape`` = (rows, cols) to check the size against."""
+    integer FITS), float64 for float FITS. ``shape`` = (rows, cols) to check the size against.
+
+    The header is read first (:mod:`rigsim.files.image_header`): its size is checked against ``shape`` and
+    the memory budget (:func:`rigsim.files.memory.check_frame_pixels`), a multi-page TIFF or a FITS file with
+    several images is refused, and a file whose content is not its suffix's format is never decoded."""
     path = Path(path)
     _regular_file(path)
     suffix = path.suffix.lower()
     if suffix not in FRAME_SUFFIXES:
         raise InputError(f"{path}: unsupported {what} file type {suffix or '(none)'!r}; expected one of "
                          f"{', '.join(FRAME_SUFFIXES)}")
+    _check_header(path, suffix, shape, what)
     if suffix in (".fits", ".fit", ".fts"):
         img = _read_fits(path)
     else:
         import cv2
 
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        try:
+            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        except cv2.error as exc:
+            msg = str(exc).strip().splitlines()[-1][:120] if str(exc).strip() else "OpenCV error"
+            raise InputError(f"{path}: not a readable {suffix[1:].upper()} image ({msg})") from None
         if img is None:
             raise InputError(f"{path}: not a readable {suffix[1:].upper()} image")
         if img.ndim != 2:

@@ -1,10 +1,13 @@
-"""argparse types for numeric options: a value outside its range (or not finite) is refused while the
-command line is parsed, with argparse's one-line error naming the option, the value and the range."""
+"""argparse types for numeric options: a value outside its range (or not finite, or not written in ASCII
+digits: :mod:`rigsim.files.numbers`) is refused while the command line is parsed, with argparse's one-line
+error naming the option, the value and the range."""
 
 from __future__ import annotations
 
 import argparse
 import math
+
+from .numbers import parse_float, parse_int
 
 
 def integer(lo: int, hi: int):
@@ -12,7 +15,7 @@ def integer(lo: int, hi: int):
 
     def parse(text: str) -> int:
         try:
-            v = int(text)
+            v = parse_int(text)
         except (TypeError, ValueError):
             v = None
         if v is None or not (lo <= v <= hi):
@@ -28,7 +31,7 @@ def number(lo: float, hi: float):
 
     def parse(text: str) -> float:
         try:
-            v = float(text)
+            v = parse_float(text)
         except (TypeError, ValueError):
             v = math.nan
         if not (math.isfinite(v) and lo <= v <= hi):
@@ -37,6 +40,14 @@ def number(lo: float, hi: float):
 
     parse.__name__ = f"number in [{lo:g}, {hi:g}]"
     return parse
+
+
+def real(text: str) -> float:
+    """A real option in ASCII digits (its range checked by the command, which names it), ``nan``/``inf`` included."""
+    try:
+        return parse_float(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number in ASCII digits") from None
 
 
 SEED = integer(0, 2**63 - 1)  # every seed: numpy's SeedSequence and Mitsuba's sampler take it whole

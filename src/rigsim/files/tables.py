@@ -19,6 +19,7 @@ import numpy as np
 from rigsim.errors import InputError
 
 from .atomic import atomic_write_bytes
+from .numbers import parse_float, parse_int
 
 UNITS = {"deg": "degrees", "rad": "radians", "mrad": "milliradians", "urad": "microradians", "arcmin": "arcminutes",
          "arcsec": "arcseconds", "mas": "milliarcseconds", "px": "pixels", "nm": "nanometres", "um": "micrometres",
@@ -104,9 +105,14 @@ def _parse(path, parquet, line, col: Column, cell):
     if isinstance(cell, bool):
         raise InputError(f"{_where(path, parquet, line, col.key)}: {cell!r} is a boolean; expected a number")
     try:
-        x = float(cell) if col.kind == "float" else int(cell)
-    except (TypeError, ValueError):
-        want = "a number" if col.kind == "float" else "an integer"
+        if isinstance(cell, str):  # ASCII digits only: float('١٢') is 12 and int('1_0') is 10
+            x = parse_float(cell) if col.kind == "float" else parse_int(cell)
+        else:
+            x = float(cell) if col.kind == "float" else int(cell)
+        if col.kind == "int" and not -2**63 <= x < 2**63:
+            raise ValueError
+    except (TypeError, ValueError, OverflowError):
+        want = "a number in ASCII digits" if col.kind == "float" else "an integer in ASCII digits, at most 2⁶³"
         raise InputError(f"{_where(path, parquet, line, col.key)}: {str(cell)[:40]!r} is not {want}") from None
     if col.kind == "float" and not math.isfinite(x) and not (col.allow_nan and math.isnan(x)):
         raise InputError(f"{_where(path, parquet, line, col.key)}: {cell!r}; expected a finite number")

@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 TARGET_SPECS = "chessboard:COLSxROWS:SQUARE_MM, circles:COLSxROWS:PITCH_MM:DIAM_MM or image:PATH:WIDTH_MM"
-_GRID = re.compile(r"^\s*(\d+)\s*[xX×]\s*(\d+)\s*$")
+_GRID = re.compile(r"^\s*([0-9]+)\s*[xX×]\s*([0-9]+)\s*$")
 
 
 @dataclass(frozen=True)
@@ -171,8 +171,10 @@ def image_target(path, width_mm: float, *, spec: str | None = None) -> PlanarTar
 
 
 def _number(spec: str, text: str, what: str) -> float:
+    from rigsim.files.numbers import parse_float
+
     try:
-        x = float(text)
+        x = parse_float(text)
     except ValueError:
         raise InputError(f"--target {spec!r}: {what} {text!r} is not a number; expected {TARGET_SPECS}") from None
     return x

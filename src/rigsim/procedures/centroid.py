@@ -17,6 +17,7 @@ import numpy as np
 from rigsim.errors import CliError
 from rigsim.files import read_image, write_table
 from rigsim.files.options import integer, number
+from rigsim.files.outputs import declare
 from rigsim.imaging import Flag, NoiseModel, estimate_background
 from rigsim.imaging.frame_spots import FRAME_METHODS, default_threshold_dn, measure_frame
 
@@ -148,6 +149,9 @@ def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str =
     its bright stars) is appended to ``psf_sigmas``."""
     cols: dict[str, list] = {k: [] for k in ("frame", "spot", "u_px", "v_px", "sigma_u_px", "sigma_v_px", "flux_dn",
                                              "flags", "flag_names")}
+    from rigsim.files.inputs import check_distinct
+
+    check_distinct(paths, "FRAME")  # the table names each frame by its base name
     warned = False
     for p in paths:
         img = read_image(p, shape=settings.shape)
@@ -209,6 +213,7 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--max-spots", type=integer(1, 1_000_000), default=None, help="keep the N brightest spots per frame")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_centroid)
+    declare(c, "out", suffixes=(".csv", ".parquet"))
 
 
 def _check_options(args) -> None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from rigsim.errors import CliError
 from rigsim.files.options import number
+from rigsim.files.outputs import declare
 
 __all__ = ["add_cli", "parse_matrix"]
 
@@ -30,6 +31,7 @@ def add_cli(groups: dict) -> None:
                    help="also recompute the numbers the documents' own data decide (Table 1, the printed matrix)")
     p.add_argument("--json", default=None, metavar="FILE", help="write the registry (and the evaluation) as JSON")
     p.set_defaults(func=cmd_readings)
+    declare(p, "json")
     m = groups["top"].add_parser(
         "check-matrix", formatter_class=argparse.RawDescriptionHelpFormatter,
         help="is a printed 3×3 matrix a rotation? determinant, norms, angles, nearest rotation, sign repair",
@@ -101,12 +103,19 @@ def cmd_readings(args) -> int:
 def parse_matrix(text: str) -> np.ndarray:
     """Nine numbers in row order, separated by spaces, commas, semicolons or brackets ('1 0 0; 0 1 0; 0 0 1',
     '[[1, 0, 0], [0, 1, 0], [0, 0, 1]]')."""
+    from rigsim.files.numbers import parse_float
+
     tokens = [t for t in re.split(r"[\s,;\[\]()]+", text) if t]
-    try:
-        M = np.array([float(t) for t in tokens], float)
-    except ValueError:
-        bad = next(t for t in tokens if not re.fullmatch(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", t))
-        raise CliError(f"matrix {text!r}: {bad!r} is not a number; expected nine numbers, rows separated by ';'") from None
+    if len(tokens) > 9:
+        raise CliError(f"matrix {text[:60]!r}…: {len(tokens)} numbers; expected nine, rows separated by ';'")
+    vals = []
+    for t in tokens:
+        try:
+            vals.append(parse_float(t))
+        except ValueError:
+            raise CliError(f"matrix {text!r}: {t!r} is not a number in ASCII digits; expected nine numbers, rows "
+                           "separated by ';'") from None
+    M = np.array(vals, float)
     if M.size != 9 or not np.all(np.isfinite(M)):
         raise CliError(f"matrix {text!r}: {M.size} numbers{'' if np.all(np.isfinite(M)) else ', not all finite'}; "
                        "expected nine finite numbers, rows separated by ';'")

@@ -39,6 +39,9 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--out", default=None, metavar="DIR", help="report folder (default renders/robustness/<rig name>)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run_robustness)
+    from rigsim.files.outputs import declare
+
+    declare(p, "out", folder=True)
 
 
 FAMILY_MODULES = {

@@ -14,6 +14,7 @@ from rigsim.errors import CliError
 from rigsim.files import write_json, write_table
 from rigsim.files.atomic import output_folder
 from rigsim.files.options import SEED, SPP, integer, number
+from rigsim.files.outputs import Output, declare
 from rigsim.optics.targets import TARGET_SPECS, PlanarTarget, TargetPoses, parse_target, read_poses, spread_poses, write_poses
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -129,6 +130,8 @@ def add_cli(groups: dict) -> None:
                    help="white's signal on axis as a fraction of the usable full well (default 0.6)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_render_target)
+    declare(p, "out", folder=True, derived=lambda a: [Output(Path(a.out) / n, f"--out's {n}") for n in
+                                                      ("points.csv", "target.json", *(("poses.csv",) if a.spread else ()))])
 
 
 def cmd_render_target(args) -> int:

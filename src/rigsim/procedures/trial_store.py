@@ -1,6 +1,8 @@
 """The finished trials of a robustness run, one small JSON file each in the report folder, so that a
 run that is killed or fails resumes where it stopped. A trial is reused only when the rig, the effects
-studied, the trial function, rigsim's source and the renderer's version are all the same."""
+studied, the trial function, rigsim's source and the renderer's version are all the same, and when its
+own checksum (SHA-256 of its canonical JSON, written beside the values) still holds: a trial edited by
+hand, or damaged, is run again, never reused (as a dataset's frames)."""
 
 from __future__ import annotations
 
@@ -17,7 +19,13 @@ from rigsim.files.atomic import atomic_write_bytes, output_folder
 __all__ = ["FOLDER", "TrialStore", "run_key", "source_digest"]
 
 FOLDER = "robustness-trials"
-FORMAT = "rigsim.robustness-trial/1"
+FORMAT = "rigsim.robustness-trial/2"  # /2: with its own checksum ("sha256")
+
+
+def _checksum(doc: dict) -> str:
+    """SHA-256 of the trial's canonical JSON (sorted keys, no spaces), its "sha256" left out."""
+    body = {k: v for k, v in doc.items() if k != "sha256"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
 def source_digest() -> str:
@@ -64,17 +72,22 @@ class TrialStore:
         return self.folder / f"{_slug(config)}-seed{int(seed)}.json"
 
     def get(self, config: str, seed: int) -> dict | None:
-        """The stored values of (``config``, ``seed``), or None when absent, unreadable or from
-        another rig, source or version (such a file is then overwritten)."""
+        """The stored values of (``config``, ``seed``), or None when absent, unreadable, edited since it was
+        written (its checksum does not hold) or from another rig, source or version (such a file is then
+        overwritten)."""
+        from rigsim.files.results import parse_json
+
         p = self._path(config, seed)
         if self.folder.is_symlink() or p.is_symlink() or not p.is_file():
             return None
         try:
-            d = json.loads(p.read_text())
+            d = parse_json(p.read_bytes(), p, "kept trial", max_bytes=16 << 20)
         except (OSError, ValueError):
             return None
         if not isinstance(d, dict) or d.get("format") != FORMAT or d.get("key") != self.key \
                 or d.get("config") != config or d.get("seed") != int(seed) or not isinstance(d.get("values"), dict):
+            return None
+        if d.get("sha256") != _checksum(d):
             return None
         return d["values"]
 
@@ -91,6 +104,8 @@ class TrialStore:
     def put(self, config: str, seed: int, values: dict) -> None:
         self.create()
         doc = {"format": FORMAT, "key": self.key, "config": config, "seed": int(seed), "values": values}
+        doc = json.loads(json.dumps(doc))  # the checksum is of what is read back (tuples become lists)
+        doc["sha256"] = _checksum(doc)
         atomic_write_bytes(self._path(config, seed), (json.dumps(doc) + "\n").encode())
 
     def count(self, configs, seeds) -> int:

@@ -8,44 +8,18 @@ import shutil
 from pathlib import Path
 
 from rigsim.errors import ResourceError
+from rigsim.files.memory import HEADROOM, available_bytes
+from rigsim.files.memory import human_bytes as _gb
 
 BASE_BYTES = 350e6      # an interpreter with Mitsuba and the rig loaded, film and detector buffers aside
 BYTES_PER_PIXEL = 115   # film, photon, noise and fixed-pattern buffers (float64) and the 16-bit frame
 DISK_BYTES_PER_PIXEL = 2.0  # a 16-bit image stored uncompressed (PNG and FITS are at most this, plus headers)
 SIDECAR_BYTES = 16_384
-HEADROOM = 0.85         # of the available memory: the rest is left to the system and the caller
 
 
 def process_bytes(pixels: int) -> float:
     """Peak resident memory of one process rendering frames of ``pixels`` detector pixels."""
     return BASE_BYTES + BYTES_PER_PIXEL * int(pixels)
-
-
-def available_bytes() -> float | None:
-    """Memory this process may still use: MemAvailable, or less under a cgroup (container) limit."""
-    avail = None
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    avail = float(line.split()[1]) * 1024
-    except OSError:
-        return None
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        if limit != "max":
-            used = float(Path("/sys/fs/cgroup/memory.current").read_text())
-            avail = min(avail, float(limit) - used) if avail is not None else float(limit) - used
-    except (OSError, ValueError):
-        pass
-    return avail
-
-
-def _gb(x: float) -> str:
-    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
-        if abs(x) >= scale:
-            return f"{x / scale:.3g} {unit}"
-    return f"{x / 1e3:.3g} kB"
 
 
 def fit_processes(requested: int, pixels: int, what: str) -> int:

@@ -129,7 +129,9 @@ def read_frame(path) -> tuple[np.ndarray, dict]:
     img = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ValueError(f"{png} is not a readable PNG")
-    side = json.loads(js.read_text())
+    from rigsim.files.results import parse_json
+
+    side = parse_json(js.read_bytes(), js, "frame sidecar", max_bytes=16 << 20, error=ValueError)
     if side.get("format") != SIDECAR_FORMAT:
         raise ValueError(f"{js}: format {side.get('format')!r}, expected {SIDECAR_FORMAT!r}")
     if img.dtype != np.uint16 or img.ndim != 2:

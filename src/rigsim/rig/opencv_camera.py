@@ -6,6 +6,7 @@ comments and layout (tomlkit); only the intrinsics change. docs/custom-rig.md ha
 from __future__ import annotations
 
 import math
+import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,15 +48,21 @@ def read_opencv_camera(path) -> OpenCVCamera:
         raise InputError(f"{path}: not UTF-8 text (byte {exc.start}); expected an OpenCV FileStorage camera") from None
     if path.suffix.lower() in (".yml", ".yaml") and not text.lstrip().startswith("%YAML"):
         text = "%YAML:1.0\n" + text  # OpenCV insists on its header; files written by hand often lack it
+    check_filestorage_text(text, path)
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
     except (cv2.error, SystemError) as exc:  # OpenCV's parser raises through a SystemError on some syntax errors
         cause = exc.__cause__ or exc
         raise InputError(f"{path}: not an OpenCV FileStorage file ({str(cause).strip().splitlines()[-1][:120]})") from None
     try:
+        if not fs.root().isMap():  # a list or a scalar at the top: OpenCV's getNode would assert
+            raise InputError(f"{path}: the top level is not a map of named nodes; expected an OpenCV FileStorage "
+                             "camera (camera_matrix, distortion_coefficients, image_width, image_height)")
         K = _matrix(fs, MATRIX_KEYS)
         D = _matrix(fs, DIST_KEYS)
         size = tuple(_integer(fs, k) for k in ("image_width", "image_height"))
+    except cv2.error as exc:
+        raise InputError(f"{path}: not an OpenCV FileStorage camera ({str(exc).strip().splitlines()[-1][:120]})") from None
     finally:
         fs.release()
     if K is None:
@@ -73,6 +80,69 @@ def read_opencv_camera(path) -> OpenCVCamera:
     dist = {n: float(v) for n, v in zip(DIST_NAMES, d)}
     w, h = size
     return OpenCVCamera(fx, fy, cx, cy, dist, (w, h) if w and h else None, float(K[0, 1]))
+
+
+MAX_DEPTH = 64
+"""Deepest nesting read from a FileStorage file (a camera file nests 2 deep; OpenCV's parser recurses and
+crashes near 10⁵)."""
+_DIMS = re.compile(r'(?<![A-Za-z_])["\']?(rows|cols)["\']?\s*:\s*"?([0-9]+)|<(rows|cols)>\s*([0-9]+)\s*</(?:rows|cols)>')
+_SIZES = re.compile(r'(?<![A-Za-z_])["\']?sizes["\']?\s*(?::|>)\s*\[?\s*([0-9][0-9\s,]*)')
+_XML_TAG = re.compile(r"<(/?)[A-Za-z_][^\s>/]*[^>]*?(/?)>")
+
+
+def _block_depth(text: str) -> int:
+    """Nesting of a YAML file's block structure: indentation levels, plus '- ' items opened on one line."""
+    stack: list[int] = []
+    deepest = 0
+    for line in text.splitlines():
+        body = line.lstrip(" ")
+        if not body or body.startswith(("#", "%", "---", "...")):
+            continue
+        indent = len(line) - len(body)
+        while stack and stack[-1] >= indent:
+            stack.pop()
+        stack.append(indent)
+        dashes = 0
+        while body.startswith("- ") or body == "-":
+            dashes += 1
+            body = body[2:].lstrip(" ")
+        deepest = max(deepest, len(stack) + dashes)
+    return deepest
+
+
+def _xml_depth(text: str) -> int:
+    depth = deepest = 0
+    for m in _XML_TAG.finditer(text):
+        if m.group(0).startswith(("<?", "<!")):
+            continue
+        if m.group(1):
+            depth -= 1
+        elif not m.group(2):
+            depth += 1
+            deepest = max(deepest, depth)
+    return deepest
+
+
+def check_filestorage_text(text: str, path) -> None:
+    """Refuse, before OpenCV parses it, a FileStorage text nested deeper than :data:`MAX_DEPTH` or with a
+    matrix whose ``rows × cols`` (or ``sizes``) claims more values than the file can hold (OpenCV allocates the
+    claimed size first: 10⁶ × 10⁶ doubles are 8 TB)."""
+    from rigsim.files.results import json_depth
+
+    depth = _xml_depth(text) if text.lstrip().startswith("<") else json_depth(text) + _block_depth(text)
+    if depth > MAX_DEPTH:
+        raise InputError(f"{path}: nested {depth} deep; an OpenCV camera file is read when it nests at most {MAX_DEPTH} "
+                         "deep")
+    dims = [(m.group(1) or m.group(3), int(m.group(2) or m.group(4))) for m in _DIMS.finditer(text)]
+    claims = [int(np.prod([int(x) for x in re.split(r"[\s,]+", m.group(1).strip()) if x], dtype=object))
+              for m in _SIZES.finditer(text)]
+    rows = [n for k, n in dims if k == "rows"]
+    cols = [n for k, n in dims if k == "cols"]
+    claims += [r * c for r, c in zip(rows, cols)] + [n for n in rows + cols if n > len(text)]
+    big = [c for c in claims if c > len(text)]
+    if big:
+        raise InputError(f"{path}: a matrix claims {big[0]} values ({', '.join(f'{k} {n}' for k, n in dims[:2])}) in a file "
+                         f"of {len(text)} characters; expected the camera_matrix (3×3) and distortion_coefficients")
 
 
 def _matrix(fs, keys):

@@ -61,7 +61,9 @@ def parse_size(size) -> tuple[int, int]:
     if isinstance(size, str):
         parts = size.lower().replace("\u00d7", "x").split("x")
         try:
-            w, h = (int(p) for p in parts)
+            from rigsim.files.numbers import parse_int
+
+            w, h = (parse_int(p) for p in parts)
         except ValueError:
             raise ViewError(f"--size = {size!r}: expected WIDTHxHEIGHT in pixels, e.g. 1200x800") from None
     else:

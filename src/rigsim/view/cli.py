@@ -61,6 +61,11 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--size", default="1200x800", metavar="WxH", help="picture / window size in pixels")
     p.add_argument("--window", action="store_true", help="open the interactive window (needs a display)")
     p.set_defaults(func=cmd_view)
+    from rigsim.files.outputs import declare
+
+    declare(p, "screenshot", suffixes=(".png",))
+    declare(p, "html", suffixes=(".html",))
+    declare(p, "export", suffixes=(".gltf", ".vtkjs", ".vtm"))
 
 
 def _check_outputs(args) -> None:
@@ -106,11 +111,13 @@ def cmd_view(args) -> int:
         from rigsim.view.display import render_window_class
         from rigsim.view.plot import make_plotter
 
+        from rigsim.view.plot import save_screenshot
+
         out = Path(args.screenshot)
         output_folder(out.parent)
         pl = make_plotter(scene, off_screen=True, size=size)
         try:
-            pl.screenshot(str(out), return_img=False)
+            save_screenshot(pl, out)
             rw = render_window_class(pl)
         finally:
             pl.close()

@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from rigsim.files.numbers import parse_float
 from rigsim.errors import GeometryError, ViewError
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.optics.cube import DOCUMENT_FACE_NAMES, FACE_NORMALS, reflect
@@ -106,9 +107,9 @@ def resolve_pose_deg(rig: CubeMirrorRig, real: Realization, pose, fi: int) -> tu
         if k not in axes:
             raise ViewError(f"--pose axis {k!r}: this turntable has axes {labels}")
         try:
-            val = float(v)
+            val = parse_float(v) if isinstance(v, str) else float(v)
         except (TypeError, ValueError):
-            raise ViewError(f"--pose {k} = {v!r}: not a number of degrees") from None
+            raise ViewError(f"--pose {k} = {v!r}: not a number of degrees in ASCII digits") from None
         lo, hi = axes[k].range_deg
         if not (math.isfinite(val) and lo <= val <= hi):
             raise ViewError(f"--pose {k} = {v}: allowed range is {lo:g} to {hi:g} degrees "

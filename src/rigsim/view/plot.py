@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import ViewError
-from rigsim.files.atomic import output_folder
+from rigsim.files.atomic import atomic_write_bytes, output_folder
+from rigsim.files.outputs import check_target
 from rigsim.view.display import has_display, prepare_offscreen
 from rigsim.view.scene import COLOURS, RigScene, ViewSpec
 
-__all__ = ["make_plotter", "populate", "screenshot", "export_scene", "show", "EXPORT_SUFFIXES",
+__all__ = ["make_plotter", "populate", "screenshot", "save_screenshot", "export_scene", "show", "EXPORT_SUFFIXES",
            "html_available"]
 
 EXPORT_SUFFIXES = (".gltf", ".vtkjs", ".vtm", ".html")
@@ -204,13 +205,22 @@ def screenshot(scene: RigScene, out_png, *, size=(1200, 800), views: list[str] |
     out = Path(out_png)
     if out.suffix.lower() != ".png":
         raise ViewError(f"--screenshot = {str(out_png)!r}: must be a .png file")
+    check_target(out)
     output_folder(out.parent)
     pl = make_plotter(scene, off_screen=True, size=size, views=views)
     try:
-        pl.screenshot(str(out), return_img=False)
+        save_screenshot(pl, out)
     finally:
         pl.close()
     return out
+
+
+def save_screenshot(pl, out: Path) -> None:
+    """The plotter's picture as a PNG at ``out``: VTK writes it in a temporary folder, then one atomic write of its
+    bytes (never through a link, never over a device node)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        pl.screenshot(str(Path(tmp) / "shot.png"), return_img=False)
+        atomic_write_bytes(out, (Path(tmp) / "shot.png").read_bytes())
 
 
 def html_available() -> bool:
@@ -245,6 +255,7 @@ def export_scene(scene: RigScene, path) -> Path:
     suf = out.suffix.lower()
     if suf not in EXPORT_SUFFIXES:
         raise ViewError(f"export file {str(path)!r}: allowed suffixes are {', '.join(EXPORT_SUFFIXES)}")
+    check_target(out)
     output_folder(out.parent)
     if suf == ".vtm":
         import pyvista as pv
@@ -262,8 +273,11 @@ def export_scene(scene: RigScene, path) -> Path:
     pl = _single(scene)
     try:
         if suf == ".gltf":
-            pl.export_gltf(str(out), inline_data=True, rotate_scene=False)
-            gltf_in_metres(out, [it.name for it in scene.items], scene.rig_name)
+            with tempfile.TemporaryDirectory() as tmp:  # VTK writes the file itself: then one atomic write
+                g = Path(tmp) / "scene.gltf"
+                pl.export_gltf(str(g), inline_data=True, rotate_scene=False)
+                gltf_in_metres(g, [it.name for it in scene.items], scene.rig_name)
+                atomic_write_bytes(out, g.read_bytes())
         elif suf == ".vtkjs":
             import vtk
 
@@ -273,10 +287,14 @@ def export_scene(scene: RigScene, path) -> Path:
                 ex.SetRenderWindow(pl.render_window)
                 ex.SetFileName(str(d))
                 ex.Write()
-                with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+                import io
+
+                buf = io.BytesIO()
+                with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
                     for f in sorted(d.rglob("*")):
                         if f.is_file():
                             z.write(f, Path("scene") / f.relative_to(d))
+                atomic_write_bytes(out, buf.getvalue())
         else:  # .html with trame-pyvista present
             pl.trame.export_html(str(out))
             html_overlay(out, scene)

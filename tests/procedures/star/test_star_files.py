@@ -4,6 +4,7 @@ every EKF state to 1e-9 relative through `rigsim star calibrate`; bad logs and f
 
 import json
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -115,6 +116,46 @@ def test_bad_inputs_one_line(exported, tmp_path, capsys, edit, message):
                "--out", str(d / "cal")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and re.search(message, err), err
+    assert not (d / "cal").exists()
+
+
+def _rewrite_log(path, fn):
+    t = read_table(path, [Column("frame", kind="str"), Column("time", "s"), Column("qw"), Column("qx"), Column("qy"),
+                          Column("qz")])
+    q = np.column_stack([t["qw"], t["qx"], t["qy"], t["qz"]])
+    q = fn(q)
+    write_table(path, {"frame": list(t["frame"]), "time_s": t["time_s"], "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2],
+                       "qz": q[:, 3]})
+
+
+@pytest.mark.parametrize("fn, named", [
+    (lambda q: q[:, [1, 2, 3, 0]], "read scalar last, they agree with the stars"),        # (x, y, z, w) under qw..qz
+    (lambda q: q * [1, -1, -1, -1], "read conjugated, they agree with the stars"),        # R(ICRS←cam)
+    (lambda q: (q * [1, -1, -1, -1])[:, [1, 2, 3, 0]], "read scalar last and conjugated"),
+    (lambda q: np.roll(q, 7, axis=0), "is the log for these frames"),                     # another frame's attitude
+])
+def test_a_log_in_another_quaternion_convention_is_named(exported, tmp_path, capsys, fn, named):
+    """The two commonest mistakes in an attitude log: the scalar written last, and the inverse rotation. Frames
+    identified without a prior tell which one it is; nothing is written."""
+    d = _bare(exported, tmp_path / "bare")
+    _rewrite_log(d / "log.csv", fn)
+    rc = main(["star", "calibrate", *sorted(str(p) for p in d.glob("shot-*.png")), "--attitudes", str(d / "log.csv"),
+               "--out", str(d / "cal")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and named in err, err
+    assert not (d / "cal").exists()
+
+
+def test_a_frame_listed_twice_or_two_frames_of_one_name_are_refused(exported, tmp_path, capsys):
+    d = _bare(exported, tmp_path / "bare")
+    frames = sorted(str(p) for p in d.glob("shot-*.png"))
+    (d / "again").mkdir()
+    shutil.copy(frames[3], d / "again" / "shot-03.png")
+    for extra, words in (([frames[2]], "the same file as"), ([str(d / "." / Path(frames[2]).name)], "the same file as"),
+                         ([str(d / "again" / "shot-03.png")], "two star frames named 'shot-03.png'")):
+        rc = main(["star", "calibrate", *frames, *extra, "--attitudes", str(d / "log.csv"), "--out", str(d / "cal")])
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and len(err.splitlines()) == 1 and words in err, err
     assert not (d / "cal").exists()
 
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from rigsim.errors import DatasetError
+from rigsim.files.numbers import parse_float
 
 
 def parse_sweep(spec: str, allowed: list[str]) -> dict[str, np.ndarray]:
@@ -18,9 +19,11 @@ def parse_sweep(spec: str, allowed: list[str]) -> dict[str, np.ndarray]:
         name, vals = part.split("=", 1)
         if name not in allowed:
             raise DatasetError(f"--sweep {spec!r}: '{name}' is not sweepable; allowed: {', '.join(allowed)}")
+        if name in out:
+            raise DatasetError(f"--sweep {spec!r}: '{name}' given twice")
         try:
             if ":" in vals:
-                a, b, s = (float(x) for x in vals.split(":"))
+                a, b, s = (parse_float(x) for x in vals.split(":"))
                 if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(s)) or s <= 0 or b < a:
                     raise ValueError
                 n = int(math.floor((b - a) / s + 1e-9)) + 1
@@ -28,7 +31,7 @@ def parse_sweep(spec: str, allowed: list[str]) -> dict[str, np.ndarray]:
                     raise DatasetError(f"--sweep {spec!r}: {name} has {n} values (max 100000)")
                 v = a + s * np.arange(n)
             else:
-                v = np.array([float(x) for x in vals.split(",")])
+                v = np.array([parse_float(x) for x in vals.split(",")])
             if not np.all(np.isfinite(v)):
                 raise ValueError
         except (ValueError, OverflowError):

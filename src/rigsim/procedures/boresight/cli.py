@@ -14,6 +14,7 @@ import numpy as np
 
 from rigsim.errors import CliError
 from rigsim.files.options import SEED, SPP, integer, number
+from rigsim.files.outputs import declare
 
 __all__ = ["add_cli", "cmd_run_boresight"]
 
@@ -49,6 +50,9 @@ def add_cli(groups: dict) -> None:
                    "image files (ref_/meas_<camera>_m1|m2_<k>.png, no truth) for `rigsim boresight centroid`")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_run_boresight)
+    declare(p, "out", folder=True)
+    declare(p, "json_out")
+    declare(p, "export_frames", folder=True)
     from rigsim.procedures.boresight import render_commands
 
     render_commands.add_cli(groups)
@@ -68,6 +72,7 @@ def add_cli(groups: dict) -> None:
                    help="centroider (seed 003: tcom; tcom_peak: the peak's blob only, leaves out a ghost)")
     c.add_argument("--out", required=True, metavar="FILE", help="spot table (.csv or .parquet)")
     c.set_defaults(func=cmd_boresight_centroid)
+    declare(c, "out", suffixes=(".csv", ".parquet"))
     v = bs.add_parser("solve", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
                       help="(Δf, α, β, γ) per row of a spot table against a reference",
                       description="Solve every row (camera, u_m1_px, v_m1_px, u_m2_px, v_m2_px) against the reference "
@@ -90,6 +95,8 @@ def add_cli(groups: dict) -> None:
 
     add_accept_option(v)
     v.set_defaults(func=cmd_boresight_solve)
+    declare(v, "out", suffixes=(".csv", ".parquet"))
+    declare(v, "json_out")
     return p
 
 
@@ -109,6 +116,10 @@ def cmd_boresight_centroid(args) -> int:
 def _merged_rows(paths, rig, what):
     from rigsim.procedures.boresight.files import read_spot_rows
 
+    from rigsim.files.inputs import check_distinct
+
+    check_distinct(paths, f"--{what.split()[0]}" if what.startswith("reference") else "--measured", by_name=False,
+                   what="table")
     samples, cams, uvs = [], [], []
     for p in paths:
         s, c, uv = read_spot_rows(p, rig, what=what)
@@ -209,11 +220,12 @@ def _write_solve_json(args, rig, rcams, ref, samples, cams, uv, sig, verdict) ->
 
 def _stream(rig, ref) -> int:
     """Rows on stdin → rows on stdout, one at a time: camera,u_m1_px,v_m1_px,u_m2_px,v_m2_px[,sample]."""
-    from rigsim.procedures.boresight.files import streaming_solver
+    from rigsim.files.numbers import parse_float
+    from rigsim.procedures.boresight.files import spot_problem, streaming_solver
 
     solvers = streaming_solver(rig, ref)
     need = ["camera", "u_m1_px", "v_m1_px", "u_m2_px", "v_m2_px"]
-    header = sys.stdin.readline().strip().split(",")
+    header = [h.strip() for h in sys.stdin.readline().strip().split(",")]
     missing = [c for c in need if c not in header]
     if missing:
         raise CliError(f"stdin: line 1 (header): no column {missing[0]}; expected {','.join(need)}[,sample]")
@@ -224,7 +236,9 @@ def _stream(rig, ref) -> int:
     out.flush()
     uv = np.empty((2, 2))
     for n, line in enumerate(sys.stdin, start=2):
-        f = line.rstrip("\n").split(",")
+        if not line.strip():
+            continue
+        f = [x.strip() for x in line.rstrip("\r\n").split(",")]  # CRLF lines (a Windows program's) read as LF
         if len(f) != len(header):
             raise CliError(f"stdin: line {n}: {len(f)} fields; expected {len(header)} like the header")
         cam = f[idx[0]]
@@ -232,9 +246,13 @@ def _stream(rig, ref) -> int:
         if sol is None:
             raise CliError(f"stdin: line {n}, column camera: {cam!r} has no reference")
         try:
-            uv[0, 0], uv[0, 1], uv[1, 0], uv[1, 1] = (float(f[i]) for i in idx[1:])
+            uv[0, 0], uv[0, 1], uv[1, 0], uv[1, 1] = (parse_float(f[i], special=False) for i in idx[1:])
         except ValueError:
-            raise CliError(f"stdin: line {n}: {','.join(f[i] for i in idx[1:])!r}: expected four numbers (px)") from None
+            raise CliError(f"stdin: line {n}: {','.join(f[i] for i in idx[1:])!r}: expected four numbers (px) in ASCII "
+                           "digits") from None
+        why = spot_problem(rig, cam, uv)
+        if why:
+            raise CliError(f"stdin: line {n}: {why}")
         e = sol.solve(uv)
         a = e.angles_arcsec
         out.write(f"{f[si] if si is not None else n - 2},{cam},{float(e.delta_f_mm) * 1e3!r},{float(a[0])!r},"

@@ -41,6 +41,9 @@ def centroid_roi_files(rig: BoresightRig, camera: str, m1: Sequence, m2: Sequenc
     """The spot table of pairs of ROI files (i-th M1 with i-th M2) of one camera."""
     if len(m1) != len(m2):
         raise InputError(f"--m1 has {len(m1)} frames and --m2 {len(m2)}; expected one M2 frame per M1 frame")
+    from rigsim.files.inputs import check_distinct
+
+    check_distinct([*m1, *m2], "--m1/--m2", by_name=False, what="ROI frame")
     geom = camera_geometry(rig, camera)
     w = rig.orbit.window_px
     noise = NoiseModel.from_detector(rig.detector)
@@ -78,8 +81,24 @@ def read_spot_rows(path, rig: BoresightRig, *, what: str = "spot table") -> tupl
         if cam not in names:
             raise InputError(f"{path}: line {line}, column camera: {cam!r}; this rig's cameras are {', '.join(sorted(names))}")
     uv = np.stack([np.column_stack([t["u_m1_px"], t["v_m1_px"]]), np.column_stack([t["u_m2_px"], t["v_m2_px"]])], axis=1)
+    for k, (cam, line) in enumerate(zip(t["camera"], t["__line__"])):
+        why = spot_problem(rig, str(cam), uv[k])
+        if why:
+            raise InputError(f"{path}: line {line}: {why}")
     samples = list(t["sample"]) if "sample" in t else [str(i) for i in range(len(uv))]
     return samples, [str(c) for c in t["camera"]], uv
+
+
+def spot_problem(rig: BoresightRig, camera: str, uv: np.ndarray) -> str | None:
+    """Why the spots ``uv`` ([M1, M2] × (u, v), detector px) of ``camera`` cannot be a measurement (off its
+    detectors), or None."""
+    c = next(c for c in rig.cameras if c.name == camera)
+    W, H = c.detector_width_px, c.detector_height_px
+    for j, (u, v) in enumerate(np.asarray(uv, float).reshape(2, 2)):
+        if not (-0.5 <= u <= W - 0.5 and -0.5 <= v <= H - 0.5):
+            return (f"u_m{j + 1}_px, v_m{j + 1}_px = ({u:.6g}, {v:.6g}): off camera {camera}'s detector (u from -0.5 to "
+                    f"{W - 0.5}, v from -0.5 to {H - 0.5} px)")
+    return None
 
 
 SIGMA_COLUMNS = [Column(f"sigma_{a}_m{j}", "px", required=False) for j in (1, 2) for a in ("u", "v")]

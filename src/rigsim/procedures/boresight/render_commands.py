@@ -39,6 +39,9 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--out", default="renders/frames", help="output folder")
     p.add_argument("--name", type=file_stem, default=None, help="file stem (default boresight_<camera>_<detector>)")
     p.set_defaults(func=cmd_render_boresight_roi)
+    from rigsim.files.outputs import declare
+
+    declare(p, "out", folder=True)
 
 
 def cmd_render_boresight_roi(args) -> int:

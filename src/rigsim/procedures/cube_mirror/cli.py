@@ -14,6 +14,8 @@ import numpy as np
 import rigsim
 from rigsim.errors import CliError
 from rigsim.files.atomic import atomic_write_text, output_folder
+from rigsim.files.numbers import parse_float
+from rigsim.files.outputs import declare
 from rigsim.files.names import file_stem, slug
 from rigsim.files.options import SEED, SPP, integer, number
 from rigsim.procedures.cube_mirror import file_commands, render_commands
@@ -59,6 +61,9 @@ def add_cli(groups: dict) -> None:
                      "of frames exported with --export-frames (same rig, seed, sweep options); compared as --centroider")
     cmr.add_argument("--quiet", action="store_true", help="no progress bar")
     cmr.set_defaults(func=cmd_run_cube_mirror)
+    declare(cmr, "out", folder=True)
+    declare(cmr, "json_out")
+    declare(cmr, "export_frames", folder=True)
 
     rss = rds.add_parser("sun-sensor", help="the sun simulator seen by the sun sensor at a turntable pose",
                          formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -72,6 +77,8 @@ def add_cli(groups: dict) -> None:
     rss.add_argument("--name", type=file_stem, default="sun_sensor", help="file stem of the frame")
     rss.add_argument("--preview", default=None, metavar="PNG", help="also write an 8-bit zoomed preview")
     rss.set_defaults(func=cmd_render_sun_sensor)
+    declare(rss, "out", folder=True)
+    declare(rss, "preview", suffixes=(".png", ".jpg", ".tif"))
 
     sc = sub.add_parser("scene", help="Mitsuba scenes of a rig")
     scs = sc.add_subparsers(dest="scene_command", metavar="ACTION")
@@ -84,6 +91,7 @@ def add_cli(groups: dict) -> None:
                      help="diaphragm screen: the sun simulator's divergent beam as the campaign renders it (default), "
                           "or one collimated pencil")
     sce.set_defaults(func=cmd_scene_export)
+    declare(sce, "xml", folder=True)
 
 
 def _progress(total, desc, enabled=True):
@@ -399,10 +407,12 @@ def _parse_pose(text: str | None, rig) -> dict[str, float]:
         k, v = (x.strip() for x in part.split("=", 1))
         if k not in labels:
             raise CliError(f"--pose axis {k!r}: this turntable has axes {sorted(labels)}")
+        if k in pose:
+            raise CliError(f"--pose = {text!r}: axis {k} given twice")
         try:
-            val = float(v)
+            val = parse_float(v)
         except ValueError:
-            raise CliError(f"--pose {k} = {v!r}: not a number of degrees") from None
+            raise CliError(f"--pose {k} = {v!r}: not a number of degrees in ASCII digits") from None
         lo, hi = labels[k].range_deg
         if not lo <= val <= hi:
             raise CliError(f"--pose {k} = {val}: allowed range is {lo} to {hi} degrees")

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import CliError, PoorFitError
-from rigsim.files.options import number
+from rigsim.files.options import number, real
+from rigsim.files.outputs import declare
 from rigsim.procedures.fit_verdict import add_accept_option
 from rigsim.rig.load import DEFAULT_RIG
 
@@ -41,6 +42,8 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--opencv", default=None, metavar="FILE", help="also write OpenCV's FileStorage camera (.yml/.json)")
     add_accept_option(c)
     c.set_defaults(func=cmd_calibrate_sun_sensor)
+    declare(c, "out", suffixes=(".json",), derived=_residual_plot)
+    declare(c, "opencv", suffixes=(".yml", ".yaml", ".json", ".xml"))
 
     t = sub.add_parser(
         "triad", formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -50,7 +53,7 @@ def add_cli(groups: dict) -> None:
                     "(two rows: face, x_deg, y_deg[, z_deg]) with --rig for any table.",
         epilog="examples:\n  rigsim triad 181.398 0.528 91.386 -0.048\n"
                "  rigsim triad --nulls nulls.csv --rig sun_sensor_3axis_autocollimator --out cube.json")
-    t.add_argument("angles_deg", nargs="*", type=float, metavar="θ", help="θ1 θ2 θ3 θ4 in degrees (θ1, θ3 about X'; θ2, θ4 about Y')")
+    t.add_argument("angles_deg", nargs="*", type=real, metavar="θ", help="θ1 θ2 θ3 θ4 in degrees (θ1, θ3 about X'; θ2, θ4 about Y')")
     t.add_argument("--nulls", default=None, metavar="FILE", help="null log: face, x_deg, y_deg[, z_deg] (two rows)")
     t.add_argument("--rig", default=None, help="rig file or name: axes, faces, reading σ (default: 2-axis, +Z +Y)")
     t.add_argument("--axis-order", default=None, help="nesting reading, outermost first (2-axis: XY or YX; 3-axis: YXZ or XYZ)")
@@ -63,6 +66,7 @@ def add_cli(groups: dict) -> None:
     t.add_argument("--json", action="store_true", help="also print the JSON result (last line)")
     add_accept_option(t)
     t.set_defaults(func=cmd_triad)
+    declare(t, "out")
 
     m = sub.add_parser("compose", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
                        help="R(cube←sun) = R(cube←rot)·R(sun←rot)ᵀ with the propagated covariance",
@@ -72,6 +76,13 @@ def add_cli(groups: dict) -> None:
     m.add_argument("--out", default=None, metavar="FILE", help="write R(cube←sun) and its covariance as JSON")
     add_accept_option(m)
     m.set_defaults(func=cmd_compose)
+    declare(m, "out")
+
+
+def _residual_plot(args) -> list:
+    from rigsim.files.outputs import Output
+
+    return [Output(Path(args.out).with_suffix(".residuals.png"), "--out's residual plot")] if args.out else []
 
 
 def _print_rotation(name: str, blk: dict) -> None:
@@ -166,6 +177,7 @@ def cmd_triad(args) -> int:
         sigma = {a.label: args.sigma_arcsec / ARCSEC_PER_RAD for a in rig.turntable.axes}
     else:
         sigma = F.reading_sigma_rad(rig)
+    _refuse_parallel_normals(readings, faces, order, args)
     verdict = _judge_triad(rig, readings, faces, order, sigma, args.accept_poor_fit,
                            None if args.nulls is not None else {"X": "θ1, θ3", "Y": "θ2, θ4"})
     try:
@@ -230,6 +242,23 @@ def _judge_triad(rig, readings, faces, order, sigma, accept, cols=None):
     alts = null_alternatives([a.label for a in rig.turntable.axes], [dict(r) for r in readings], quality,
                              [o for o in F.axis_orders(rig) if o != order], cols)
     return judge(quality([dict(r) for r in readings]), alts, accept=accept, what="TRIAD")
+
+
+def _refuse_parallel_normals(readings, faces, order, args) -> None:
+    """The two nulls must give two distinct measured normals: equal readings (the same null twice) leave TRIAD
+    without a second direction."""
+    from rigsim.estimation.cube_attitude import cube_from_rot_triad
+    from rigsim.frames import angle_between
+
+    try:
+        _, r1, r2 = cube_from_rot_triad(readings, faces, order, eq8=args.eq8)
+        ang = float(np.degrees(angle_between(r1, r2)))
+    except ValueError:
+        ang = 0.0
+    if not ang > 0.5:
+        where = args.nulls if args.nulls is not None else "θ1 θ2 θ3 θ4"
+        raise CliError(f"{where}: the two nulls give measured normals {ang:.3g}° apart; expected two faces' nulls "
+                       "(about 90° apart): is the same null listed twice?")
 
 
 def cmd_compose(args) -> int:

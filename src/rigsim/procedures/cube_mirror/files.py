@@ -63,6 +63,16 @@ def angle_columns(rig: CubeMirrorRig) -> list[Column]:
     return [Column(a.label.lower(), "deg") for a in rig.turntable.axes]
 
 
+def _check_degrees(path, t: dict, rig: CubeMirrorRig) -> None:
+    """Every axis column of table ``t`` within ±360°."""
+    for a in rig.turntable.axes:
+        x = t[f"{a.label.lower()}_deg"]
+        bad = np.flatnonzero(np.abs(x) > 360.0)
+        if bad.size:
+            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
+                             "expected -360 to 360 degrees")
+
+
 def read_angle_log(path, rig: CubeMirrorRig) -> tuple[list[str], TurntableReading, np.ndarray]:
     """An angle log (``frame`` and one ``<axis>_deg`` column per axis): (frame names, the readings
     in radians, each row's line). Frame names are unique."""
@@ -73,12 +83,7 @@ def read_angle_log(path, rig: CubeMirrorRig) -> tuple[list[str], TurntableReadin
         if f in seen:
             raise InputError(f"{path}: line {line}, column frame: {f!r} already on line {seen[f]}; one row per frame")
         seen[f] = int(line)
-    for a in rig.turntable.axes:
-        x = t[f"{a.label.lower()}_deg"]
-        bad = np.flatnonzero(np.abs(x) > 360.0)
-        if bad.size:
-            raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {a.label.lower()}_deg: {x[bad[0]]}; "
-                             "expected -360 to 360 degrees")
+    _check_degrees(path, t, rig)
     reading = TurntableReading({a.label: np.radians(t[f"{a.label.lower()}_deg"]) for a in rig.turntable.axes})
     return frames, reading, t["__line__"]
 
@@ -103,8 +108,14 @@ def read_spot_table(path) -> dict[str, tuple[float, float, int, int, float, floa
         if bad.size:
             raise InputError(f"{path}: line {t['__line__'][bad[0]]}, column {key}: {s[bad[0]]}; expected ≥ 0 px or empty")
     out: dict[str, tuple[float, float, int, int, float, float]] = {}
+    seen: dict[tuple[str, int], int] = {}
     for i in np.argsort(spot, kind="stable"):
         f = Path(str(t["frame"][i])).name
+        key, line = (f, int(spot[i])), int(t["__line__"][i])
+        if key in seen:
+            raise InputError(f"{path}: line {line}, column frame: {f!r} spot {key[1]} already on line {seen[key]}; one row "
+                             "per frame and spot (a frame listed twice is not new data)")
+        seen[key] = line
         if f in out:
             continue
         fl = int(flags[i]) | (int(REJECT) if not (np.isfinite(t["u_px"][i]) and np.isfinite(t["v_px"][i])) else 0)
@@ -141,9 +152,13 @@ def read_sweep_tables(rig: CubeMirrorRig, angles_path, centroids_path) -> SweepT
     frames, reading, _ = read_angle_log(angles_path, rig)
     spots = read_spot_table(centroids_path)
     known = set(frames)
-    for f, (_, _, _, line, _, _) in spots.items():
+    W, H = rig.sun_sensor.resolution_px
+    for f, (u, v, _, line, _, _) in spots.items():
         if f not in known:
             raise InputError(f"{centroids_path}: line {line}, column frame: {f!r} has no row in the angle log {angles_path}")
+        if np.isfinite(u) and np.isfinite(v) and not (-1.0 <= u <= W and -1.0 <= v <= H):
+            raise InputError(f"{centroids_path}: line {line}, columns u_px, v_px: ({u:.6g}, {v:.6g}) px lies off the sun "
+                             f"sensor's {W}×{H} px detector (u from -0.5 to {W - 0.5}, v from -0.5 to {H - 0.5})")
     return SweepTables(frames, {k: np.asarray(v, float) for k, v in reading.items()}, spots, str(angles_path),
                        str(centroids_path))
 
@@ -297,6 +312,10 @@ def read_nulls(path, rig: CubeMirrorRig) -> tuple[list[str], list[TurntableReadi
     for f, line in zip(t["face"], t["__line__"]):
         if f not in FACE_NORMALS:
             raise InputError(f"{path}: line {line}, column face: {f!r}; expected one of {', '.join(FACE_NORMALS)}")
+    _check_degrees(path, t, rig)
+    if t["face"][0] == t["face"][1]:
+        raise InputError(f"{path}: line {t['__line__'][1]}, column face: {t['face'][1]!r} again; expected the nulls of two "
+                         "different faces")
     readings = [TurntableReading({a.label: float(np.radians(t[f"{a.label.lower()}_deg"][i])) for a in rig.turntable.axes})
                 for i in range(2)]
     return [str(f) for f in t["face"]], readings

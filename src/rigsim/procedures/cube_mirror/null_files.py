@@ -16,6 +16,7 @@ import numpy as np
 from rigsim.errors import CliError, InputError
 from rigsim.estimation.fit_quality import FitQuality, not_judged
 from rigsim.estimation.null_search import numerical_jacobian, offset_model
+from rigsim.files.outputs import declare
 from rigsim.frames import ARCSEC_PER_RAD
 from rigsim.imaging.screen import hole_spot_offset
 from rigsim.imaging.spot import THRESHOLD_SIGMA, SpotMeasurement, measure_spot
@@ -175,26 +176,37 @@ def concentricity_quality(rig: CubeMirrorRig, m: dict, hole_dn: np.ndarray, spot
 
 # ------------------------------------------------------------------------------ commands
 
-def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option: str = "--reading") -> dict[str, float]:
-    """``"X=181.4,Y=0.55"`` (degrees) → {axis: rad} for every axis of the rig (unnamed axes at 0);
-    empty: the search start of the face ``face_index``."""
+def parse_reading(text: str | None, rig: CubeMirrorRig, face_index: int, option: str = "--reading",
+                  every_axis: bool = True) -> dict[str, float]:
+    """``"X=181.4,Y=0.55"`` (degrees) → {axis: rad} for every axis of the rig; an axis named twice is refused,
+    and so is a missing one when ``every_axis`` (a turntable's reading names every axis; a render's ``--pose``
+    leaves the others at 0); empty: the search start of the face ``face_index``."""
     if not text:
         return {k: math.radians(v) for k, v in rig.procedure.search_start[face_index].items()}
-    labels = {a.label for a in rig.turntable.axes}
+    from rigsim.files.numbers import parse_float
+
+    labels = [a.label for a in rig.turntable.axes]
+    want = ",".join(f"{a}=DEGREES" for a in labels)
     out = {}
     for part in text.split(","):
         k, sep, v = (x.strip() for x in part.partition("="))
         if not sep or k not in labels:
-            raise CliError(f"{option} = {text!r}: expected LABEL=DEGREES for the axes {', '.join(sorted(labels))}")
+            raise CliError(f"{option} = {text!r}: expected {want} (every axis of the turntable)")
+        if k in out:
+            raise CliError(f"{option} = {text!r}: axis {k} given twice; expected {want}")
         try:
-            x = float(v)
+            x = parse_float(v)
         except ValueError:
-            raise CliError(f"{option} = {text!r}: {v!r} is not a number of degrees") from None
+            raise CliError(f"{option} = {text!r}: {v!r} is not a number of degrees in ASCII digits") from None
         if not (math.isfinite(x) and -360.0 <= x <= 360.0):
             raise CliError(f"{option} = {text!r}: {k} = {v}: allowed -360 to 360 degrees")
         out[k] = math.radians(x)
-    for a in labels - set(out):
-        out[a] = 0.0
+    missing = [a for a in labels if a not in out]
+    if not every_axis:
+        return {a: out.get(a, 0.0) for a in labels}
+    if missing:  # a reading without an axis is not a reading at 0
+        raise CliError(f"{option} = {text!r}: no angle for axis {', '.join(missing)}; expected {want} (every axis of the "
+                       "turntable, as its encoders read)")
     return out
 
 
@@ -235,6 +247,7 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
+    declare(c, "json")
     a = sub.add_parser("autocollimator", help="the autocollimator's reading of a frame (seed 001)")
     acs = a.add_subparsers(dest="autocollimator_command", metavar="ACTION")
     r = acs.add_parser("read", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -246,6 +259,7 @@ def add_cli(groups: dict) -> None:
     r.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(r)
     r.set_defaults(func=cmd_autocollimator_read)
+    declare(r, "json")
 
 
 def _write_json(path, obj) -> None:
@@ -265,6 +279,17 @@ def cmd_concentricity(args) -> int:
     face = args.face or faces[0]
     if face not in faces:
         raise CliError(f"--face = {face!r}: the procedure's faces are {', '.join(faces)}")
+    if args.axis_order is not None:
+        from rigsim.procedures.cube_mirror.files import axis_orders
+
+        allowed = axis_orders(rig)
+        if args.axis_order not in allowed:
+            raise CliError(f"--axis-order = {args.axis_order!r}: allowed for this {len(rig.turntable.axes)}-axis table: "
+                           f"{', '.join(allowed)}")
+    parse_reading(args.reading, rig, faces.index(face))  # a bad reading is refused before the frames are read
+    from rigsim.files.inputs import check_distinct
+
+    check_distinct([args.hole, args.spot], "HOLE/SPOT", by_name=False)
     shape = tuple(rig.aiming_camera.resolution_px[::-1])
     hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
     spot = read_image(args.spot, shape=shape, what="aiming-camera frame")

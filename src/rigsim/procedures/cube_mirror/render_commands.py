@@ -17,6 +17,7 @@ import numpy as np
 from rigsim.errors import CliError
 from rigsim.files.names import file_stem
 from rigsim.files.options import SEED, SPP
+from rigsim.files.outputs import declare
 from rigsim.rig.load import DEFAULT_RIG
 
 __all__ = ["add_cli"]
@@ -32,6 +33,7 @@ def _common(p, default_rig: str, name: str) -> None:
     p.add_argument("--ideal", action="store_true", help="rig without its true errors")
     p.add_argument("--out", default="renders/frames", help="output folder")
     p.add_argument("--name", type=file_stem, default=name, help="file stem of the frame(s)")
+    declare(p, "out", folder=True)
 
 
 def add_cli(groups: dict) -> None:
@@ -73,7 +75,7 @@ def _setup(args, method: str):
         raise CliError(f"--seed = {args.seed}: allowed 0 to 2^63 - 1")
     if not 1 <= args.spp <= 65536:
         raise CliError(f"--spp = {args.spp}: allowed 1 to 65536")
-    pose_rad = parse_reading(args.pose, rig, faces.index(face), "--pose")
+    pose_rad = parse_reading(args.pose, rig, faces.index(face), "--pose", every_axis=False)
     return rig, realization_from_rig(rig, ideal=args.ideal), faces.index(face), face, pose_rad
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from rigsim.errors import CliError
 from rigsim.files.options import SEED, SPP, integer, number
+from rigsim.files.outputs import Output, declare
 
 __all__ = ["add_cli", "cmd_run_star_calibration"]
 
@@ -80,10 +81,15 @@ def add_cli(groups: dict) -> None:
 
     add_accept_option(c)
     c.set_defaults(func=cmd_star_calibrate)
+    declare(c, "out", folder=True, derived=lambda a: [Output(Path(a.out) / n, f"--out's {n}")
+                                                      for n in ("stars.csv", "calibration.json")])
+    declare(c, "opencv", suffixes=(".yml", ".yaml", ".json", ".xml"))
     from rigsim.procedures.star import twin_commands
 
     twin_commands.add_cli(sts)
     p.set_defaults(func=cmd_run_star_calibration)
+    declare(p, "out", folder=True)
+    declare(p, "export_frames", folder=True)
     from rigsim.procedures.star import render_commands
 
     render_commands.add_cli(groups)
@@ -128,9 +134,11 @@ def _site(args):
 
     from rigsim.optics.refraction import Site
 
+    from rigsim.files.numbers import parse_float
+
     parts = args.site.split(",")
     try:
-        vals = [float(x) for x in parts]
+        vals = [parse_float(x) for x in parts]  # ASCII digits only
     except ValueError:
         vals = []
     if len(vals) not in (2, 3) or not all(np.isfinite(vals)):

@@ -75,10 +75,16 @@ def star_observations(paths: Sequence, log_path, nominal: NominalStarRig, *, att
                       ) -> tuple[list[StarObservation], list[str]]:
     """The frames as the pipeline takes them, in the order of their times, and their names; each
     frame's size is checked against the rig's detector and each must have a row in the log. With no
-    log (``log_path`` None) the frames keep the order given, one second apart, with no attitude."""
+    log (``log_path`` None) the frames keep the order given, one second apart, with no attitude. Each
+    frame once (by file and by name), and all of them must fit in memory together: checked first."""
+    from rigsim.files.inputs import check_distinct
+    from rigsim.files.memory import check_frames_kept
+
     if not paths:
         raise InputError(f"{log_path or 'star calibrate'}: no frames given")
+    check_distinct(paths, "FRAME", what="star frame")
     W, H = nominal.sensor.resolution_px
+    check_frames_kept(len(paths), W, H, 8, what="star calibrate")
     if log_path is None:
         return ([StarObservation(k, float(k), read_image(p, shape=(H, W), what="star frame"), None)
                  for k, p in enumerate(paths)], [Path(p).name for p in paths])
@@ -119,10 +125,70 @@ def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, 
         pipe.fixed_pattern_note = "none: no commanded attitudes to check that the stars move"
     for o in obs:
         pipe.add(o)
-    if not any(i.ok for i in pipe.ident):
+    ok = [i.ok for i in pipe.ident]
+    if identification == "commanded" and log_path is not None and sum(ok) < 0.5 * len(ok):
+        check_attitude_convention(obs, names, log_path, nominal, sky, ok)  # a log in another convention is named
+    if not any(ok):
         why = "; ".join(f"{n}: {i.reason}" for n, i in zip(names, pipe.ident))
         raise InputError(f"none of the {len(names)} frames could be identified{_likely_cause(pipe)} ({why})")
     return pipe.calibrate(), names
+
+
+CONVENTIONS = {
+    "scalar last": "the columns qw, qx, qy, qz hold (x, y, z, w): the scalar is written last",
+    "conjugated": "the quaternions are R(ICRS←cam), the inverse of R(cam←ICRS): conjugate them (negate qx, qy, qz)",
+    "scalar last and conjugated": "the scalar is written last and the quaternions are R(ICRS←cam): reorder the "
+                                  "columns to w, x, y, z and negate x, y, z",
+}
+CONVENTION_SAMPLE = 3  # frames tried (first, middle, last) without a prior
+
+
+def _convention_attitudes(R_log: np.ndarray) -> dict[str, np.ndarray]:
+    """The attitude the log's quaternion gives under each convention it might have been written in."""
+    q = Rotation.from_matrix(R_log).as_quat(scalar_first=True)  # the four columns as written (w, x, y, z); ± alike
+    last = Rotation.from_quat(q, scalar_first=False).as_matrix()
+    return {"as written": R_log, "scalar last": last, "conjugated": R_log.T, "scalar last and conjugated": last.T}
+
+
+def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky: SkyCatalogue,
+                              identified: Sequence[bool]) -> None:
+    """When most frames do not identify from the log (``identified``: each frame's identification with the log's
+    attitude as the prior): up to :data:`CONVENTION_SAMPLE` of the frames that did not (first, middle, last) are
+    identified lost in space (no prior), and their attitudes from the stars are compared with the log's quaternion
+    read under each convention it might have been written in (scalar first or last, R(cam←ICRS) or its inverse). A
+    log that matches under another convention is refused with one line naming it; a log that matches under none is
+    refused as not describing these frames. When the stars agree with the log as written, or no frame identifies
+    lost in space either, nothing can be said here."""
+    from rigsim.frames import rotation_angle
+
+    failing = [i for i, ok in enumerate(identified) if not ok]
+    if not failing:
+        return
+    pick = sorted({failing[0], failing[len(failing) // 2], failing[-1]})[:CONVENTION_SAMPLE]
+    lis = StarPipeline(nominal, sky, identification="lost-in-space")
+    tol = max(5.0 * nominal.identification.attitude_error_deg, 1.0)
+    seen = []
+    for i in pick:
+        ident = lis.add(obs[i])
+        if not ident.ok:
+            continue
+        err = {c: float(np.degrees(rotation_angle(R, ident.R_cam_from_icrs)))
+               for c, R in _convention_attitudes(obs[i].R_commanded).items()}
+        seen.append((names[i], err))
+    if not seen:
+        return
+    name, err = seen[0]
+    best = min(err, key=err.get)
+    if best == "as written" and err[best] <= tol:
+        return  # the log is right; the frames fail to identify for another reason
+    if best != "as written" and err[best] <= tol and all(min(e, key=e.get) == best for _, e in seen):
+        raise InputError(f"{log_path}: {sum(identified)} of {len(identified)} frames identify with its attitudes as "
+                         "written (R(cam←ICRS), scalar first); "
+                         f"read {best}, they agree with the stars of {len(seen)} frame(s) identified without a prior "
+                         f"({name}: {err[best]:.3g}° instead of {err['as written']:.3g}°): {CONVENTIONS[best]}")
+    raise InputError(f"{log_path}: its attitudes are {err['as written']:.3g}° from the attitude the stars of {name} give "
+                     f"(identified without a prior), and {min(err[c] for c in CONVENTIONS):.3g}° at best read scalar "
+                     "last or conjugated: is the log for these frames (rows, times, frame names)?")
 
 
 def _likely_cause(pipe) -> str:

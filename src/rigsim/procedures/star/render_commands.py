@@ -18,15 +18,21 @@ __all__ = ["add_cli", "parse_attitude"]
 
 def parse_attitude(text: str) -> tuple[float, float, float]:
     """``"ra=83.6,dec=-5.4,roll=30"`` (degrees; roll optional) → (ra, dec, roll)."""
+    from rigsim.files.numbers import parse_float
+
     vals = {"roll": 0.0}
+    seen: set[str] = set()
     for part in text.split(","):
         k, sep, v = (x.strip() for x in part.partition("="))
         if not sep or k not in ("ra", "dec", "roll"):
             raise CliError(f"--attitude = {text!r}: expected ra=DEG,dec=DEG[,roll=DEG]")
+        if k in seen:
+            raise CliError(f"--attitude = {text!r}: {k} given twice")
+        seen.add(k)
         try:
-            vals[k] = float(v)
+            vals[k] = parse_float(v)
         except ValueError:
-            raise CliError(f"--attitude = {text!r}: {k} = {v!r} is not a number of degrees") from None
+            raise CliError(f"--attitude = {text!r}: {k} = {v!r} is not a number of degrees in ASCII digits") from None
     if "ra" not in vals or "dec" not in vals:
         raise CliError(f"--attitude = {text!r}: give both ra and dec (degrees)")
     for k, lo, hi in (("ra", -360.0, 360.0), ("dec", -90.0, 90.0), ("roll", -360.0, 360.0)):
@@ -55,6 +61,9 @@ def add_cli(groups: dict) -> None:
     p.add_argument("--out", default="renders/frames", help="output folder")
     p.add_argument("--name", type=file_stem, default="star_field", help="file stem")
     p.set_defaults(func=cmd_render_star_field)
+    from rigsim.files.outputs import declare
+
+    declare(p, "out", folder=True)
 
 
 def cmd_render_star_field(args) -> int:

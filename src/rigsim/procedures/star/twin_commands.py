@@ -33,6 +33,9 @@ def add_cli(star_actions) -> None:
     c.add_argument("--out", required=True, metavar="DIR", help="output folder")
     c.add_argument("--seed", type=SEED, default=0, help="seed of the twin's detector noise (frame k takes seed + k)")
     c.set_defaults(func=cmd_star_twin)
+    from rigsim.files.outputs import declare
+
+    declare(c, "out", folder=True)
 
 
 def _calibration(path, names):

@@ -61,7 +61,6 @@ from pathlib import Path
 import numpy as np
 
 from rigsim.errors import GeometryWarning, SaturationWarning
-from rigsim.files.atomic import output_folder
 from rigsim.optics.cube_ghosts import normal_reflectance, slab_reflectance
 from rigsim.optics.meshes import figured_cube_mesh, screen_with_hole_mesh, tilt_cube_faces
 from rigsim.render.frame import Frame, digitise
@@ -644,11 +643,13 @@ def preview_png(dn: np.ndarray, path, *, low_pct: float = 1.0, high_pct: float =
     a = np.asarray(dn, float)
     lo, hi = np.percentile(a, [low_pct, high_pct])
     x = np.clip((a - lo) / max(hi - lo, 1e-12), 0.0, 1.0) ** gamma
+    from rigsim.files.atomic import atomic_write_bytes
+
     path = Path(path)
-    output_folder(path.parent)
-    if not cv2.imwrite(str(path), np.round(255.0 * x).astype(np.uint8)):
-        raise OSError(f"cv2.imwrite could not write {path}")
-    return path
+    ok, enc = cv2.imencode(path.suffix or ".png", np.round(255.0 * x).astype(np.uint8))
+    if not ok:
+        raise OSError(f"OpenCV cannot encode a {path.suffix} preview for {path}")
+    return atomic_write_bytes(path, enc.tobytes())
 
 
 DEMO_TILT_ARCSEC = {"X": -260.0, "Y": 330.0}
