@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rigsim.dataset import store
-from rigsim.errors import DatasetError
+from rigsim.errors import DatasetError, InputError
 
 IMG = (np.arange(24 * 40, dtype=np.uint16).reshape(24, 40) * 37) % 4096
 
@@ -49,10 +49,11 @@ def test_bad_images_are_refused(tmp_path):
             store.encode_image(IMG, fmt)
     with pytest.raises(ValueError, match="'tif': must be 'png' or 'fits'"):
         store.encode_image(IMG, "tif")
-    (tmp_path / "frame.a").write_bytes(store.encode_image(IMG, "png"))  # read by its content, not its name
-    assert np.array_equal(store.decode_image(tmp_path / "frame.a"), IMG)
+    (tmp_path / "frame.a").write_bytes(store.encode_image(IMG, "png"))  # a name that is no frame's: refused
+    with pytest.raises(InputError, match=r"frame\.a: unsupported dataset frame file type '\.a'; expected one of \.png"):
+        store.decode_image(tmp_path / "frame.a")
     (tmp_path / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
-    with pytest.raises(DatasetError, match=r"x\.png: not a readable image"):
+    with pytest.raises(InputError, match=r"x\.png: not a readable PNG image"):
         store.decode_image(tmp_path / "x.png")
 
 
@@ -132,7 +133,7 @@ def test_read_json_names_a_missing_or_corrupt_file(tmp_path):
     with pytest.raises(DatasetError, match=r"plan\.json: missing \(the plan\)"):
         store.read_json(tmp_path / "plan.json", "the plan")
     (tmp_path / "plan.json").write_text("{")
-    with pytest.raises(DatasetError, match=r"plan\.json: corrupt JSON \(the plan\)"):
+    with pytest.raises(DatasetError, match=r"plan\.json: line 1, column 2: not valid JSON \(.*\); expected the plan"):
         store.read_json(tmp_path / "plan.json", "the plan")
     store.atomic_write_json(tmp_path / "plan.json", {"a": np.float64(1.5), "b": np.arange(2)})
     assert store.read_json(tmp_path / "plan.json", "the plan") == {"a": 1.5, "b": [0, 1]}

@@ -156,7 +156,7 @@ def test_an_output_folder_that_cannot_be_one_is_one_line(tmp_path):
         output_folder(tmp_path / "file" / "sub", "--out")
     with pytest.raises(InputError, match=r"^output folder .*: cannot create the folder \(File name too long\)$"):
         output_folder(tmp_path / ("x" * 300))
-    with pytest.raises(InputError, match=r"r\.json: is a folder; expected a file name"):
+    with pytest.raises(InputError, match=r"r\.json: is a folder; rigsim replaces only regular files"):
         (tmp_path / "r.json").mkdir()
         write_json(tmp_path / "r.json", {"a": 1})
 

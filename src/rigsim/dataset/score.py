@@ -118,12 +118,12 @@ def read_predictions(path, mode: str | None = None, multi: bool = False, names: 
     except UnicodeDecodeError as exc:
         raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); expected the predictions CSV") from None
     try:
-        return _read_predictions(path, text, mode, multi)
+        return _read_predictions(path, text, mode, multi, names)
     except csv.Error as exc:  # a field longer than the csv module's limit (131072 characters), a stray NUL
         raise DatasetError(f"{path}: not a readable CSV ({str(exc)[:100]})") from None
 
 
-def _read_predictions(path, text: str, mode, multi):
+def _read_predictions(path, text: str, mode, multi, names=None):
     from rigsim.files.numbers import parse_float, parse_int
 
     rd = csv.reader(io.StringIO(text, newline=""))

@@ -156,4 +156,4 @@ def read_json(path, what: str):
         raise DatasetError(f"{path}: missing ({what})")
     if not path.is_file():
         raise DatasetError(f"{path}: not a regular file ({what})")
-    return parse_json(path.read_bytes(), path, what, max_bytes=None, error=DatasetError)
+    return parse_json(path.read_bytes(), path, what.removeprefix("the "), max_bytes=None, error=DatasetError)

@@ -84,7 +84,7 @@ def parse_json(data: bytes | str, path, what: str = "result", *, max_bytes: int 
     try:
         return json.loads(text, parse_int=_int)
     except json.JSONDecodeError as exc:
-        raise error(f"{path}: line {exc.lineno}, column {exc.colno}: not valid JSON ({exc.msg})") from None
+        raise error(f"{path}: line {exc.lineno}, column {exc.colno}: not valid JSON ({exc.msg}); expected the {what}") from None
     except _Refused as exc:
         raise error(f"{path}: {exc}; expected the {what} as JSON") from None
     except (ValueError, RecursionError) as exc:

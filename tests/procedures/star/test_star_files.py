@@ -139,7 +139,7 @@ def test_a_log_in_another_quaternion_convention_is_named(exported, tmp_path, cap
     identified without a prior tell which one it is; nothing is written."""
     d = _bare(exported, tmp_path / "bare")
     _rewrite_log(d / "log.csv", fn)
-    rc = main(["star", "calibrate", *sorted(str(p) for p in d.glob("shot-*.png")), "--attitudes", str(d / "log.csv"),
+    rc = main(["star", "calibrate", *sorted(str(p) for p in d.glob("shot-*")), "--attitudes", str(d / "log.csv"),
                "--out", str(d / "cal")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and named in err, err
@@ -148,11 +148,11 @@ def test_a_log_in_another_quaternion_convention_is_named(exported, tmp_path, cap
 
 def test_a_frame_listed_twice_or_two_frames_of_one_name_are_refused(exported, tmp_path, capsys):
     d = _bare(exported, tmp_path / "bare")
-    frames = sorted(str(p) for p in d.glob("shot-*.png"))
+    frames = sorted(str(p) for p in d.glob("shot-*"))
     (d / "again").mkdir()
-    shutil.copy(frames[3], d / "again" / "shot-03.png")
+    shutil.copy(frames[3], d / "again" / "shot-03.fits")
     for extra, words in (([frames[2]], "the same file as"), ([str(d / "." / Path(frames[2]).name)], "the same file as"),
-                         ([str(d / "again" / "shot-03.png")], "two star frames named 'shot-03.png'")):
+                         ([str(d / "again" / "shot-03.fits")], "two star frames named 'shot-03.fits'")):
         rc = main(["star", "calibrate", *frames, *extra, "--attitudes", str(d / "log.csv"), "--out", str(d / "cal")])
         err = capsys.readouterr().err.strip()
         assert rc == 2 and len(err.splitlines()) == 1 and words in err, err
