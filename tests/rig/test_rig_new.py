@@ -110,7 +110,7 @@ def test_an_existing_file_is_kept_unless_forced(tmp_path, capsys):
     assert load_star_rig(out).sensor.resolution_px == [1024, 768]
     (tmp_path / "d.toml").mkdir()
     rc, _ = _new(tmp_path, *BLACKFLY, "--fov-deg", "11.4", name="d.toml")
-    assert rc == 2 and "not a regular file" in capsys.readouterr().err
+    assert rc == 2 and "is a folder; rigsim replaces only regular files" in capsys.readouterr().err
 
 
 def test_rig_copy_writes_the_packaged_rig_and_refuses_to_overwrite(tmp_path, capsys):
@@ -130,8 +130,8 @@ def test_rig_copy_writes_the_packaged_rig_and_refuses_to_overwrite(tmp_path, cap
 @pytest.mark.parametrize("name,dest,msg", [
     ("nope", "x.toml", "no packaged rig 'nope'; the packaged rigs are dual_line_array_prism, star_sensor"),
     ("../scenes/star_sensor", "x.toml", "no packaged rig"),
-    ("star_sensor", "x.txt", "x.txt: a rig file name ends in .toml"),
-    ("star_sensor", "sub", "a rig file name ends in .toml"),
+    ("star_sensor", "x.txt", "'x.txt': the name must end in .toml"),
+    ("star_sensor", "sub", "'sub': the name must end in .toml"),
 ])
 def test_rig_copy_bad_arguments_are_one_line(tmp_path, capsys, monkeypatch, name, dest, msg):
     monkeypatch.chdir(tmp_path)

@@ -109,6 +109,7 @@ class Scene:
             d.update(part)
         self.elements = list(elements)
         self.scene_dict = d
+        _collect_stale_scenes()
         self.scene = mi.load_dict(d)
         self.params = mi.traverse(self.scene)
 
@@ -146,7 +147,6 @@ class Scene:
         A render of more than :data:`PASS_SAMPLES` light paths runs in passes (:func:`render_passes`);
         ``progress(done, passes)`` is called after each."""
         import drjit as dr
-        import mitsuba as mi
 
         self.update(state)
         sensor = self.scene.sensors()[0]
@@ -158,7 +158,7 @@ class Scene:
         try:
             if passes == 1:
                 kw = {} if spp is None else {"spp": total}
-                arr = np.array(mi.render(self.scene, seed=mitsuba_seed(seed), **kw), dtype=np.float64)
+                arr = np.array(_mi_render(self.scene, seed=mitsuba_seed(seed), **kw), dtype=np.float64)
             else:  # equal passes with their own seeds, averaged: the same estimator as one pass of all samples
                 import sys
 
@@ -168,7 +168,7 @@ class Scene:
                 with tqdm(total=passes, desc=f"render ({total} spp in {passes} passes)", unit="pass", leave=False,
                           disable=None if progress is None else True, file=sys.stderr) as bar:
                     for k in range(passes):
-                        a = np.array(mi.render(self.scene, seed=mitsuba_seed(seed, 0x9A55, k), spp=per_pass),
+                        a = np.array(_mi_render(self.scene, seed=mitsuba_seed(seed, 0x9A55, k), spp=per_pass),
                                      dtype=np.float64)
                         arr = a if arr is None else arr + a
                         bar.update(1)
@@ -179,6 +179,30 @@ class Scene:
             if dr.thread_count() != prev:
                 dr.set_thread_count(prev)
         return arr[..., 0] if arr.ndim == 3 else arr
+
+
+def _collect_stale_scenes() -> None:
+    """Free the Mitsuba objects of earlier scenes that only a Python reference cycle still holds. Dr.Jit's
+    vcalls over emitters trace every live emitter instance of the process, not only this scene's; an
+    area emitter whose shape is already gone then calls into a destroyed shape ("Shape::sample_position():
+    not implemented", or a crash) in the next light-tracer render."""
+    import gc
+
+    gc.collect()
+
+
+def _mi_render(scene, **kw):
+    """``mi.render``, retried once after :func:`_collect_stale_scenes` when a stale instance of another
+    scene broke the trace of a vcall."""
+    import mitsuba as mi
+
+    try:
+        return mi.render(scene, **kw)
+    except RuntimeError as exc:
+        if "not implemented" not in str(exc) and "not implemented" not in str(exc.__cause__ or ""):
+            raise
+    _collect_stale_scenes()
+    return mi.render(scene, **kw)
 
 
 PASS_SAMPLES = 2**30  # light paths per Mitsuba pass: below its 2^32 wavefront limit, whose own split fails
