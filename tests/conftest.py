@@ -53,6 +53,9 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip_long)
         elif "slow" in item.keywords and not slow:
             item.add_marker(skip_slow)
+    if slow:  # the longest files first (xdist hands out files in this order): no worker is left alone at the end
+        items.sort(key=lambda it: (not it.nodeid.startswith("tests/rig/test_random_rig_frames_"),
+                                   "_diaphragm" not in it.nodeid))
 
 
 @pytest.fixture(scope="session")
