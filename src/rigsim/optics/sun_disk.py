@@ -212,10 +212,24 @@ def max_spot_extent_px(camera: PinholeBrown, full_angle_rad: float, grid: int = 
     U, V = np.meshgrid(uu, vv)
     dirs = camera.unproject(np.column_stack([U.ravel(), V.ravel()]))
     ext = 2.0 * math.tan(full_angle_rad / 2.0) * max(camera.fx, camera.fy)
-    for d in dirs[np.all(np.isfinite(dirs), axis=1)]:
-        rim, rim_ok = spot_outline(camera, d, full_angle_rad)
-        if np.all(rim_ok):
-            ext = max(ext, float(np.max(rim.max(axis=0) - rim.min(axis=0))))
+    dirs = dirs[np.all(np.isfinite(dirs), axis=1)]
+    if len(dirs) == 0:
+        return ext
+    # every grid point's rim (spot_outline's, n = 90) in one projection: (points, 90, 2)
+    s = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    a = np.where((np.abs(s[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])  # _basis, every point at once
+    e1 = np.cross(s, a)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(s, e1)
+    psi = np.linspace(0.0, 2.0 * math.pi, 90, endpoint=False)
+    h = full_angle_rad / 2.0
+    rim_dirs = (math.cos(h) * s[:, None, :] + math.sin(h) * (np.cos(psi)[None, :, None] * e1[:, None, :]
+                                                            + np.sin(psi)[None, :, None] * e2[:, None, :]))
+    rim, rim_ok = camera.project_valid(rim_dirs.reshape(-1, 3))
+    rim, rim_ok = rim.reshape(len(s), 90, 2), rim_ok.reshape(len(s), 90)
+    whole = np.all(rim_ok, axis=1)
+    if np.any(whole):
+        ext = max(ext, float(np.max(rim[whole].max(axis=1) - rim[whole].min(axis=1))))
     return ext
 
 

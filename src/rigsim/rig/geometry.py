@@ -49,13 +49,10 @@ def sweep_landing(rig: CubeMirrorRig, margin_px: float = 3.0) -> tuple[int, int]
     cam = rig.sun_sensor.camera()
     R_sm = rig.R_sun_from_mount()
     n = A.size
-    landed = 0
-    for i in range(n):
-        R = tt.R_rot_from_mount({a: v[i] for a, v in pose.items()})
-        s = R_sm @ (R.T @ np.asarray(NOMINAL_D, float))
-        uv, ok = cam.project_valid(s[None, :])
-        landed += bool(ok[0] and cam.on_detector(uv, margin_px=margin_px)[0])
-    return landed, n
+    R = np.broadcast_to(tt.R_rot_from_mount(pose), (n, 3, 3))  # every pose at once
+    s = np.einsum("ij,nkj,k->ni", R_sm, R, np.asarray(NOMINAL_D, float))  # R_sm @ R.T @ d per pose
+    uv, ok = cam.project_valid(s)
+    return int(np.count_nonzero(ok & cam.on_detector(uv, margin_px=margin_px))), n
 
 
 def geometry_summary(rig: CubeMirrorRig) -> list[GeometryLine]:
