@@ -47,6 +47,7 @@ outline and position (what a perfect calibration in this very geometry would ret
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field, replace
 
@@ -81,6 +82,7 @@ SCHOTT_N_BK7 = ((1.03961212, 0.00600069867), (0.231792344, 0.0200179144), (1.010
 """Schott Sellmeier coefficients (B_i, C_i in µm²) of N-BK7."""
 
 _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+_CALIBRATIONS: dict = {}  # (instrument key, n_rays) → factory calibration, shared by equal instruments in a process
 
 
 def n_bk7(wavelength_nm: float) -> float:
@@ -490,6 +492,10 @@ class AutocollimatorOptics:
             self.detector_xy0 = np.array([-beam_splitter.lateral_shift_mm, 0.0])
         self.cone_half_angle_rad = self._cone_for_stop(self.overfill)
         self._calib = None
+        # everything the exact model depends on: instruments built from equal numbers share one calibration
+        self._key = (float(ac.focal_length_mm), float(ac.aperture_mm), (self.width, self.height), float(self.pitch_mm),
+                     self.distance_mm, float(wavelength_nm), float(center_thickness_mm), focus, self.source_offset_mm,
+                     self.overfill, beam_splitter)
 
     # -- geometry helpers ----------------------------------------------------------------
     @property
@@ -864,6 +870,8 @@ class AutocollimatorOptics:
         tilts up to :meth:`calibration_range_rad`. With a beam splitter the plate breaks the
         symmetry: the zero (``ref_uv``) is the spot of the untilted mirror and the y axis gets its
         own scale (``y_scale``, from six tilts along y_A)."""
+        if self._calib is None and (self._key, n_rays) in _CALIBRATIONS:
+            self._calib = copy.deepcopy(_CALIBRATIONS[self._key, n_rays])
         if self._calib is None:
             half = self.calibration_range_rad()
             ref = np.array([self.cx, self.cy])
@@ -901,6 +909,9 @@ class AutocollimatorOptics:
                         sy.append((uv[1] - ref[1]) * self.pitch_mm)
                         ay.append(F * np.tan(2.0 * t) * (1.0 + Fc / F * 4.0 * t * t))
                 self._calib["y_scale"] = float(np.dot(ay, ay) / np.dot(ay, sy))
+            if len(_CALIBRATIONS) >= 64:
+                _CALIBRATIONS.pop(next(iter(_CALIBRATIONS)))
+            _CALIBRATIONS[self._key, n_rays] = copy.deepcopy(self._calib)
         return self._calib
 
     def reading(self, uv) -> np.ndarray:
