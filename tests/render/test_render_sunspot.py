@@ -11,6 +11,7 @@ here and reported.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
@@ -36,8 +37,14 @@ def _dir(theta_deg, az_deg):
 
 
 def cv2_truth(cam: PinholeBrown, s, full_angle, n_rings=700, n_az=1400):
-    """Independent truth: polar midpoint quadrature of the cone, projected with OpenCV."""
-    s = s / np.linalg.norm(s)
+    """Independent truth: polar midpoint quadrature of the cone, projected with OpenCV. Each (camera, direction)
+    is computed once per module (a million projected points, ~1 s): the window and tight cases share it."""
+    return _cv2_truth(cam, tuple(float(x) for x in s), float(full_angle), n_rings, n_az)
+
+
+@functools.lru_cache(maxsize=None)
+def _cv2_truth(cam: PinholeBrown, s, full_angle, n_rings, n_az):
+    s = np.asarray(s) / np.linalg.norm(s)
     helper = np.array([0.0, 1.0, 0.0]) if abs(s[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
     e1 = np.cross(helper, s)
     e1 /= np.linalg.norm(e1)
