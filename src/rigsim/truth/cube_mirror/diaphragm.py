@@ -132,8 +132,10 @@ class DiaphragmGeometry:
     def uv_to_screen(self, uv) -> np.ndarray:
         uv = np.asarray(uv, float)
         Hi = np.linalg.inv(self.H_screen_to_uv)
-        h = uv @ Hi[:, :2].T + Hi[:, 2]
-        return h[..., :2] / h[..., 2:3]
+        u, v = uv[..., 0], uv[..., 1]  # element-wise: a (N, 2) @ (2, 3) product is slow for millions of pixels
+        w = Hi[2, 0] * u + Hi[2, 1] * v + Hi[2, 2]
+        return np.stack([(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / w, (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / w],
+                        axis=-1)
 
     def screen_mm_per_px(self, uv=None) -> np.ndarray:
         """Local 2×2 Jacobian d(s, t)/d(u, v) at ``uv`` (default: the hole's image)."""
