@@ -5,6 +5,7 @@ it. FITS pixels are 1-based (CRPIX = rigsim's principal point + 1); astropy's ``
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -30,12 +31,29 @@ def _fit_sip(x: np.ndarray, y: np.ndarray, dx: np.ndarray, dy: np.ndarray, order
     return out_x, out_y
 
 
+@functools.lru_cache(maxsize=16)
+def _sip_of(cam, order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The SIP polynomials (A, B, AP, BP) of a camera's distortion: they depend on the camera alone, not on the
+    attitude, so a sequence of frames fits them once (a frozen camera is its own cache key)."""
+    from rigsim.optics.camera import brown_undistort
+
+    # a grid of detected (distorted) pixels a little beyond the detector, and where the pinhole would put them
+    u, v = np.meshgrid(np.linspace(-0.05 * cam.width, 1.05 * cam.width - 1, 61),
+                       np.linspace(-0.05 * cam.height, 1.05 * cam.height - 1, 61))
+    xd, yd = u.ravel() - cam.cx, v.ravel() - cam.cy
+    xn, yn, ok = brown_undistort(xd / cam.fx, yd / cam.fy, cam.k1, cam.k2, cam.p1, cam.p2, cam.k3)
+    xd, yd, xu, yu = xd[ok], yd[ok], xn[ok] * cam.fx, yn[ok] * cam.fy
+    Ac, Bc = _fit_sip(xd, yd, xu - xd, yu - yd, order)     # pixel → sky: detected to pinhole
+    APc, BPc = _fit_sip(xu, yu, xd - xu, yd - yu, order)   # sky → pixel: pinhole to detected
+    for a in (Ac, Bc, APc, BPc):
+        a.flags.writeable = False
+    return Ac, Bc, APc, BPc
+
+
 def camera_wcs(cam, R_cam_from_icrs, order: int = SIP_ORDER):
     """astropy ``WCS`` of ``cam`` (a :class:`~rigsim.optics.camera.PinholeBrown`: OpenCV's model, pixel centres on
     integers, 0-based) looking along ``R_cam_from_icrs``'s +z."""
     from astropy.wcs import WCS, Sip
-
-    from rigsim.optics.camera import brown_undistort
 
     R = np.asarray(R_cam_from_icrs, float)
     xc, yc, b = R[0], R[1], R[2]  # the camera axes in ICRS
@@ -46,14 +64,7 @@ def camera_wcs(cam, R_cam_from_icrs, order: int = SIP_ORDER):
     # undistorted pixel offsets from the principal point = diag(fx, fy) · M · (ξ, η) [rad], standard coordinates
     M = np.array([[xc @ east, xc @ north], [yc @ east, yc @ north]])
     CD = np.degrees(np.linalg.inv(np.diag([cam.fx, cam.fy]) @ M))
-    # a grid of detected (distorted) pixels a little beyond the detector, and where the pinhole would put them
-    u, v = np.meshgrid(np.linspace(-0.05 * cam.width, 1.05 * cam.width - 1, 61),
-                       np.linspace(-0.05 * cam.height, 1.05 * cam.height - 1, 61))
-    xd, yd = u.ravel() - cam.cx, v.ravel() - cam.cy
-    xn, yn, ok = brown_undistort(xd / cam.fx, yd / cam.fy, cam.k1, cam.k2, cam.p1, cam.p2, cam.k3)
-    xd, yd, xu, yu = xd[ok], yd[ok], xn[ok] * cam.fx, yn[ok] * cam.fy
-    Ac, Bc = _fit_sip(xd, yd, xu - xd, yu - yd, order)     # pixel → sky: detected to pinhole
-    APc, BPc = _fit_sip(xu, yu, xd - xu, yd - yu, order)   # sky → pixel: pinhole to detected
+    Ac, Bc, APc, BPc = _sip_of(cam, order)
     w = WCS(naxis=2)
     w.wcs.ctype = ["RA---TAN-SIP", "DEC--TAN-SIP"]
     w.wcs.crpix = [cam.cx + 1.0, cam.cy + 1.0]
