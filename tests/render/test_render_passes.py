@@ -30,8 +30,9 @@ def test_render_passes(spp, pixels, expect):
 
 
 def test_a_render_in_passes_is_the_same_estimator(monkeypatch):
-    """The chessboard target through the default sun sensor's camera at 64 spp in one pass and in 16 passes of
-    4 spp: the mean flux agrees to the Monte-Carlo noise, and the images differ only by noise."""
+    """The chessboard target through the default sun sensor's camera at 16 spp in one pass and in 4 passes of
+    4 spp: the mean flux agrees to the Monte-Carlo noise (thousands of lit pixels: < 0.1 %), and the images differ
+    only by noise."""
     from rigsim.optics.targets import parse_target
     from rigsim.procedures.target_commands import spread_for_camera
     from rigsim.render.target import TargetScene
@@ -40,13 +41,13 @@ def test_a_render_in_passes_is_the_same_estimator(monkeypatch):
     rig = load_rig("sun_sensor_2axis_diaphragm")
     t = parse_target("chessboard:8x6:10")
     pose = spread_for_camera(rig, t, 1, camera="sun-sensor", seed=1)
-    ts = TargetScene(rig.sun_sensor.camera(), t, rig.sun_sensor.detector, spp=64)
+    ts = TargetScene(rig.sun_sensor.camera(), t, rig.sun_sensor.detector, spp=16)
     state = {"pose": (np.asarray(pose.rvec_deg[0], float), np.asarray(pose.tvec_mm[0], float)), "window_origin": (0, 0)}
-    one = ts.scene.render(state, seed=3, spp=64)
+    one = ts.scene.render(state, seed=3, spp=16)
     calls = []
     monkeypatch.setattr(scene_mod, "PASS_SAMPLES", 4 * one.size)
-    many = ts.scene.render(state, seed=3, spp=64, progress=lambda k, n: calls.append((k, n)))
-    assert calls[-1] == (16, 16)
+    many = ts.scene.render(state, seed=3, spp=16, progress=lambda k, n: calls.append((k, n)))
+    assert calls[-1] == (4, 4)
     assert not np.array_equal(one, many)
     lit = one > 0.5 * one.max()
     assert abs(many[lit].mean() / one[lit].mean() - 1) < 0.01
