@@ -15,8 +15,11 @@ leave it. ``record(write)`` runs it whole and returns its steps.
 ``Disk`` replays steps on a model of a journalling file system after a power failure: names (create, rename,
 unlink, truncate) reach the disk in the order they were made; a file's data only once ``fsync``'d — data written
 and not synced is lost (a new file is empty; a truncated one stays empty). ``Disk.after(events[:k])`` is what a
-power cut after step ``k`` leaves. This is the ordering POSIX and ext4/XFS guarantee to a program that relies on
-nothing else (fsync of the file before the rename that publishes it).
+power cut after step ``k`` leaves when the journal had committed every name made so far;
+``Disk.after(events[:k], names="synced")`` when it had committed only those made before the last ``fsync`` of
+their folder (POSIX makes a name durable only then). This is the ordering POSIX and ext4/XFS guarantee to a
+program that relies on nothing else (fsync of the file before the rename that publishes it, fsync of the folder
+before saying the file is written).
 """
 
 from __future__ import annotations
@@ -194,11 +197,16 @@ class Disk:
         self.names = {os.path.abspath(k): i for i, k in enumerate(files)}
         self._fds: dict[int, int] = {}
         self._handed: dict[int, bytearray] = {}  # per descriptor: bytes handed to a buffered file, not yet in the kernel
+        self._dir_fds: dict[int, str] = {}  # descriptors of folders (opened to be synced)
+        self.synced_names = dict(self.names)  # the names as of each folder's last fsync
 
     def _apply(self, e) -> None:
         kind = e[0]
         if kind == "open":
             _, path, fd, flags = e
+            if flags & getattr(os, "O_DIRECTORY", 0):  # a folder opened to be synced
+                self._dir_fds[fd] = path
+                return
             if path not in self.names:
                 assert flags & os.O_CREAT, f"opened a missing file {path}"
                 self._inodes.append(dict(data=bytearray(), durable=b""))
@@ -218,6 +226,10 @@ class Disk:
             ino = self._inodes[self._fds[e[1]]]
             del ino["data"][e[2]:]
             ino["durable"] = ino["durable"][:e[2]]
+        elif kind == "fsync" and e[1] in self._dir_fds:  # the folder's names are on the disk
+            folder = self._dir_fds[e[1]]
+            self.synced_names = {p: i for p, i in self.synced_names.items() if os.path.dirname(p) != folder}
+            self.synced_names.update({p: i for p, i in self.names.items() if os.path.dirname(p) == folder})
         elif kind == "fsync":
             ino = self._inodes[self._fds[e[1]]]
             ino["durable"] = bytes(ino["data"])
@@ -226,6 +238,7 @@ class Disk:
                 self._settle(e[1], None)
                 del self._handed[e[1]]
             self._fds.pop(e[1], None)
+            self._dir_fds.pop(e[1], None)
         elif kind == "rename":
             self.names[e[2]] = self.names.pop(e[1])
         elif kind == "unlink":
@@ -240,12 +253,14 @@ class Disk:
         del pending[:take]
 
     @classmethod
-    def after(cls, files: dict[str, bytes], events) -> dict[str, bytes]:
-        """``{path: bytes}`` on the disk after a power cut that follows ``events`` (the start: ``files``)."""
+    def after(cls, files: dict[str, bytes], events, names: str = "all") -> dict[str, bytes]:
+        """``{path: bytes}`` on the disk after a power cut that follows ``events`` (the start: ``files``), with
+        every name made so far (``names="all"``) or only those synced with their folder (``"synced"``)."""
         d = cls(files)
         for e in events:
             d._apply(e)
-        return {p: d._inodes[i]["durable"] for p, i in d.names.items()}
+        table = d.names if names == "all" else d.synced_names
+        return {p: d._inodes[i]["durable"] for p, i in table.items()}
 
 
 def materialise(files: dict[str, bytes], folder: Path) -> None:

@@ -59,13 +59,13 @@ def power_cut_problems(write, target: Path, old: bytes | None, new: bytes) -> li
     events = record(write)
     problems = []
     for k in range(len(events) + 1):
-        disk = Disk.after(start, events[:k])
-        got = disk.get(str(target))
-        if got not in (old, new):
-            problems.append(f"power cut after step {k} ({events[k - 1][0] if k else 'start'}): "
-                            f"the target holds {len(got or b'')} bytes, neither old nor new")
-    if Disk.after(start, events).get(str(target)) != new:
-        problems.append("after the last step the new data is not on the disk")
+        for names in ("all", "synced"):  # the journal committed every name so far, or only the synced ones
+            got = Disk.after(start, events[:k], names).get(str(target))
+            if got not in (old, new):
+                problems.append(f"power cut after step {k} ({events[k - 1][0] if k else 'start'}, {names} names): "
+                                f"the target holds {len(got or b'')} bytes, neither old nor new")
+    if Disk.after(start, events, "synced").get(str(target)) != new:
+        problems.append("after the last step the new data is not on the disk (the folder was not synced)")
     return problems
 
 
@@ -98,7 +98,8 @@ def test_a_failure_at_any_step_leaves_the_old_file_and_no_temporary(target):
     """Every step in turn raises (a full disk, an I/O error): the write raises, the target is untouched, and
     the temporary is removed."""
     t, old = target
-    n_steps = len(record(lambda: atomic_write_bytes(t, NEW)))
+    kinds = [e[0] for e in record(lambda: atomic_write_bytes(t, NEW))]
+    n_steps = kinds.index("rename") + 1  # the steps up to the publishing rename; the folder's sync follows
     if old is not None:
         t.write_bytes(old)
     else:
@@ -116,6 +117,27 @@ def test_a_failure_at_any_step_leaves_the_old_file_and_no_temporary(target):
             atomic_write_bytes(t, NEW)
         assert (t.read_bytes() if t.exists() else None) == old, n
         assert sorted(p.name for p in t.parent.iterdir()) == ([t.name] if old is not None else []), n
+
+
+def test_an_io_error_syncing_the_folder_is_raised_with_the_new_file_in_place(tmp_path):
+    """After the rename the folder is synced: an I/O error there is raised (the name may not survive a power cut),
+    the new file is whole in place and no temporary is left; a file system that cannot sync a folder (EINVAL) is
+    no error."""
+    t = tmp_path / "r.json"
+    t.write_bytes(OLD)
+    for err, raised in ((5, True), (22, False)):
+        def hook(event, phase, err=err):
+            if phase == 0 and event[0] == "fsync" and os.path.isdir(f"/proc/self/fd/{event[1]}"):
+                raise OSError(err, "injected at the folder's fsync")
+
+        with steps(hook):
+            if raised:
+                with pytest.raises(OSError, match="injected"):
+                    atomic_write_bytes(t, NEW)
+            else:
+                atomic_write_bytes(t, NEW)
+        assert t.read_bytes() == NEW and sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
+        t.write_bytes(OLD)
 
 
 def test_a_failed_clean_up_does_not_hide_the_writes_own_error(tmp_path):
@@ -209,15 +231,17 @@ def test_a_kill_or_power_cut_at_any_step_of_a_frame_write_leaves_a_frame_trusted
     assert n >= 10  # both files' steps were hit
     events = record(write_new)
     for k in range(len(events) + 1):
-        disk = Disk.after(old, events[:k])
-        for p in (root / "frames").iterdir():
-            p.unlink()
-        for name, data in disk.items():
-            if not Path(name).name.startswith("."):
-                Path(name).write_bytes(data)
-        files = {k2: v for k2, v in disk.items() if not Path(k2).name.startswith(".")}
-        problems += [f"power cut after step {k}: {p}" for p in _frame_state(root, files, old, new, old_params, new_params)]
-        restore()
+        for names in ("all", "synced"):  # the journal committed every name so far, or only the synced ones
+            disk = Disk.after(old, events[:k], names)
+            for p in (root / "frames").iterdir():
+                p.unlink()
+            for name, data in disk.items():
+                if not Path(name).name.startswith("."):
+                    Path(name).write_bytes(data)
+            files = {k2: v for k2, v in disk.items() if not Path(k2).name.startswith(".")}
+            problems += [f"power cut after step {k} ({names} names): {p}"
+                         for p in _frame_state(root, files, old, new, old_params, new_params)]
+            restore()
     assert problems == []
 
 
@@ -228,10 +252,26 @@ def _png(value: int) -> bytes:
 
 
 # -- the checks see a broken writer --------------------------------------------------------------------------
+def _sync_folder(path):
+    fd = os.open(Path(path).parent, os.O_RDONLY | os.O_DIRECTORY)
+    os.fsync(fd)
+    os.close(fd)
+
+
 def _no_fsync(path, data):
     tmp = Path(path).with_name(f".{Path(path).name}.x.tmp")
     with open(tmp, "xb") as f:
         f.write(data)
+    os.replace(tmp, path)
+    _sync_folder(path)
+
+
+def _no_folder_sync(path, data):
+    tmp = Path(path).with_name(f".{Path(path).name}.x.tmp")
+    with open(tmp, "xb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
     os.replace(tmp, path)
 
 
@@ -263,7 +303,7 @@ def _straight_onto_the_target(path, data):
 
 @pytest.mark.parametrize("writer, power, kill", [
     (_no_fsync, True, False), (_no_flush, True, False), (_rename_then_sync, True, False),
-    (_straight_onto_the_target, True, True)])
+    (_no_folder_sync, True, False), (_straight_onto_the_target, True, True)])
 def test_the_checks_fail_a_broken_writer(tmp_path, writer, power, kill):
     t = tmp_path / "out" / "result.json"
     t.parent.mkdir()

@@ -1,10 +1,11 @@
 """One way to write a file: a temporary file created exclusively in the target's folder (never
-following a symlink), fsync, then an atomic rename over the target. Only a regular file (or a link,
+following a symlink), fsync, then an atomic rename over the target and an fsync of the folder. Only a regular file (or a link,
 which is replaced, not followed) is ever replaced; a folder, a device node, a FIFO or a socket at the
 target is refused, and so is an input of the running command (:mod:`rigsim.files.outputs`)."""
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -58,7 +59,26 @@ def atomic_write_bytes(path, data: bytes) -> Path:
         except OSError:
             pass
         raise
+    _sync_folder(path.parent)
     return path
+
+
+def _sync_folder(folder: Path) -> None:
+    """fsync the folder: the rename that published the file is on the disk when the write returns (POSIX makes a
+    name durable only with its directory). A folder that cannot be opened (no read permission) or a file system
+    that cannot sync one (EINVAL) is left as it is; an I/O error is raised: the file is in place, its name may
+    not survive a power cut."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError as exc:
+        if exc.errno not in (errno.EINVAL, errno.ENOTSUP, errno.EBADF):
+            raise
+    finally:
+        os.close(fd)
 
 
 def atomic_write_text(path, text: str) -> Path:
