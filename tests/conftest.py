@@ -44,6 +44,17 @@ def _long_requested(config) -> bool:
     return ("long" in expr and "not long" not in expr) or os.environ.get("RIGSIM_LONG") == "1"
 
 
+def pytest_collection_finish(session):
+    """Everything imported by collection (numpy, scipy, Mitsuba, astropy, the test modules: ~200k objects) moves to
+    the garbage collector's permanent generation. Every new Mitsuba scene runs a full collection (Scene frees the
+    cycles of earlier scenes first); it cost ~0.15 s a scene over those objects, ~0.002 s once they are frozen.
+    Nothing frozen is ever garbage: no scene exists yet."""
+    import gc
+
+    gc.collect()
+    gc.freeze()
+
+
 def pytest_collection_modifyitems(config, items):
     slow, long = _slow_requested(config), _long_requested(config)
     skip_slow = pytest.mark.skip(reason="slow: run with -m slow or RIGSIM_SLOW=1")
