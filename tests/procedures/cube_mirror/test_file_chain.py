@@ -1,5 +1,6 @@
 """The cube-mirror file chain closes: a rendered campaign's exported files, run through the commands
-as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars), give the
+as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars; the null-search
+frames after the first through the same ``rigsim.cli.main`` in this process), give the
 campaign's decisions (each null search's next command and its null) and numbers (the three
 rotations to 1e-9 relative, their covariances to 1e-6, the same fit verdicts).
 
@@ -12,7 +13,7 @@ import shutil
 
 import numpy as np
 import pytest
-from file_chain import assert_rel, derived_rig, read, rigsim
+from file_chain import assert_rel, derived_rig, read, rigsim, rigsim_in_process
 
 from rigsim.cli import main
 from rigsim.files import Column, read_table
@@ -116,7 +117,8 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
         shutil.copy(d / "export" / t["frame"][i], bare / f"n{n}h.tif")
         shutil.copy(d / "export" / t["frame"][i + 1], bare / f"n{n}s.tif")
         assert t["face"][i] == face and (t["x_deg"][i], t["y_deg"][i]) == (reading["X"], reading["Y"])
-        rigsim("concentricity", f"n{n}h.tif", f"n{n}s.tif", "--rig", rig, "--face", face,
+        run = rigsim if n == 0 else rigsim_in_process  # the first pair as a lab runs it, the others through main()
+        run("concentricity", f"n{n}h.tif", f"n{n}s.tif", "--rig", rig, "--face", face,
                "--reading", f"X={float(t['x_deg'][i])!r},Y={float(t['y_deg'][i])!r}",
                f"--null-offset-px={float(t['null_offset_x_px'][i])!r},{float(t['null_offset_y_px'][i])!r}", "--json", f"n{n}.json",
                cwd=bare)
@@ -166,11 +168,30 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
         assert msg in err and len(err.splitlines()) == 1, err
 
 
+def _one_instrument(monkeypatch):
+    """The in-process `autocollimator read` calls share one instrument: its factory calibration (six exact,
+    deterministic traces of 400 000 rays, the same numbers in every process) is made once instead of once per
+    frame. The command's body is unchanged; only its optics object is reused."""
+    from rigsim.procedures.cube_mirror import null_files
+
+    made = {}
+    build = null_files.autocollimator_optics
+
+    def once(rig):
+        key = rig.model_dump_json()  # the whole rig: its autocollimator and its beam-splitter effect
+        if key not in made:
+            made[key] = build(rig)
+        return made[key]
+
+    monkeypatch.setattr(null_files, "autocollimator_optics", once)
+
+
 @pytest.mark.render
-def test_three_axis_campaign_closes_through_the_commands(tmp_path):
+def test_three_axis_campaign_closes_through_the_commands(tmp_path, monkeypatch):
     """Seed 001 (PNG frames; seed 000's test takes TIFF): the sweep, and the autocollimator's readings and null
     decisions."""
     rig = "sun_sensor_3axis_autocollimator"
+    _one_instrument(monkeypatch)
     camp, bare = _campaign(tmp_path, rig, ".png", autocollimator_spp=64)
     out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
     _same_numbers(out, camp)
@@ -179,7 +200,8 @@ def test_three_axis_campaign_closes_through_the_commands(tmp_path):
     assert len(t["frame"]) == len(decisions)
     for n, (f, (face, reading, dec)) in enumerate(zip(t["frame"], decisions)):
         shutil.copy(tmp_path / "export" / f, bare / f"a{n}.png")
-        rigsim("autocollimator", "read", f"a{n}.png", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
+        run = rigsim if n == 0 else rigsim_in_process  # the first frame as a lab runs it, the others through main()
+        run("autocollimator", "read", f"a{n}.png", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
         r = read(bare / f"a{n}.json")
         step = next(s for s in camp["searches"] if s["face"] == face)["steps"]
         assert_rel(r["reading_arcsec"], [s["measured"] for s in step if s["reading_deg"] == reading][0])
