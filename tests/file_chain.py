@@ -24,18 +24,21 @@ def rigsim(*args, cwd=None, ok=(0,), timeout=300, stdin=None) -> subprocess.Comp
     return p
 
 
-def rigsim_in_process(*args, cwd=None, ok=(0,)) -> int:
+def rigsim_in_process(*args, cwd=None, ok=(0,)) -> subprocess.CompletedProcess:
     """``rigsim ARGS`` through :func:`rigsim.cli.main` in this process (from ``cwd``), the same body the
     subprocess runs without the interpreter's start-up: for the repeats of a command a test has already run
-    once as a subprocess. Its exit status must be in ``ok``."""
+    as a subprocess. Its exit status must be in ``ok``; its output is returned as :func:`rigsim`'s."""
     import contextlib
+    import io
 
     from rigsim.cli import main
 
-    with contextlib.chdir(cwd or os.getcwd()):
-        rc = main([str(a) for a in args])
-    assert rc in ok, f"rigsim {' '.join(map(str, args))}: exit {rc}"
-    return rc
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd or os.getcwd()), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    assert rc in ok, f"rigsim {' '.join(argv)}: exit {rc}\n{err.getvalue()[-2000:]}"
+    return subprocess.CompletedProcess(["rigsim", *argv], rc, out.getvalue(), err.getvalue())
 
 
 def derived_rig(name: str, dst: Path, edits: dict[str, str]) -> Path:

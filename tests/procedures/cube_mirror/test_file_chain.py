@@ -1,6 +1,7 @@
 """The cube-mirror file chain closes: a rendered campaign's exported files, run through the commands
-as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars; the null-search
-frames after the first through the same ``rigsim.cli.main`` in this process), give the
+as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars; seed 001's sweep
+stages and the null-search frames after each search's first through the same ``rigsim.cli.main`` in this
+process), give the
 campaign's decisions (each null search's next command and its null) and numbers (the three
 rotations to 1e-9 relative, their covariances to 1e-6, the same fit verdicts).
 
@@ -54,13 +55,14 @@ def _campaign(d, rig_file, fmt, **kw):
     return camp, bare
 
 
-def _stages(bare, rig, frames):
-    """centroid → calibrate sun-sensor → triad → compose, each in its own process."""
-    rigsim("centroid", *frames, "--rig", rig, "--out", "c.csv", "--quiet", cwd=bare)
-    rigsim("calibrate", "sun-sensor", "--rig", rig, "--angles", "angles.csv", "--centroids", "c.csv", "--out", "sun.json",
-           "--opencv", "cam.yml", cwd=bare)
-    rigsim("triad", "--nulls", "nulls.csv", "--rig", rig, "--out", "cube.json", cwd=bare)
-    p = rigsim("compose", "--cube-from-rot", "cube.json", "--sun-from-rot", "sun.json", "--out", "cs.json", cwd=bare)
+def _stages(bare, rig, frames, run=rigsim):
+    """centroid → calibrate sun-sensor → triad → compose, each in its own process (``run=rigsim``; the seed-001
+    chain runs the same commands through ``rigsim.cli.main`` in this process)."""
+    run("centroid", *frames, "--rig", rig, "--out", "c.csv", "--quiet", cwd=bare)
+    run("calibrate", "sun-sensor", "--rig", rig, "--angles", "angles.csv", "--centroids", "c.csv", "--out", "sun.json",
+        "--opencv", "cam.yml", cwd=bare)
+    run("triad", "--nulls", "nulls.csv", "--rig", rig, "--out", "cube.json", cwd=bare)
+    p = run("compose", "--cube-from-rot", "cube.json", "--sun-from-rot", "sun.json", "--out", "cs.json", cwd=bare)
     assert "fit: no fit of its own; its inputs': cube_from_rot" in p.stdout
     return {k: read(bare / f"{k}.json") for k in ("sun", "cube", "cs")}
 
@@ -193,7 +195,8 @@ def test_three_axis_campaign_closes_through_the_commands(tmp_path, monkeypatch):
     rig = "sun_sensor_3axis_autocollimator"
     _one_instrument(monkeypatch)
     camp, bare = _campaign(tmp_path, rig, ".png", autocollimator_spp=64)
-    out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
+    # the stages in this process: seed 000's chain runs each of them as a subprocess
+    out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")), run=rigsim_in_process)
     _same_numbers(out, camp)
     t = read_table(tmp_path / "export" / "null_frames.csv", [Column("frame", kind="str"), Column("face", kind="str")])
     decisions = _decisions(camp)
