@@ -40,7 +40,6 @@ IDEAL = realization_from_rig(RIG, ideal=True)
 THR = RIG.autocollimator.null_threshold_arcsec  # 0.1″
 READ_TOL = 0.03  # ″, rendered reading error bound near null (≈ 5σ of the measured ≈ 0.006″ rms)
 FACE_SCALE = 0.0012  # the 0.09 % over-read on a 25 mm face, with margin
-SPP_IDEAL = 576  # the noise-free rendered steps' samples per pixel (test_rendered_ideal_rig_noise_free_step_a_and_face_search)
 
 
 def _rig_with(**ac_update):
@@ -242,21 +241,15 @@ def test_rendered_ideal_rig_noise_free_step_a_and_face_search(optics, tmp_path):
     final true face normal is along the true axis to ≤ threshold + READ_TOL per component. With
     a 0.02″ threshold (rig copy) the face ends ≤ 0.05″ from the axis: at threshold 0.1″ a single
     Newton step from the 0.05° start overshoots by the face's 0.09 % over-read (~0.05″) and stops
-    there, so 0.05″ needs the tighter threshold.
-
-    At 576 spp (24², the stratified sampler's square below the default 1024): the noise-free reading's Monte-Carlo
-    error grows by √(1024/576) = 1.33, from the measured 0.004″ to 0.0053″ rms per axis; READ_TOL (0.03″) is then
-    5.6σ per frame (7.5σ at 1024 spp), and a search stopped below the 0.02″ threshold leaves the face within
-    0.02 + 3σ = 0.036″ per axis, 0.051″ in all, of the 0.071″ bound."""
-    a = ac.step_a_align(RIG, IDEAL, np.random.default_rng(11), rendered=True, noiseless=True, spp=SPP_IDEAL)
+    there, so 0.05″ needs the tighter threshold."""
+    a = ac.step_a_align(RIG, IDEAL, np.random.default_rng(11), rendered=True, noiseless=True)
     assert a.converged and a.rendered and 2 <= a.n_frames <= 4
     _check_frames(zip(a.measured_arcsec, a.exact_arcsec))
     assert np.all(np.abs(a.exact_arcsec[-1]) <= THR + READ_TOL)
     assert a.axis_error_arcsec <= math.sqrt(2) * (THR + READ_TOL)
     assert all(not f["warnings"] or f is a.frame_info[0] for f in a.frame_info)  # vignetting only far off
     rig = _rig_with(null_threshold_arcsec=0.02)
-    res = ac.autocollimator_face_search(rig, IDEAL, 0, a.axis_rot, {}, rendered=True, noiseless=True, seed=4,
-                                        spp=SPP_IDEAL)
+    res = ac.autocollimator_face_search(rig, IDEAL, 0, a.axis_rot, {}, rendered=True, noiseless=True, seed=4)
     assert res.converged and res.n_frames <= 4
     _check_frames((s.measured, s.true) for s in res.steps)
     assert np.all(np.abs(res.final_true) <= 0.02 + READ_TOL)
