@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["assert_rel", "derived_rig", "rigsim"]
+__all__ = ["assert_rel", "derived_rig", "rigsim", "rigsim_in_process"]
 
 
 def rigsim(*args, cwd=None, ok=(0,), timeout=300, stdin=None) -> subprocess.CompletedProcess:
@@ -22,6 +22,23 @@ def rigsim(*args, cwd=None, ok=(0,), timeout=300, stdin=None) -> subprocess.Comp
                        timeout=timeout, env=env, input=stdin)
     assert p.returncode in ok, f"rigsim {' '.join(map(str, args))}: exit {p.returncode}\n{p.stderr[-2000:]}"
     return p
+
+
+def rigsim_in_process(*args, cwd=None, ok=(0,)) -> subprocess.CompletedProcess:
+    """``rigsim ARGS`` through :func:`rigsim.cli.main` in this process (from ``cwd``), the same body the
+    subprocess runs without the interpreter's start-up: for the repeats of a command a test has already run
+    as a subprocess. Its exit status must be in ``ok``; its output is returned as :func:`rigsim`'s."""
+    import contextlib
+    import io
+
+    from rigsim.cli import main
+
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd or os.getcwd()), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    assert rc in ok, f"rigsim {' '.join(argv)}: exit {rc}\n{err.getvalue()[-2000:]}"
+    return subprocess.CompletedProcess(["rigsim", *argv], rc, out.getvalue(), err.getvalue())
 
 
 def derived_rig(name: str, dst: Path, edits: dict[str, str]) -> Path:

@@ -127,12 +127,13 @@ def test_score_against_known_errors(clean, tmp_path):
 
 def test_rigsim_centroid_tables_are_scored(clean, tmp_path):
     """The file chain: `rigsim centroid` on a dataset's frames writes the table `dataset score` reads (frame file
-    names for the index, spot 0 of each frame), each in a subprocess; `dataset verify` reads the manifest."""
-    from file_chain import rigsim
+    names for the index, spot 0 of each frame); `dataset verify` reads the manifest. `dataset score` and `verify`
+    in a subprocess, `centroid` in this process (its subprocess runs: the cube-mirror file chain)."""
+    from file_chain import rigsim, rigsim_in_process
 
     root, _ = clean
     frames = sorted(str(p) for p in (root / "frames").glob("*.png"))
-    rigsim("centroid", *frames, "--rig", RIG, "--out", tmp_path / "c.csv", "--quiet")
+    rigsim_in_process("centroid", *frames, "--rig", RIG, "--out", tmp_path / "c.csv", "--quiet")
     p = rigsim("dataset", "score", root, tmp_path / "c.csv", "--json-out", tmp_path / "s.json")
     s = json.loads((tmp_path / "s.json").read_text())
     assert s["n"] == N and s["missing"] == [] and s["rms"] < 0.05, p.stdout
@@ -308,8 +309,9 @@ def test_star_frames_are_fits_with_one_truth_row_per_star_and_scored_by_matching
         assert any("u and v look swapped" in h for h in s.hints), s.hints
     except DatasetError as e:  # no prediction matched: the error names the cause
         assert "with u and v exchanged: u and v look swapped" in str(e), e
-    # the file chain: `star calibrate` reads the dataset's FITS frames (a lab's log: the frames' attitudes)
-    from file_chain import rigsim
+    # the file chain: `star calibrate` reads the dataset's FITS frames (a lab's log: the frames' attitudes), in this
+    # process (its subprocess run: tests/procedures/star/test_star_files.py)
+    from file_chain import rigsim_in_process as rigsim
 
     from rigsim.files import write_table
     from rigsim.procedures.star.files import attitude_log_columns

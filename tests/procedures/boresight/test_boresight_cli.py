@@ -13,12 +13,28 @@ def run(*args, timeout=600):
     return subprocess.run([sys.executable, "-m", "rigsim.cli", *args], capture_output=True, text=True, timeout=timeout)
 
 
+def run_here(*args):
+    """The command's body in this process (`rigsim.cli.main`): the tests below after the first, which runs
+    `run boresight` as a subprocess. The same fields as :func:`run`'s result."""
+    import contextlib
+    import io
+    import types
+
+    from rigsim.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main([str(a) for a in args])
+    return types.SimpleNamespace(returncode=rc, stdout=out.getvalue(), stderr=err.getvalue())
+
+
 def test_analytic_study_writes_report_and_is_reproducible(tmp_path):
+    """The study run twice with the same seed: as a subprocess, then through the same body in this process."""
     outs = []
     for k in range(2):
         d = tmp_path / f"r{k}"
-        r = run("run", "boresight", "--no-orbit", "--runs", "200", "--quiet", "--out", str(d),
-                "--json-out", str(d / "key.json"))
+        r = (run if k == 0 else run_here)("run", "boresight", "--no-orbit", "--runs", "200", "--quiet", "--out", str(d),
+                                          "--json-out", str(d / "key.json"))
         assert r.returncode == 0, r.stderr
         outs.append(json.loads((d / "key.json").read_text()))
         for f in ("report.md", "fig4_centroid_error.png", "fig5_monte_carlo.png", "fig6_focal_length.png",
@@ -51,14 +67,14 @@ def test_analytic_study_writes_report_and_is_reproducible(tmp_path):
     (["--eq20-cos2beta", "nominal"], "argument --eq20-cos2beta: invalid choice: 'nominal'"),
 ])
 def test_bad_input_is_a_clear_error(args, expected):
-    r = run("run", "boresight", "--no-orbit", *args)
+    r = run_here("run", "boresight", "--no-orbit", *args)
     assert r.returncode == 2 and expected in r.stderr and "Traceback" not in r.stderr
 
 
 def test_paper_loop_model_run_reports_both_loop_models(tmp_path):
     """--loop-model paper: the analyses run on the paper's loop, boresight.json's loop_models carries Fig 5
     and the verdicts under both loops; the DVAD's beta excess of the physical loop vanishes under the paper's."""
-    r = run("run", "boresight", "--no-orbit", "--runs", "400", "--quiet", "--loop-model", "paper", "--out", str(tmp_path))
+    r = run_here("run", "boresight", "--no-orbit", "--runs", "400", "--quiet", "--loop-model", "paper", "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     assert "loop model 'paper'" in r.stdout
     js = json.loads((tmp_path / "boresight.json").read_text())
@@ -81,7 +97,7 @@ def test_bad_rig_value_names_field_and_range(tmp_path):
     p = tmp_path / "r.toml"
     p.write_text((SCENES_DIR / "dual_line_array_prism.toml").read_text().replace(
         "core_radius_um = 25.0", "core_radius_um = -3.0"))
-    r = run("run", "boresight", "--no-orbit", "--rig", str(p))
+    r = run_here("run", "boresight", "--no-orbit", "--rig", str(p))
     assert r.returncode == 2
     assert "field `laser.core_radius_um` = -3.0" in r.stderr and "≥ 2.0" in r.stderr
 

@@ -188,23 +188,31 @@ def test_the_operator_homography_is_the_nominal_one():
     assert not np.allclose(nominal_screen_homography(tilted), g.H_screen_to_uv, rtol=1e-6)
 
 
+# The aiming camera with 1/16 of the pixels over the same field (400 × 300 px of 60 µm, as the file chain's): the
+# pencil's sample chunks depend on the spp and the film binning only (chunk_count(spp·b²)), so the worker tests below
+# split the same chunks between the processes for ~1/13 of the render.
+COARSE = RIG.model_copy(update={"aiming_camera": RIG.aiming_camera.model_copy(
+    update={"resolution_px": [400, 300], "pixel_pitch_um": 60.0})})
+COARSE_REAL = realization_from_rig(COARSE)
+
+
 @pytest.mark.render
 def test_aiming_frames_are_bit_identical_for_one_and_two_workers():
     """The pencil's fixed sample chunks, rendered in this process alone or with a worker process
-    (and with Dr.Jit at 1 or 2 threads), give the same uint16 frames for the same seed."""
+    (and with Dr.Jit at 1 or 2 threads), give the same uint16 frames for the same seed (the coarse camera)."""
     import drjit as dr
 
     from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
     from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
 
-    pose = dict(diaphragm_geometry(RIG, REAL, 0).layout.null_pose_rad)
+    pose = dict(diaphragm_geometry(COARSE, COARSE_REAL, 0).layout.null_pose_rad)
     pose["X"] += math.radians(-60.0 / 3600)
     frames = {}
     prev = dr.thread_count()
     try:
         for workers, threads in ((1, 1), (2, 2), (1, 2)):
             dr.set_thread_count(threads)
-            r = ConcentricityRenderer(RIG, REAL, 0, workers=workers)
+            r = ConcentricityRenderer(COARSE, COARSE_REAL, 0, workers=workers)
             assert r.workers == workers
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -223,16 +231,16 @@ def test_aiming_frames_are_bit_identical_for_one_and_two_workers():
 
 def test_a_dead_aiming_worker_leaves_the_frame_unchanged():
     """The worker process is killed before a frame: the renderer warns once, renders that chunk itself and
-    returns the frame one process gives for the seed."""
+    returns the frame one process gives for the seed (the coarse camera)."""
     from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
     from rigsim.truth.cube_mirror.diaphragm import diaphragm_geometry
 
-    pose = dict(diaphragm_geometry(RIG, REAL, 0).layout.null_pose_rad)
+    pose = dict(diaphragm_geometry(COARSE, COARSE_REAL, 0).layout.null_pose_rad)
     pose["X"] += math.radians(-60.0 / 3600)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref = ConcentricityRenderer(RIG, REAL, 0, workers=1).render(pose, seed=3)
-    r = ConcentricityRenderer(RIG, REAL, 0, workers=2)
+        ref = ConcentricityRenderer(COARSE, COARSE_REAL, 0, workers=1).render(pose, seed=3)
+    r = ConcentricityRenderer(COARSE, COARSE_REAL, 0, workers=2)
     r.render(pose, seed=9)  # the worker is up
     for proc in list(r._chunks._pool._processes.values()):
         proc.kill()

@@ -1,5 +1,7 @@
 """The cube-mirror file chain closes: a rendered campaign's exported files, run through the commands
-as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars), give the
+as a lab runs them (``python -m rigsim`` in a subprocess, the frames renamed, no sidecars; seed 001's sweep
+stages and the null-search frames after each search's first through the same ``rigsim.cli.main`` in this
+process), give the
 campaign's decisions (each null search's next command and its null) and numbers (the three
 rotations to 1e-9 relative, their covariances to 1e-6, the same fit verdicts).
 
@@ -12,7 +14,7 @@ import shutil
 
 import numpy as np
 import pytest
-from file_chain import assert_rel, derived_rig, read, rigsim
+from file_chain import assert_rel, derived_rig, read, rigsim, rigsim_in_process
 
 from rigsim.cli import main
 from rigsim.files import Column, read_table
@@ -53,13 +55,14 @@ def _campaign(d, rig_file, fmt, **kw):
     return camp, bare
 
 
-def _stages(bare, rig, frames):
-    """centroid → calibrate sun-sensor → triad → compose, each in its own process."""
-    rigsim("centroid", *frames, "--rig", rig, "--out", "c.csv", "--quiet", cwd=bare)
-    rigsim("calibrate", "sun-sensor", "--rig", rig, "--angles", "angles.csv", "--centroids", "c.csv", "--out", "sun.json",
-           "--opencv", "cam.yml", cwd=bare)
-    rigsim("triad", "--nulls", "nulls.csv", "--rig", rig, "--out", "cube.json", cwd=bare)
-    p = rigsim("compose", "--cube-from-rot", "cube.json", "--sun-from-rot", "sun.json", "--out", "cs.json", cwd=bare)
+def _stages(bare, rig, frames, run=rigsim):
+    """centroid → calibrate sun-sensor → triad → compose, each in its own process (``run=rigsim``; the seed-001
+    chain runs the same commands through ``rigsim.cli.main`` in this process)."""
+    run("centroid", *frames, "--rig", rig, "--out", "c.csv", "--quiet", cwd=bare)
+    run("calibrate", "sun-sensor", "--rig", rig, "--angles", "angles.csv", "--centroids", "c.csv", "--out", "sun.json",
+        "--opencv", "cam.yml", cwd=bare)
+    run("triad", "--nulls", "nulls.csv", "--rig", rig, "--out", "cube.json", cwd=bare)
+    p = run("compose", "--cube-from-rot", "cube.json", "--sun-from-rot", "sun.json", "--out", "cs.json", cwd=bare)
     assert "fit: no fit of its own; its inputs': cube_from_rot" in p.stdout
     return {k: read(bare / f"{k}.json") for k in ("sun", "cube", "cs")}
 
@@ -116,7 +119,8 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
         shutil.copy(d / "export" / t["frame"][i], bare / f"n{n}h.tif")
         shutil.copy(d / "export" / t["frame"][i + 1], bare / f"n{n}s.tif")
         assert t["face"][i] == face and (t["x_deg"][i], t["y_deg"][i]) == (reading["X"], reading["Y"])
-        rigsim("concentricity", f"n{n}h.tif", f"n{n}s.tif", "--rig", rig, "--face", face,
+        run = rigsim if n == 0 else rigsim_in_process  # the first pair as a lab runs it, the others through main()
+        run("concentricity", f"n{n}h.tif", f"n{n}s.tif", "--rig", rig, "--face", face,
                "--reading", f"X={float(t['x_deg'][i])!r},Y={float(t['y_deg'][i])!r}",
                f"--null-offset-px={float(t['null_offset_x_px'][i])!r},{float(t['null_offset_y_px'][i])!r}", "--json", f"n{n}.json",
                cwd=bare)
@@ -166,20 +170,41 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
         assert msg in err and len(err.splitlines()) == 1, err
 
 
+def _one_instrument(monkeypatch):
+    """The in-process `autocollimator read` calls share one instrument: its factory calibration (six exact,
+    deterministic traces of 400 000 rays, the same numbers in every process) is made once instead of once per
+    frame. The command's body is unchanged; only its optics object is reused."""
+    from rigsim.procedures.cube_mirror import null_files
+
+    made = {}
+    build = null_files.autocollimator_optics
+
+    def once(rig):
+        key = rig.model_dump_json()  # the whole rig: its autocollimator and its beam-splitter effect
+        if key not in made:
+            made[key] = build(rig)
+        return made[key]
+
+    monkeypatch.setattr(null_files, "autocollimator_optics", once)
+
+
 @pytest.mark.render
-def test_three_axis_campaign_closes_through_the_commands(tmp_path):
+def test_three_axis_campaign_closes_through_the_commands(tmp_path, monkeypatch):
     """Seed 001 (PNG frames; seed 000's test takes TIFF): the sweep, and the autocollimator's readings and null
     decisions."""
     rig = "sun_sensor_3axis_autocollimator"
+    _one_instrument(monkeypatch)
     camp, bare = _campaign(tmp_path, rig, ".png", autocollimator_spp=64)
-    out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")))
+    # the stages in this process: seed 000's chain runs each of them as a subprocess
+    out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")), run=rigsim_in_process)
     _same_numbers(out, camp)
     t = read_table(tmp_path / "export" / "null_frames.csv", [Column("frame", kind="str"), Column("face", kind="str")])
     decisions = _decisions(camp)
     assert len(t["frame"]) == len(decisions)
     for n, (f, (face, reading, dec)) in enumerate(zip(t["frame"], decisions)):
         shutil.copy(tmp_path / "export" / f, bare / f"a{n}.png")
-        rigsim("autocollimator", "read", f"a{n}.png", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
+        run = rigsim if n == 0 else rigsim_in_process  # the first frame as a lab runs it, the others through main()
+        run("autocollimator", "read", f"a{n}.png", "--rig", rig, "--json", f"a{n}.json", cwd=bare)
         r = read(bare / f"a{n}.json")
         step = next(s for s in camp["searches"] if s["face"] == face)["steps"]
         assert_rel(r["reading_arcsec"], [s["measured"] for s in step if s["reading_deg"] == reading][0])

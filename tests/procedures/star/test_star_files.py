@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from file_chain import rigsim
+from file_chain import rigsim, rigsim_in_process
 
 from rigsim.cli import main
 from rigsim.files import Column, read_table, write_table
@@ -88,8 +88,10 @@ def test_frames_round_trip_through_star_calibrate(exported, tmp_path):
     assert np.allclose(got["batch"]["covariance"]["sigma"], ref["batch"]["covariance"]["sigma"], rtol=1e-9)
     stars = read_table(d / "cal" / "stars.csv", [Column("frame", kind="str"), Column("u", "px"), Column("identified", kind="int")])
     assert stars["identified"].sum() == got["identification"]["identified"] > 1900
-    # the camera it wrote is read by `rig import-camera`
-    rigsim("rig", "import-camera", "cal/camera.yml", "--rig", "star_sensor", "--out", "imported.toml", cwd=d)
+    # the camera it wrote is read by `rig import-camera` (in this process: the cube-mirror file chain runs it as a
+    # subprocess)
+    rigsim_in_process("rig", "import-camera", "cal/camera.yml", "--rig", "star_sensor", "--out", "imported.toml", cwd=d)
+    assert "focal_length_mm" in (d / "imported.toml").read_text()
 
 
 @pytest.mark.parametrize("edit, message", [
