@@ -170,30 +170,11 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
         assert msg in err and len(err.splitlines()) == 1, err
 
 
-def _one_instrument(monkeypatch):
-    """The in-process `autocollimator read` calls share one instrument: its factory calibration (six exact,
-    deterministic traces of 400 000 rays, the same numbers in every process) is made once instead of once per
-    frame. The command's body is unchanged; only its optics object is reused."""
-    from rigsim.procedures.cube_mirror import null_files
-
-    made = {}
-    build = null_files.autocollimator_optics
-
-    def once(rig):
-        key = rig.model_dump_json()  # the whole rig: its autocollimator and its beam-splitter effect
-        if key not in made:
-            made[key] = build(rig)
-        return made[key]
-
-    monkeypatch.setattr(null_files, "autocollimator_optics", once)
-
-
 @pytest.mark.render
-def test_three_axis_campaign_closes_through_the_commands(tmp_path, monkeypatch):
+def test_three_axis_campaign_closes_through_the_commands(tmp_path):
     """Seed 001 (PNG frames; seed 000's test takes TIFF): the sweep, and the autocollimator's readings and null
     decisions."""
     rig = "sun_sensor_3axis_autocollimator"
-    _one_instrument(monkeypatch)
     camp, bare = _campaign(tmp_path, rig, ".png", autocollimator_spp=64)
     # the stages in this process: seed 000's chain runs each of them as a subprocess
     out = _stages(bare, rig, sorted(p.name for p in bare.glob("img_*")), run=rigsim_in_process)
