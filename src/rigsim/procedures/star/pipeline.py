@@ -99,7 +99,7 @@ class StarPipeline:
     :class:`StarObservation`; :meth:`calibrate` runs the estimators over all frames added."""
 
     def __init__(self, nominal: NominalStarRig, sky: SkyCatalogue, *, identification: str = "commanded",
-                 refraction=None):
+                 refraction=None, extractions: dict | None = None):
         if not isinstance(nominal, NominalStarRig):
             raise TypeError("the pipeline takes the nominal rig (StarRig.nominal_rig()), not the rig with its truth")
         if identification not in IDENTIFICATION:
@@ -117,6 +117,9 @@ class StarPipeline:
         self.fixed_pattern_note = "none"  # what was subtracted, for the output
         # (Site, frame index → UTC time): the air's refraction of every identified star before the joint fit
         self.refraction = refraction
+        # shared by pipelines that see the same observation objects: an extraction with equal settings on the same
+        # frame and the same fixed-pattern array is made once (a robustness trial's variants differ mostly after it)
+        self._extractions = extractions
 
     def _refract(self, k: int, dirs: np.ndarray) -> np.ndarray:
         if self.refraction is None:
@@ -135,9 +138,15 @@ class StarPipeline:
         s, idc = self.nominal.sensor, self.nominal.identification
         t0 = time.perf_counter()
         c = self.nominal.calibration
-        found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, method=c.centroid_method,
-                              repair_single_pixels=c.single_pixel_filter, poor_fit=c.poor_fit_reference,
-                              background=c.background)
+        key = (id(obs), id(self.fixed_pattern), s.detector.model_dump_json(), s.psf_sigma_px, c.centroid_method,
+               c.single_pixel_filter, c.poor_fit_reference, c.background)
+        found = None if self._extractions is None else self._extractions.get(key)
+        if found is None:
+            found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px,
+                                  method=c.centroid_method, repair_single_pixels=c.single_pixel_filter,
+                                  poor_fit=c.poor_fit_reference, background=c.background)
+            if self._extractions is not None:
+                self._extractions[key] = found
         keep = found.usable
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)

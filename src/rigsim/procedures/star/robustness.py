@@ -99,7 +99,8 @@ def star_trial(rig, names, config: str, seed: int) -> dict:
     if key not in _SKY:
         _SKY[key] = StarSky(rig).sky
     sky = StarSky(r, sky=_SKY[key])
-    pipes = {v: StarPipeline(nom, sky.sky) for v, nom in pipeline_variants(r).items()}
+    extractions: dict = {}  # the variants' extractions with equal settings, made once per frame (the frames are held)
+    pipes = {v: StarPipeline(nom, sky.sky, extractions=extractions) for v, nom in pipeline_variants(r).items()}
     truths, held, t_render = [], [], 0.0
     t0 = time.perf_counter()
     for obs, truth, _fr in generate(r, seed=int(seed), sky=sky):
