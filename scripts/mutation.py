@@ -34,7 +34,7 @@ MODULES = {
     "atomic": ("src/rigsim/files/atomic.py", ["tests/files/test_crash_safety.py", "tests/files/test_files.py"]),
     "dataset_store": ("src/rigsim/dataset/store.py", ["tests/files/test_crash_safety.py", "tests/dataset/test_store.py"]),
     "detector": ("src/rigsim/detector/model.py", ["tests/detector/test_detector_distribution.py", "tests/detector/test_detector_model.py",
-                                                  "tests/detector/test_detector_blocks.py"]),
+                                                  "tests/detector/test_detector_blocks.py", "tests/detector/test_detector_chain.py"]),
     "poisson": ("src/rigsim/detector/poisson.py", ["tests/detector/test_detector_poisson_inverse.py"]),
     "triad": ("src/rigsim/estimation/triad.py", ["tests/estimation/test_triad.py", "tests/test_cli.py::test_triad_table1",
                                                  "tests/procedures/cube_mirror/test_campaign.py"]),
