@@ -87,8 +87,8 @@ def _cornish_fisher(lam: np.ndarray, u: np.ndarray, work=None) -> np.ndarray:
     if u.dtype == np.float32:  # 24-bit uniforms: the middle of each 2^-24 step
         np.copyto(z, u)
         z += 2.0 ** -25
-    else:
-        np.clip(u, 1e-300, 1 - 1e-16, out=z)
+    else:  # 53-bit uniforms: u = 0 stands for the middle of its step (at 1e-300, z = −37, the expansion turns back up)
+        np.clip(u, 2.0 ** -54, 1 - 1e-16, out=z)
     special.ndtri(z, out=z)
     np.sqrt(lam64, out=s)
     np.divide(1.0, s, out=g1)

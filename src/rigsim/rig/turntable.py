@@ -125,7 +125,7 @@ class TurntableModel:
         if err > 1e-10 or np.max(np.abs(sol.x - x0)) > max_move_rad:
             raise GeometryError(
                 f"no pose of axes {free} within {np.degrees(max_move_rad):.0f}° of "
-                f"{ {k: round(np.degrees(v), 3) for k, v in base.items()} } (deg) aligns the face normal "
+                f"{ {k: round(float(np.degrees(v)), 3) for k, v in base.items()} } (deg) aligns the face normal "
                 f"with the beam (residual {err:.2e}); check the cube orientation and procedure.nominal_poses_deg"
             )
         out = dict(base)
