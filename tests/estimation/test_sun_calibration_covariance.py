@@ -176,7 +176,60 @@ def test_too_few_points_names_the_field_only_when_it_left_frames_out():
         calibrate_sun_sensor(READINGS, UV, MODEL, W, H, f_guess_px=270.0, max_field_deg=8.0)
 
 
-@pytest.mark.parametrize("limit", [90.0, 100.0, 180.0])
+@pytest.mark.parametrize("limit", [90.0, 90.5, 100.0, 180.0])
 def test_a_field_limit_of_90_degrees_or_more_keeps_every_frame(limit):
     cal = _calibrate(_noisy(7), max_field_deg=limit)
     assert cal.n_points == len(UV) and len(cal.outside_field) == 0
+
+
+def test_an_unknown_sigma_takes_the_median_in_the_outlier_test():
+    """Frame 20 has no σ (NaN) and is 1 px off: with the others' median σ (0.05 px) that is 20σ, an outlier
+    at the limit 8; were its σ taken as 1 px it would stay."""
+    uv = _noisy(8)
+    uv[20, 0] += 1.0
+    sig = np.full(UV.shape, 0.05)
+    sig[20] = np.nan
+    assert _calibrate(uv, sigma_uv=sig, outlier_sigma=8.0).outliers.tolist() == [20]
+
+
+def test_a_limit_of_one_robust_sigma_still_tests():
+    """Any limit > 0 switches the test on, 1 included: a frame 5 px off (≈100 robust σ) is left out."""
+    uv = _noisy(9)
+    uv[30, 1] += 5.0
+    cal = _calibrate(uv, outlier_sigma=1.0)
+    assert 30 in cal.outliers.tolist() and cal.n_points == len(UV) - len(cal.outliers)
+
+
+def test_a_negative_sigma_is_unknown_in_the_outlier_test():
+    """A σ ≤ 0 is no σ: frame 40, 1 px off with σ = −0.05 px, is judged with the median σ and left out."""
+    uv = _noisy(10)
+    uv[40, 1] += 1.0
+    sig = np.full(UV.shape, 0.05)
+    sig[40] = -0.05
+    assert _calibrate(uv, sigma_uv=sig, outlier_sigma=8.0).outliers.tolist() == [40]
+
+
+def test_eight_frames_are_enough():
+    """8 frames (16 equations, 11 unknowns): the fit runs and returns the noise-free camera's centroids."""
+    i = np.linspace(0, len(UV) - 1, 8).round().astype(int)
+    few = TurntableReading({k: np.asarray(READINGS[k])[i] for k in READINGS})
+    cal = calibrate_sun_sensor(few, UV[i], MODEL, W, H, f_guess_px=270.0)
+    assert cal.n_points == 8 and cal.rms_px < 1e-6
+
+
+def test_the_returned_camera_is_the_fitted_one_with_the_unfitted_terms_zero():
+    """Without k3 (and without p1, p2) in the fit, the returned camera has them at 0: it projects the sweep
+    as OpenCV does with the fitted intrinsics and the other terms 0."""
+    uv = _noisy(11)
+    for tangential in (True, False):
+        cal = _calibrate(uv, fit_tangential=tangential)
+        p = dict(zip(cal.param_names, cal.params))
+        want = [p["fx"], p["fy"], p["cx"], p["cy"], p["k1"], p["k2"], p.get("p1", 0.0), p.get("p2", 0.0)]
+        assert cal.camera.k3 == 0.0 and (tangential or cal.camera.p1 == cal.camera.p2 == 0.0)
+        s = M @ cal.R_sun_from_rot.T
+        np.testing.assert_allclose(cal.camera.project(s), _project(s, want), rtol=0, atol=1e-9)
+
+
+def test_repr_leaves_out_the_per_frame_arrays():
+    cal = _calibrate(_noisy(12))
+    assert "residuals_px=" not in repr(cal) and "uv=" not in repr(cal) and "rms_px=" in repr(cal)
