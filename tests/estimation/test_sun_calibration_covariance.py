@@ -166,9 +166,9 @@ def test_sweep_poses_is_the_grid_by_hand():
 
 def test_too_few_points_names_the_field_only_when_it_left_frames_out():
     """The message names the field limit only when the limit left frames out."""
-    few = TurntableReading({k: np.asarray(READINGS[k])[:5] for k in READINGS})
-    with pytest.raises(ValueError, match=r"got 5$"):
-        calibrate_sun_sensor(few, UV[:5], MODEL, W, H, f_guess_px=270.0)
+    few = TurntableReading({k: np.asarray(READINGS[k])[:7] for k in READINGS})
+    with pytest.raises(ValueError, match=r"at least 8 points on the detector, got 7$"):
+        calibrate_sun_sensor(few, UV[:7], MODEL, W, H, f_guess_px=270.0)
     r = np.hypot(UV[:, 0] - (W - 1) / 2, UV[:, 1] - (H - 1) / 2)
     n_in = int(np.sum(r <= 270.0 * np.tan(np.radians(8.0))))  # the nominal camera's 8° circle
     assert 0 < n_in < 8
@@ -233,3 +233,70 @@ def test_the_returned_camera_is_the_fitted_one_with_the_unfitted_terms_zero():
 def test_repr_leaves_out_the_per_frame_arrays():
     cal = _calibrate(_noisy(12))
     assert "residuals_px=" not in repr(cal) and "uv=" not in repr(cal) and "rms_px=" in repr(cal)
+
+
+@pytest.mark.parametrize("side", [(1, 0), (-1, 0), (0, 1), (0, -1)])
+def test_the_field_limit_is_measured_from_the_detector_centre(side):
+    """The limit's circle is centred on ((W − 1)/2, (H − 1)/2) with radius f_guess·tan(limit): put its edge
+    0.01 px beyond a frame about 300 px from the centre on each side; exactly the frames outside, counted by
+    hand, are left out."""
+    c = np.array([(W - 1) / 2, (H - 1) / 2])
+    d = UV - c
+    r = np.hypot(*d.T)
+    i = int(np.argmin(np.abs(r - 300.0) + 1e3 * (d @ np.array(side) < 0.9 * r)))
+    limit = np.degrees(np.arctan((r[i] + 0.01) / 270.0))
+    cal = _calibrate(UV, max_field_deg=limit)
+    np.testing.assert_array_equal(cal.outside_field, np.flatnonzero(r > r[i] + 0.01))
+    assert i not in cal.outside_field
+
+
+def test_a_frame_claiming_a_small_sigma_is_judged_by_it():
+    """Frame 50 says σ = 0.01 px (the others 0.05) and is 1 px off: 100 of its σ, an outlier."""
+    uv = _noisy(13)
+    uv[50, 0] += 1.0
+    sig = np.full(UV.shape, 0.05)
+    sig[50] = 0.01
+    assert _calibrate(uv, sigma_uv=sig, outlier_sigma=8.0).outliers.tolist() == [50]
+
+
+def _nine(bad, seed):
+    i = np.linspace(0, len(UV) - 1, 9).round().astype(int)
+    few = TurntableReading({k: np.asarray(READINGS[k])[i] for k in READINGS})
+    uv = UV[i] + np.random.default_rng(seed).normal(0.0, 0.01, (9, 2))
+    uv[bad, 0] += 20.0
+    return calibrate_sun_sensor(few, uv, MODEL, W, H, f_guess_px=270.0, outlier_sigma=8.0)
+
+
+def test_a_nine_frame_sweep_loses_its_one_outlier():
+    """8 frames are enough for the refit: of 9 frames, the middle one, 20 px off, is left out."""
+    cal = _nine([4], 14)
+    assert cal.outliers.tolist() == [4] and cal.n_points == 8 and cal.rms_px < 0.05
+
+
+@pytest.mark.parametrize("bad", [[3, 4, 5], [4, 5]])
+def test_the_outlier_test_never_leaves_fewer_than_eight_frames(bad):
+    """Of 9 frames, 2 or 3 off by 20 px: leaving them out would leave 7 or 6 frames, so every frame is kept
+    (the plain fit)."""
+    cal = _nine(bad, 15)
+    assert len(cal.outliers) == 0 and cal.n_points == 9
+
+
+def test_every_sigma_unknown_is_the_same_as_none():
+    """With no usable σ at all (NaN everywhere), the outlier test runs as without σ: frame 60, 3 px off, is out."""
+    uv = _noisy(16)
+    uv[60, 0] += 3.0
+    none = _calibrate(uv, outlier_sigma=8.0)
+    nan = _calibrate(uv, sigma_uv=np.full(UV.shape, np.nan), outlier_sigma=8.0)
+    assert none.outliers.tolist() == nan.outliers.tolist() == [60] and nan.fit is None
+    np.testing.assert_array_equal(nan.params, none.params)
+
+
+def test_sun_directions_in_mount_are_unit_vectors_of_the_table_chain():
+    """d_rot of any length: the unit sun direction R(rot←mount)ᵀ·d̂, R(rot←mount) = Rx(θx)·Ry(θy) from scipy."""
+    from rigsim.estimation.sun_calibration import sun_directions_in_mount
+
+    tx, ty = np.radians([10.0, -35.0, 50.0]), np.radians([-20.0, 5.0, 40.0])
+    d = np.array([0.2, -0.1, 2.0])
+    got = sun_directions_in_mount(MODEL, TurntableReading({"X": tx, "Y": ty}), d)
+    R = Rotation.from_euler("XY", np.column_stack([tx, ty])).as_matrix()
+    np.testing.assert_allclose(got, R.transpose(0, 2, 1) @ (d / np.linalg.norm(d)), atol=1e-15)
