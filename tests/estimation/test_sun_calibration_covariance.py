@@ -113,10 +113,11 @@ def test_sigma_uv_below_the_noise_gives_the_scatter_covariance():
     np.testing.assert_allclose(cal.covariance, rss / dof * _jtj_inv(cal), rtol=1e-4, atol=0)
 
 
-def test_sigma_uv_with_a_zero_is_not_judged():
-    """A σ of 0 among the used frames: no judgement, the residual scatter's covariance."""
+@pytest.mark.parametrize("bad", [0.0, -0.05])
+def test_sigma_uv_with_a_zero_is_not_judged(bad):
+    """A σ of 0 or below among the used frames: no judgement, the residual scatter's covariance."""
     sig = np.full(UV.shape, 0.05)
-    sig[5] = 0.0
+    sig[5] = bad
     cal = _calibrate(_noisy(5), sigma_uv=sig)
     assert cal.fit is None
     rss, dof = _rss_dof(cal)
@@ -146,6 +147,11 @@ def test_so3_left_jacobian_satisfies_its_defining_identity(norm):
     Jl = _so3_left_jacobian(d)
     np.testing.assert_allclose(Jl @ K, Rotation.from_rotvec(d).as_matrix() - np.eye(3), rtol=0,
                                atol=1e-15 + 1e-13 * norm)
+    # J_l(δ) = ∫₀¹ exp(s[δ]×) ds, by Gauss–Legendre quadrature of scipy's rotation matrices: resolves the
+    # K²/6 term of the series (≈1e-13 at |δ| = 1e-6) to float64 rounding
+    xg, wg = np.polynomial.legendre.leggauss(20)
+    quad = sum(w / 2 * Rotation.from_rotvec((x + 1) / 2 * d).as_matrix() for x, w in zip(xg, wg))
+    np.testing.assert_allclose(Jl, quad, rtol=0, atol=2e-15)
     R = Rotation.from_rotvec(d)
     for k in range(3):
         e = np.zeros(3)
