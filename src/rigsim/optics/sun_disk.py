@@ -29,11 +29,19 @@ def _unit(v) -> np.ndarray:
 
 
 def _basis(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors completing s to a right-handed orthonormal frame."""
-    a = np.array([1.0, 0.0, 0.0]) if abs(s[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    """Two unit vectors completing s (a unit 3-vector, or (..., 3) of them) to a right-handed orthonormal frame."""
+    a = np.where((np.abs(s[..., 0]) < 0.9)[..., None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     e1 = np.cross(s, a)
-    e1 /= np.linalg.norm(e1)
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
     return e1, np.cross(s, e1)
+
+
+def _rim_directions(s: np.ndarray, full_angle_rad: float, n: int) -> np.ndarray:
+    """The ``n`` directions of the disk's rim around each unit direction s ((3,) or (..., 3)): (..., n, 3)."""
+    e1, e2 = _basis(s)
+    psi = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)[:, None]
+    h = full_angle_rad / 2.0
+    return math.cos(h) * s[..., None, :] + math.sin(h) * (np.cos(psi) * e1[..., None, :] + np.sin(psi) * e2[..., None, :])
 
 
 @functools.lru_cache(maxsize=4)
@@ -72,12 +80,7 @@ def disk_directions(sun_dir, full_angle_rad: float, n: int) -> np.ndarray:
 
 def spot_outline(camera: PinholeBrown, sun_dir, full_angle_rad: float, n: int = 90):
     """Projected rim of the disk: (n, 2) pixel positions and a validity mask."""
-    s = _unit(sun_dir)
-    e1, e2 = _basis(s)
-    psi = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
-    h = full_angle_rad / 2.0
-    d = math.cos(h) * s + math.sin(h) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
-    return camera.project_valid(d)
+    return camera.project_valid(_rim_directions(_unit(sun_dir), full_angle_rad, n))
 
 
 def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
@@ -217,15 +220,7 @@ def max_spot_extent_px(camera: PinholeBrown, full_angle_rad: float, grid: int = 
         return ext
     # every grid point's rim (spot_outline's, n = 90) in one projection: (points, 90, 2)
     s = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    a = np.where((np.abs(s[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])  # _basis, every point at once
-    e1 = np.cross(s, a)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(s, e1)
-    psi = np.linspace(0.0, 2.0 * math.pi, 90, endpoint=False)
-    h = full_angle_rad / 2.0
-    rim_dirs = (math.cos(h) * s[:, None, :] + math.sin(h) * (np.cos(psi)[None, :, None] * e1[:, None, :]
-                                                            + np.sin(psi)[None, :, None] * e2[:, None, :]))
-    rim, rim_ok = camera.project_valid(rim_dirs.reshape(-1, 3))
+    rim, rim_ok = camera.project_valid(_rim_directions(s, full_angle_rad, 90).reshape(-1, 3))
     rim, rim_ok = rim.reshape(len(s), 90, 2), rim_ok.reshape(len(s), 90)
     whole = np.all(rim_ok, axis=1)
     if np.any(whole):

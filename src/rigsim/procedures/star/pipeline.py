@@ -120,6 +120,9 @@ class StarPipeline:
         # shared by pipelines that see the same observation objects: an extraction with equal settings on the same
         # frame and the same fixed-pattern array is made once (a robustness trial's variants differ mostly after it)
         self._extractions = extractions
+        c, s = nominal.calibration, nominal.sensor
+        self._extraction_settings = (s.detector.model_dump_json(), s.psf_sigma_px, c.centroid_method,
+                                     c.single_pixel_filter, c.poor_fit_reference, c.background)
 
     def _refract(self, k: int, dirs: np.ndarray) -> np.ndarray:
         if self.refraction is None:
@@ -138,8 +141,7 @@ class StarPipeline:
         s, idc = self.nominal.sensor, self.nominal.identification
         t0 = time.perf_counter()
         c = self.nominal.calibration
-        key = (id(obs), id(self.fixed_pattern), s.detector.model_dump_json(), s.psf_sigma_px, c.centroid_method,
-               c.single_pixel_filter, c.poor_fit_reference, c.background)
+        key = (id(obs), id(self.fixed_pattern), *self._extraction_settings)
         found = None if self._extractions is None else self._extractions.get(key)
         if found is None:
             found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px,
