@@ -74,7 +74,7 @@ def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm
         assert abs(v["sun_fx_px"]) < 0.05 and abs(v["sun_u0_px"]) < 0.05 and abs(v["sun_v0_px"]) < 0.05
         # near the null the aiming camera's offset is measured to a small fraction of a pixel
         assert 0.0 < v["null_measurement_rms"] < 0.3
-    # the sweep does not depend on the hole fit: the same frames, the same sun-sensor calibration
+    # the hole fit's campaign reuses the configured campaign's sweep (the slow test below checks it against its own)
     a, b, g = (out[v] for v in variants)
     assert a["sun_fx_px"] == b["sun_fx_px"] and a["sun_rot_x_arcsec"] == b["sun_rot_x_arcsec"]
     # the guarded variant refits the configured campaign's sweep: same nulls, the frames beyond 62° left out
@@ -86,14 +86,18 @@ def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm
 @pytest.mark.slow
 def test_an_ideal_trial_is_the_main_jobs_campaign_again_with_the_same_seed(diaphragm_rig):
     """The configured variant of a trial is the main job's campaign: run again with the same seed, the same numbers.
+    The hole-fit variant, whose campaign reuses the configured campaign's sweep, is the campaign that renders its own.
     (Moved from the default test above, where it was a third campaign of the default rig: the default stage checks
     the pieces' determinism, the sweep in tests/procedures/cube_mirror/test_sweep.py and the aiming frames in
     test_concentricity.py.)"""
     from rigsim.procedures.cube_mirror.robustness import _one_campaign, campaign_trial, pipeline_variants, quantities
 
     out = campaign_trial(diaphragm_rig, (), IDEAL, 0)
+    (configured, _), (hole, hole_rig) = list(pipeline_variants(diaphragm_rig).items())[:2]
     again, _n, _t, _camp = _one_campaign(diaphragm_rig, 0, quantities(diaphragm_rig))
-    assert again == out[next(iter(pipeline_variants(diaphragm_rig)))]                  # same seed, same campaign
+    assert again == out[configured]                                                   # same seed, same campaign
+    own, n_own, _t, _camp = _one_campaign(hole_rig, 0, quantities(diaphragm_rig))     # renders its own sweep
+    assert own == out[hole] and n_own > 500
 
 
 @pytest.mark.slow

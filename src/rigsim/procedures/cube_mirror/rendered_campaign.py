@@ -100,7 +100,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
                           noise: Noise | None = None, noiseless: bool = False, threshold: float | None = None,
                           sweep_spp: int = 256, sweep_step_deg: float | None = None, repeat_frames: int = 0,
                           progress=None, frames=None, aiming_workers: int = 1,
-                          autocollimator_spp: int | None = None) -> RenderedCampaign:
+                          autocollimator_spp: int | None = None, sweep: tuple | None = None) -> RenderedCampaign:
     """One campaign on rendered frames against the rig instance ``real``.
 
     ``noise``: the random errors that are not image noise (encoder noise; default the rig's).
@@ -125,10 +125,14 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
     # ---- step 1 / B: the sun-sensor sweep
     pb.set_description("sun-sensor sweep")
     t0 = time.perf_counter()
-    sweep, sweep_truth = render_sweep(rig, real, noise, int(rng.integers(2**31)), spp=sweep_spp, noiseless=noiseless,
-                                      step_deg=sweep_step_deg, progress=pb.update,
-                                      on_frame=None if frames is None else frames.sweep_frame)
-    times["sweep render + centroid"] = time.perf_counter() - t0
+    sweep_seed = int(rng.integers(2**31))
+    if sweep is None:
+        sweep, sweep_truth = render_sweep(rig, real, noise, sweep_seed, spp=sweep_spp, noiseless=noiseless,
+                                          step_deg=sweep_step_deg, progress=pb.update,
+                                          on_frame=None if frames is None else frames.sweep_frame)
+        times["sweep render + centroid"] = time.perf_counter() - t0
+    else:
+        sweep, sweep_truth = sweep
     t0 = time.perf_counter()
     cal = fit_sun_sensor(rig, sweep.readings, sweep.uv, order, sigma_uv=sweep.sigma_uv)
     times["sweep least squares"] = time.perf_counter() - t0

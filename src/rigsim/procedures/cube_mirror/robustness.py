@@ -110,7 +110,10 @@ def campaign_trial(rig, names, config: str, seed: int) -> dict:
         if _guarded(v_rig, rig):
             out[variant] = _refit(rig_with(v_rig, config, names), *(first or (None, None)), quantities(rig))
             continue
-        values, n, t, camp = _one_campaign(rig_with(v_rig, config, names), seed, quantities(rig))
+        sweep = None
+        if first is not None and _hole_fit_only(v_rig, rig):  # the same sweep: rendered once
+            sweep = (first[0].sweep, first[0].sweep_truth)
+        values, n, t, camp = _one_campaign(rig_with(v_rig, config, names), seed, quantities(rig), sweep)
         first = first or camp
         out[variant] = values
         frames, wall = frames + n, wall + t
@@ -118,8 +121,9 @@ def campaign_trial(rig, names, config: str, seed: int) -> dict:
     return out
 
 
-def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float, tuple | None]:
-    """One rendered campaign: (its values, frames, seconds, (campaign, rig instance) or None)."""
+def _one_campaign(r, seed: int, qs, sweep=None) -> tuple[dict, int, float, tuple | None]:
+    """One rendered campaign (``sweep``: an earlier campaign's sweep of the same rig and seed, see
+    :func:`run_rendered_campaign`): (its values, frames rendered, seconds, (campaign, rig instance) or None)."""
     from rigsim.errors import SearchError
     from rigsim.procedures.cube_mirror.rendered_campaign import run_rendered_campaign
     from rigsim.truth.cube_mirror.realization import realization_from_rig
@@ -128,11 +132,20 @@ def _one_campaign(r, seed: int, qs) -> tuple[dict, int, float, tuple | None]:
     t0 = time.perf_counter()
     counter = _Counter()
     try:
-        camp = run_rendered_campaign(r, real, seed=int(seed), progress=counter)
+        camp = run_rendered_campaign(r, real, seed=int(seed), progress=counter, sweep=sweep)
     except SearchError:
         return _failed(qs), counter.n, time.perf_counter() - t0, None
     wall = time.perf_counter() - t0
     return _values(r, camp.result, camp.calibration, camp), counter.n, wall, (camp, real)
+
+
+def _hole_fit_only(v_rig, rig) -> bool:
+    """``v_rig`` is ``rig`` with only the aiming camera's hole fit changed: the sweep (sun sensor only) is the same."""
+    if v_rig.procedure.method != "diaphragm":
+        return False
+    same = v_rig.model_copy(update={"aiming_camera": v_rig.aiming_camera.model_copy(
+        update={"hole_background": rig.aiming_camera.hole_background})})
+    return same == rig
 
 
 def _failed(qs) -> dict:
