@@ -191,3 +191,38 @@ def test_cache_dir_follows_rigsim_then_xdg_then_home(tmp_path, monkeypatch):
     assert cache_dir() == tmp_path / "xdg" / "rigsim"
     monkeypatch.setenv("RIGSIM_CACHE_DIR", str(tmp_path / "mine"))
     assert cache_dir() == tmp_path / "mine"
+
+
+def test_cached_json_computes_once_and_trusts_only_a_file_that_fits(tmp_path, monkeypatch):
+    import json
+    import os
+
+    from rigsim.files import cached_json
+
+    monkeypatch.setenv("RIGSIM_CACHE_DIR", str(tmp_path / "cache"))
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"F_mm": 0.1 + 0.2, "uv": [1.0 / 3.0, -2.5e-17]}
+
+    key = {"what": "a calibration", "n": 3, "code": "abc"}
+    first = cached_json("kind", key, compute, lambda d: "F_mm" in d)
+    assert first == compute() and len(calls) == 2                     # no file yet: computed
+    (f,) = (tmp_path / "cache" / "kind").iterdir()
+    again = cached_json("kind", key, compute, lambda d: "F_mm" in d)
+    assert again == first and len(calls) == 2                         # from the file, every float bit for bit
+    assert cached_json("kind", {**key, "code": "abd"}, compute, lambda d: True) == first and len(calls) == 3
+    # a file that does not fit is computed again and replaced: garbage, another key under this name, a value refused
+    for text in ("{not json", json.dumps({"key": {**key, "n": 4}, "value": first}), json.dumps({"key": key, "value": [1]}),
+                 json.dumps({"key": key, "value": {"F_mm": float("nan")}})):
+        f.write_text(text)
+        n = len(calls)
+        assert cached_json("kind", key, compute, lambda d: d.get("F_mm") == d.get("F_mm")) == first and len(calls) == n + 1
+        assert json.loads(f.read_text())["value"] == first
+    # a cache folder that cannot be written costs the computation only
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where the cache folder should be")
+    monkeypatch.setenv("RIGSIM_CACHE_DIR", str(blocker))
+    assert cached_json("kind", key, compute, lambda d: True) == first and blocker.is_file()
+    assert not any(p.name.startswith(".") for p in os.scandir(tmp_path / "cache" / "kind"))  # no temporary left

@@ -290,3 +290,33 @@ def test_bad_parameters_are_rejected():
         PlanoConvexObjective(50.0, 50.0, 1.0)
     with pytest.raises(ValueError, match="target"):
         autocollimator_layout(RIG, REAL, "prism")
+
+
+def test_the_factory_calibration_is_shared_through_the_cache_folder_and_rebuilt_when_it_does_not_fit(tmp_path, monkeypatch):
+    """Another process (a dataset worker, a later run) reads the calibration from the cache folder, float for float;
+    a file that does not fit (a number spoiled, another instrument) is not used."""
+    import json
+
+    from rigsim.optics import autocollimator as mod
+
+    monkeypatch.setenv("RIGSIM_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(mod, "_CALIBRATIONS", {})
+    n = 20_000
+    cold = AutocollimatorOptics(AC).calibration(n_rays=n)
+    (f,) = (tmp_path / "autocollimator-calibration").iterdir()
+
+    def refuse(self, n_rays):
+        raise AssertionError("computed although the cache holds it")
+
+    monkeypatch.setattr(mod, "_CALIBRATIONS", {})
+    with monkeypatch.context() as m:
+        m.setattr(mod.AutocollimatorOptics, "_factory_calibration", refuse)
+        assert AutocollimatorOptics(AC).calibration(n_rays=n) == cold
+    doc = json.loads(f.read_text())
+    for spoil in ({"F_mm": -doc["value"]["F_mm"]}, {"c": float("nan")}, {"n_rays": n + 1}):
+        f.write_text(json.dumps({**doc, "value": {**doc["value"], **spoil}}))
+        monkeypatch.setattr(mod, "_CALIBRATIONS", {})
+        assert AutocollimatorOptics(AC).calibration(n_rays=n) == cold         # computed again: the same numbers
+    longer = AutocollimatorOptics(AC.model_copy(update={"focal_length_mm": 1.5 * AC.focal_length_mm})).calibration(n_rays=n)
+    assert longer["F_mm"] == pytest.approx(1.5 * cold["F_mm"], rel=2e-3)
+    assert len(list((tmp_path / "autocollimator-calibration").iterdir())) == 2

@@ -5,7 +5,7 @@ rigsim but :mod:`rigsim.errors`; every problem with a user's file is one
 docs/formats.md lists the files."""
 
 from .atomic import atomic_write_bytes
-from .cache import cache_dir
+from .cache import cache_dir, cached_json, source_digest
 from .images import FRAME_SUFFIXES, read_image, write_image
 from .results import covariance_block, read_json, symmetric_covariance, write_json
 from .tables import Column, read_table, write_table
@@ -15,10 +15,12 @@ __all__ = [
            "Column",
            "atomic_write_bytes",
            "cache_dir",
+           "cached_json",
            "covariance_block",
            "read_image",
            "read_json",
            "read_table",
+           "source_digest",
            "symmetric_covariance",
            "write_image",
            "write_json",

@@ -54,6 +54,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from rigsim.errors import GeometryError
+from rigsim.files.cache import cached_json, source_digest
 from rigsim.frames import ARCSEC_PER_RAD
 
 __all__ = [
@@ -83,6 +84,22 @@ SCHOTT_N_BK7 = ((1.03961212, 0.00600069867), (0.231792344, 0.0200179144), (1.010
 
 _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 _CALIBRATIONS: dict = {}  # (instrument key, n_rays) → factory calibration, shared by equal instruments in a process
+_CALIBRATION_KEYS = ("F_mm", "c", "fit_rms_px", "ref_uv", "n_rays", "range_rad", "mirror")
+
+
+def _code_digest() -> str:
+    """The digest of the code the factory calibration runs (this module and the beam splitter's)."""
+    from rigsim.optics import beam_splitter
+
+    return source_digest([__file__, beam_splitter.__file__])
+
+
+def _is_calibration(d: dict, need: tuple, n_rays: int) -> bool:
+    """A cached factory calibration holds every number it needs, finite, for ``n_rays``."""
+    if set(d) != set(need) or d["n_rays"] != n_rays or not isinstance(d["mirror"], str):
+        return False
+    nums = [d[k] for k in need if k not in ("mirror", "ref_uv")] + list(d["ref_uv"])
+    return len(d["ref_uv"]) == 2 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in nums) and d["F_mm"] > 0
 
 
 def n_bk7(wavelength_nm: float) -> float:
@@ -873,46 +890,55 @@ class AutocollimatorOptics:
         if self._calib is None and (self._key, n_rays) in _CALIBRATIONS:
             self._calib = copy.deepcopy(_CALIBRATIONS[self._key, n_rays])
         if self._calib is None:
-            half = self.calibration_range_rad()
-            ref = np.array([self.cx, self.cy])
-
-            def cal_spot(tilt):
-                m = flat_mirror(self.distance_mm + self.objective.z_vertex, tilt,
-                                radius_mm=2.0 * self.objective.clear_aperture_mm)
-                return self.spot(m, n_rays=n_rays).mean_uv
-
-            if self.beam_splitter is not None:
-                ref = cal_spot((0.0, 0.0))
-            s, rho = [], []
-            for t in np.linspace(0.1, 1.0, 6) * half:
-                uv = cal_spot((t, 0.0))
-                if uv is None:  # no light back at this tilt: not a calibration point
-                    continue
-                s.append((uv[0] - ref[0]) * self.pitch_mm)
-                rho.append(2.0 * t)
-            if len(s) < 3:
-                raise ValueError(f"autocollimator calibration: light returned at {len(s)} of 6 tilts up to "
-                                 f"{math.degrees(half) * 60:.2f} arcmin (need 3)")
-            s, rho = np.array(s), np.array(rho)
-            A = np.column_stack([np.tan(rho), np.tan(rho) * rho ** 2])
-            (F, Fc), *_ = np.linalg.lstsq(A, s, rcond=None)
-            resid = s - A @ np.array([F, Fc])
-            self._calib = {"F_mm": float(F), "c": float(Fc / F), "fit_rms_px": float(np.sqrt(np.mean(resid ** 2)) / self.pitch_mm),
-                           "ref_uv": [float(ref[0]), float(ref[1])], "n_rays": n_rays, "range_rad": float(half),
-                           "mirror": "flat, Ø2×aperture, at distance_mm"}
-            if self.beam_splitter is not None:
-                half_y = min(half, self.measuring_range_rad()[1])
-                sy, ay = [], []
-                for t in np.linspace(0.1, 1.0, 6) * half_y:
-                    uv = cal_spot((0.0, t))
-                    if uv is not None:
-                        sy.append((uv[1] - ref[1]) * self.pitch_mm)
-                        ay.append(F * np.tan(2.0 * t) * (1.0 + Fc / F * 4.0 * t * t))
-                self._calib["y_scale"] = float(np.dot(ay, ay) / np.dot(ay, sy))
+            # other processes (dataset workers, later runs) share it through the cache folder
+            key = {"instrument": repr(self._key), "n_rays": int(n_rays), "numpy": np.__version__, "code": _code_digest()}
+            need = _CALIBRATION_KEYS + (("y_scale",) if self.beam_splitter is not None else ())
+            self._calib = cached_json("autocollimator-calibration", key, lambda: self._factory_calibration(n_rays),
+                                      lambda d: _is_calibration(d, need, n_rays))
             if len(_CALIBRATIONS) >= 64:
                 _CALIBRATIONS.pop(next(iter(_CALIBRATIONS)))
             _CALIBRATIONS[self._key, n_rays] = copy.deepcopy(self._calib)
         return self._calib
+
+    def _factory_calibration(self, n_rays: int) -> dict:
+        """:meth:`calibration` computed: the six (or twelve) traced tilts and the fit."""
+        half = self.calibration_range_rad()
+        ref = np.array([self.cx, self.cy])
+
+        def cal_spot(tilt):
+            m = flat_mirror(self.distance_mm + self.objective.z_vertex, tilt,
+                            radius_mm=2.0 * self.objective.clear_aperture_mm)
+            return self.spot(m, n_rays=n_rays).mean_uv
+
+        if self.beam_splitter is not None:
+            ref = cal_spot((0.0, 0.0))
+        s, rho = [], []
+        for t in np.linspace(0.1, 1.0, 6) * half:
+            uv = cal_spot((t, 0.0))
+            if uv is None:  # no light back at this tilt: not a calibration point
+                continue
+            s.append((uv[0] - ref[0]) * self.pitch_mm)
+            rho.append(2.0 * t)
+        if len(s) < 3:
+            raise ValueError(f"autocollimator calibration: light returned at {len(s)} of 6 tilts up to "
+                             f"{math.degrees(half) * 60:.2f} arcmin (need 3)")
+        s, rho = np.array(s), np.array(rho)
+        A = np.column_stack([np.tan(rho), np.tan(rho) * rho ** 2])
+        (F, Fc), *_ = np.linalg.lstsq(A, s, rcond=None)
+        resid = s - A @ np.array([F, Fc])
+        cal = {"F_mm": float(F), "c": float(Fc / F), "fit_rms_px": float(np.sqrt(np.mean(resid ** 2)) / self.pitch_mm),
+               "ref_uv": [float(ref[0]), float(ref[1])], "n_rays": n_rays, "range_rad": float(half),
+               "mirror": "flat, Ø2×aperture, at distance_mm"}
+        if self.beam_splitter is not None:
+            half_y = min(half, self.measuring_range_rad()[1])
+            sy, ay = [], []
+            for t in np.linspace(0.1, 1.0, 6) * half_y:
+                uv = cal_spot((0.0, t))
+                if uv is not None:
+                    sy.append((uv[1] - ref[1]) * self.pitch_mm)
+                    ay.append(F * np.tan(2.0 * t) * (1.0 + Fc / F * 4.0 * t * t))
+            cal["y_scale"] = float(np.dot(ay, ay) / np.dot(ay, sy))
+        return cal
 
     def reading(self, uv) -> np.ndarray:
         """Calibrated reading (θx, θy) in radians of a spot at ``uv`` (arrays of (…, 2) welcome)."""
