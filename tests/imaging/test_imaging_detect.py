@@ -151,3 +151,53 @@ def test_find_spots_refits_blends_jointly():
     err_single = max(np.min(np.hypot(single.u - u[k], single.v - v[k])) for k in range(2))
     err_joint = max(np.min(np.hypot(res.u - u[k], res.v - v[k])) for k in range(2))
     assert err_joint < err_single
+
+
+def _clipped_stats_by_definition(v, nsigma, max_iter):
+    """The sigma clip written out with numpy's median on the values themselves (the definition)."""
+    med = rms = np.nan
+    for _ in range(max_iter):
+        if v.size == 0:
+            break
+        med = float(np.median(v))
+        rms = float(1.482602218505602 * np.median(np.abs(v - med)))
+        if rms == 0:
+            rms = float(np.std(v))
+            if rms == 0:
+                break
+        keep = np.abs(v - med) <= nsigma * rms
+        if keep.all():
+            break
+        v = v[keep]
+    return med, rms
+
+
+def test_clipped_background_of_whole_numbered_frames_is_the_definitions_bit_for_bit():
+    """Frames of codes are clipped on their histogram: the median, the MAD and every clip must be those of
+    numpy's median on the values, to the last bit, whatever the values (odd and even counts, half-integer
+    medians, negative codes, outliers, most pixels equal, a clip that keeps nothing)."""
+    from rigsim.imaging._common import MAD_TO_SD
+    from rigsim.imaging.detect import _HISTOGRAM_MIN_SIZE, _clipped_stats
+
+    assert MAD_TO_SD == 1.482602218505602
+    rng = np.random.default_rng(5)
+    cases = [
+        rng.poisson(40.0, 200_000),                                            # sky codes
+        rng.poisson(3.0, 50_001) - 7,                                         # negative, odd count
+        np.concatenate([rng.normal(1000, 12, 80_000).round(), rng.integers(1200, 65535, 3000)]),  # stars, hot pixels
+        np.concatenate([np.full(30_000, 100.0), rng.integers(0, 4000, 20_000)]),  # most pixels one value: MAD 0
+        np.full(_HISTOGRAM_MIN_SIZE, 7.0),                                    # flat: rms 0
+        rng.integers(0, 2, 10_000) * 2 + 1.0,                                 # two values: half-integer median
+        np.repeat([0.0, 1.0, 9.0], [2048, 2049, 3]),                         # the middle value just past a value's last copy
+        np.repeat([0.0, 5.0], [2048, 2048]),                                 # even count split between two values: 2.5
+        np.repeat([-3.0, 0.0, 1.0, 2.0], [1500, 1000, 1000, 1596]),          # a MAD that ends on a value's last copy
+    ]
+    for v in cases:
+        v = np.asarray(v, dtype=float)
+        rng.shuffle(v)
+        for nsigma, it in ((3.0, 5), (2.0, 9), (0.1, 5), (5.0, 1)):
+            got, want = _clipped_stats(v, nsigma, it), _clipped_stats_by_definition(v, nsigma, it)
+            assert np.array_equal(got, want, equal_nan=True), (v[:5], nsigma, it, got, want)
+    # not whole-numbered, or too few values: the array path (the same definition)
+    v = rng.normal(10.0, 1.0, 20_000)
+    assert _clipped_stats(v, 3.0, 5) == _clipped_stats_by_definition(v, 3.0, 5)
