@@ -6,10 +6,15 @@ import numpy as np
 import pytest
 
 import rigsim
+from file_chain import rigsim_in_process
 from rigsim.cli import main
 
 
-def run(*args):
+def run(*args, subprocess_run: bool = True):
+    """``python -m rigsim.cli ARGS`` as a user runs it, or (``subprocess_run`` False: the cases after a test's
+    first) through :func:`rigsim.cli.main` in this process, the same body without the interpreter's start-up."""
+    if not subprocess_run:
+        return rigsim_in_process(*args, ok=range(256))
     return subprocess.run([sys.executable, "-m", "rigsim.cli", *args], capture_output=True, text=True, timeout=300)
 
 
@@ -52,7 +57,7 @@ def test_triad_printed_eq8_reports_its_degeneracy(capsys):
     (["run", "cube-mirror", "--axis-order", "XZ", "--no-budget"], "--axis-order = 'XZ': must be a permutation"),
 ])
 def test_bad_cli_input_is_a_clear_error(args, expected):
-    r = run(*args)
+    r = run(*args, subprocess_run=args[0] == "triad")
     assert r.returncode == 2
     assert expected in r.stderr
     assert "Traceback" not in r.stderr
@@ -128,7 +133,7 @@ def test_render_sun_sensor_cli(tmp_path):
     (["render", "sun-sensor", "--spp", "100"], "--spp = 100: must be a power of 4"),
 ])
 def test_bad_render_arguments(args, expected):
-    r = run(*args)
+    r = run(*args, subprocess_run="Q=3" in args)
     assert r.returncode == 2 and expected in r.stderr and "Traceback" not in r.stderr
 
 
