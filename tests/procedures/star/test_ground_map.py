@@ -130,3 +130,40 @@ bias it must resolve (3σ = 0.50 px against 1.63 px)."""
         assert compare(out, truths, r, sky)[0]["wrong"] == 0
     assert f_err["off"] < -5.0 * f_sig["off"]
     assert abs(f_err["on"]) < 3.0 * f_sig["on"] < 0.35 * abs(f_err["off"])
+
+
+def test_the_map_is_shared_through_the_cache_folder_and_measured_again_when_it_does_not_fit(star_rig, tmp_path,
+                                                                                          monkeypatch):
+    """Another process reads the measured map from the cache folder (every node as measured); a file that does not
+    fit (a NaN shift, a shape that is not nodes × nodes × 2, tangents out of order) is measured again. The bench
+    itself is replaced by a known map here: its measurement is the other tests' subject."""
+    import json
+
+    from rigsim.procedures.star import ground_map as gm
+
+    monkeypatch.setenv("RIGSIM_CACHE_DIR", str(tmp_path))
+    rng = np.random.default_rng(2)
+    known = {"tan_x": np.linspace(-0.2, 0.2, 5).tolist(), "tan_y": np.linspace(-0.15, 0.15, 4).tolist(),
+             "shift_px": (rng.normal(0.0, 0.3, (5, 4, 2)) / 7.0).tolist()}
+    measured = []
+    monkeypatch.setattr(gm, "_measured_map", lambda nominal: measured.append(1) or known)
+    nominal = _with_map(star_rig).nominal_rig()
+
+    def fresh():
+        monkeypatch.setattr(gm, "_CACHE", {})
+        return gm.ground_centroid_map(nominal)
+
+    first = fresh()
+    assert len(measured) == 1 and np.array_equal(first.shift, np.array(known["shift_px"]))
+    again = fresh()
+    assert len(measured) == 1                                                   # read, not measured
+    assert np.array_equal(again.shift, first.shift) and np.array_equal(again.tan_x, first.tan_x)
+    (f,) = (tmp_path / "star-ground-map").iterdir()
+    doc = json.loads(f.read_text())
+    bad_shift = np.array(known["shift_px"])
+    bad_shift[2, 1, 0] = np.nan
+    for spoil in ({"shift_px": bad_shift.tolist()}, {"shift_px": known["shift_px"][:-1]},
+                  {"tan_x": known["tan_x"][::-1]}):
+        f.write_text(json.dumps({**doc, "value": {**doc["value"], **spoil}}))
+        n = len(measured)
+        assert np.array_equal(fresh().shift, first.shift) and len(measured) == n + 1

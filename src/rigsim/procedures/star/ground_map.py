@@ -10,8 +10,12 @@ model and its numbers.
 
 from __future__ import annotations
 
+import functools
+from pathlib import Path
+
 import numpy as np
 
+from rigsim.files.cache import cached_json, source_digest
 from rigsim.imaging.stars import extract_stars
 from rigsim.optics.star_centroid_map import CentroidMap
 from rigsim.optics.star_lens import StarLens
@@ -98,13 +102,30 @@ def ground_centroid_map(nominal: NominalStarRig) -> CentroidMap | None:
     values at the nominal focal length) at :data:`MAP_NODES` × :data:`MAP_NODES` directions over the
     nominal camera's field (2 % wider than the detector), for a blackbody star of the reference colour,
     measured by :func:`bench_centroids`, plus the bench's error (σ per node and axis, seeded). Cached
-    per nominal sensor and calibration settings."""
+    per nominal sensor and calibration settings in the process, and in the cache folder
+    (:func:`rigsim.files.cached_json`) for other processes: keyed also by the package's source and the
+    numerical libraries' versions, a file that does not fit is measured again."""
     s, spec = nominal.sensor, nominal.sensor.centroid_map
     if spec is None:
         return None
     key = s.model_dump_json() + nominal.calibration.model_dump_json()
     if key in _CACHE:
         return _CACHE[key]
+    import cv2
+    import scipy
+
+    # other processes and later runs read it from the cache folder; the key holds the code of the whole package
+    # (the lens trace, the PSF table and the pipeline's extraction all shape the map)
+    disk_key = {"nominal": key, "code": _package_digest(), "numpy": np.__version__, "opencv": cv2.__version__,
+                "scipy": scipy.__version__}
+    v = cached_json("star-ground-map", disk_key, lambda: _measured_map(nominal), _is_map)
+    _CACHE[key] = CentroidMap(np.array(v["tan_x"]), np.array(v["tan_y"]), np.array(v["shift_px"]))
+    return _CACHE[key]
+
+
+def _measured_map(nominal: NominalStarRig) -> dict:
+    """:func:`ground_centroid_map` measured: the traced lens's PSFs on the bench, as plain lists."""
+    s, spec = nominal.sensor, nominal.sensor.centroid_map
     lens = StarLens(focal_length_mm=s.focal_length_mm, epd_mm=spec.aperture_diameter_mm,
                     ref_nm=spec.reference_wavelength_nm, defocus_mm=-spec.defocus_um * 1e-3)
     t = field_tangents(s.camera(), s.resolution_px)
@@ -121,8 +142,26 @@ def ground_centroid_map(nominal: NominalStarRig) -> CentroidMap | None:
     if spec.sigma_px > 0.0:
         rng = np.random.default_rng(np.random.SeedSequence([int(spec.seed), 0xC0111A7]))
         shift = shift + rng.normal(0.0, spec.sigma_px, shift.shape)
-    _CACHE[key] = CentroidMap(table.tan_x, table.tan_y, shift)
-    return _CACHE[key]
+    return {"tan_x": np.asarray(table.tan_x, dtype=float).tolist(), "tan_y": np.asarray(table.tan_y, dtype=float).tolist(),
+            "shift_px": shift.tolist()}
+
+
+def _is_map(v: dict) -> bool:
+    """A cached map: increasing node tangents and a finite (nx, ny, 2) shift."""
+    try:
+        tx, ty, sh = (np.array(v[k], dtype=float) for k in ("tan_x", "tan_y", "shift_px"))
+    except (KeyError, TypeError, ValueError):
+        return False
+    return (tx.ndim == ty.ndim == 1 and tx.size >= 2 and ty.size >= 2 and sh.shape == (tx.size, ty.size, 2)
+            and bool(np.all(np.diff(tx) > 0) and np.all(np.diff(ty) > 0) and np.all(np.isfinite(sh))))
+
+
+@functools.lru_cache(maxsize=1)
+def _package_digest() -> str:
+    """SHA-256 of every source file of the rigsim package (a cache key part: any code change measures again)."""
+    import rigsim
+
+    return source_digest(sorted(Path(rigsim.__file__).parent.rglob("*.py")))
 
 
 def corrected_centroids(uv, cmap: CentroidMap | None, camera) -> np.ndarray:
