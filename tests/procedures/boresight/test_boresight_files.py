@@ -28,7 +28,8 @@ def orbit(tmp_path_factory):
         write_image(p, fr.dn)
         files[(stage, names[c], j, k)] = p
 
-    res = run_orbit(rig, seed=11, measurements=3, jitter_px=0.0, on_frame=export)
+    # in this process (the frames are the same for any worker count: tests/procedures/boresight/test_frame_pool.py)
+    res = run_orbit(rig, seed=11, measurements=3, jitter_px=0.0, on_frame=export, workers=1)
     return rig, res, files, d
 
 
