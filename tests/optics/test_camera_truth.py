@@ -1,0 +1,126 @@
+"""rigsim.optics.camera against truths of its own: OpenCV's projectPoints (and its Jacobian by central
+differences) for the fold of the distortion map, hand-worked detector edges and domains, the shape checks.
+Written from the mutation run's survivors (docs/testing.md, "Camera model")."""
+
+import cv2
+import numpy as np
+import pytest
+
+from rigsim.optics import camera as C
+from rigsim.optics.camera import PinholeBrown, distort, project, unproject
+
+# strong barrel-free distortion with a tangential term: the map folds (negative Jacobian) inside r2_max
+FOLD = np.array([1000.0, 1000.0, 500.0, 400.0, 0.8, -0.1, 0.3, 0.0, -0.2])
+
+
+def _cv2_uv(xy, prm):
+    xy = np.atleast_2d(xy)
+    P = np.concatenate([xy, np.ones((len(xy), 1))], -1).reshape(-1, 1, 3)
+    K = np.array([[prm[0], 0, prm[2]], [0, prm[1], prm[3]], [0, 0, 1.0]])
+    return cv2.projectPoints(P, np.zeros(3), np.zeros(3), K, prm[4:])[0].reshape(-1, 2)
+
+
+def _cv2_det(xy, prm, h=1e-6):
+    """det ∂(u, v)/∂(x, y) of OpenCV's model by central differences."""
+    ex, ey = np.array([h, 0.0]), np.array([0.0, h])
+    du_dx = (_cv2_uv(xy + ex, prm) - _cv2_uv(xy - ex, prm)) / (2 * h)
+    du_dy = (_cv2_uv(xy + ey, prm) - _cv2_uv(xy - ey, prm)) / (2 * h)
+    return du_dx[:, 0] * du_dy[:, 1] - du_dy[:, 0] * du_dx[:, 1]
+
+
+def test_a_pixel_on_the_fold_has_no_inverse_there():
+    """At xy0 OpenCV's map has a negative Jacobian (it is folded) though x² + y² < r2_max: the pixel it
+    lands on must not be inverted to xy0. Every pixel of a grid that is inverted lands on a point where
+    OpenCV's Jacobian is positive and that OpenCV projects back onto the pixel."""
+    xy0 = np.array([-0.928, -0.571])
+    assert _cv2_det(xy0, FOLD)[0] < 0
+    assert xy0 @ xy0 < C.radial_r2_max(FOLD[4], FOLD[5], FOLD[8])
+    q0 = _cv2_uv(xy0, FOLD)[0]
+    xy = unproject(q0, FOLD)
+    assert np.isnan(xy).all() or np.linalg.norm(xy - xy0) > 1e-3
+    assert not PinholeBrown(*FOLD).backproject(q0)[1]
+    g = np.linspace(-2.0, 2.0, 61)
+    q = np.stack(np.meshgrid(FOLD[2] + 1000 * g, FOLD[3] + 1000 * g), -1).reshape(-1, 2)
+    xy = unproject(q, FOLD)
+    ok = np.isfinite(xy).all(-1)
+    assert ok.sum() > 500
+    assert (_cv2_det(xy[ok], FOLD) > 0).all()
+    np.testing.assert_allclose(_cv2_uv(xy[ok], FOLD), q[ok], atol=1e-6)
+
+
+def test_newton_stops_once_converged():
+    """brown_undistort stops when every point has converged (quadratic convergence: a few steps), not after
+    its 20-iteration cap."""
+    calls = []
+    real = C.brown_distort
+
+    def counting(*a):
+        calls.append(1)
+        return real(*a)
+
+    xd = np.array([0.1, -0.3, 0.25])
+    yd = np.array([0.2, 0.05, -0.3])
+    C.brown_distort, saved = counting, C.brown_distort
+    try:
+        x, y, ok = C.brown_undistort(xd, yd, -0.2, 0.05, 1e-3, -1e-3, 0.0)
+    finally:
+        C.brown_distort = saved
+    assert ok.all() and len(calls) <= 8
+    np.testing.assert_allclose(_cv2_uv(np.stack([x, y], -1), np.r_[1.0, 1.0, 0.0, 0.0, -0.2, 0.05, 1e-3, -1e-3, 0.0]),
+                               np.stack([xd, yd], -1), atol=1e-14)
+
+
+def test_points_behind_the_camera_are_outside_the_domain():
+    """z ≤ 0 is behind the pinhole, z ∈ (−1, 0] included."""
+    cam = PinholeBrown(800.0, 800.0, 512.0, 512.0, k1=-0.05)
+    P = np.array([[0.01, 0.02, -0.5], [0.0, 0.0, -1e-3], [0.0, 0.0, 0.0], [0.01, 0.02, 0.5]])
+    _, valid = cam.project_valid(P)
+    assert valid.tolist() == [False, False, False, True]
+    assert np.isnan(cam.project(P)[:3]).all() and np.isfinite(cam.project(P)[3]).all()
+
+
+@pytest.mark.parametrize("edge", ["left", "right", "top", "bottom"])
+def test_on_detector_margin_at_each_edge(edge):
+    """A point 0.3 px inside one edge and far from the others: on the detector without a margin, off it with
+    a 0.5 px margin, on it again 0.7 px inside (detector [-0.5, W-0.5) x [-0.5, H-0.5))."""
+    cam = PinholeBrown(100.0, 100.0, 10.0, 20.0, width=64, height=48)
+    for inside, want in ((0.3, (True, False)), (0.7, (True, True))):
+        uv = {"left": (-0.5 + inside, 24.0), "right": (63.5 - inside, 24.0),
+              "top": (32.0, -0.5 + inside), "bottom": (32.0, 47.5 - inside)}[edge]
+        got = (bool(cam.on_detector([uv])[0]), bool(cam.on_detector([uv], margin_px=0.5)[0]))
+        assert got == want, (edge, inside)
+
+
+def test_wrong_trailing_sizes_are_refused():
+    with pytest.raises(ValueError, match=r"xy must have shape \(\.\.\., 2\)"):
+        distort(np.zeros((4, 3)), np.zeros(5))
+    with pytest.raises(ValueError, match=r"dist must have shape \(\.\.\., 5\)"):
+        distort(np.zeros((4, 2)), np.zeros(6))
+    with pytest.raises(ValueError, match=r"p must have shape \(\.\.\., 3\)"):
+        project(np.ones((4, 4)), FOLD)
+    with pytest.raises(ValueError, match=r"params must have shape \(\.\.\., 9\)"):
+        project(np.ones((4, 3)), np.r_[FOLD, 0.0])
+    with pytest.raises(ValueError, match=r"uv must have shape \(\.\.\., 2\)"):
+        unproject(np.ones((4, 3)), FOLD)
+
+
+def test_radial_fold_of_a_pure_k3_term():
+    """k3 = −1/7 alone: d/dr[r(1 + k3 r⁶)] = 1 + 7k3 s³ = 1 − s³ vanishes at s = r² = 1 (by hand); no
+    radial term at all: no fold (the cap)."""
+    assert C.radial_r2_max(0.0, 0.0, -1.0 / 7.0) == pytest.approx(1.0, rel=1e-12)
+    assert C.radial_r2_max(0.0, -1.0 / 5.0, 0.0) == pytest.approx(1.0, rel=1e-12)
+    assert C.radial_r2_max(0.0, 0.0, 0.0) == 1e6
+
+
+@pytest.mark.parametrize("shape", [(), (3,), (2, 3)])
+def test_unproject_directions_of_any_batch_shape(shape):
+    """Without distortion a pixel's direction is ((u − cx)/fx, (v − cy)/fy, 1) normalised (by hand)."""
+    cam = PinholeBrown(800.0, 700.0, 300.0, 200.0, width=640, height=480)
+    rng = np.random.default_rng(1)
+    uv = rng.uniform(0, 480, shape + (2,))
+    want = np.stack([(uv[..., 0] - 300.0) / 800.0, (uv[..., 1] - 200.0) / 700.0, np.ones(shape)], -1)
+    want /= np.linalg.norm(want, axis=-1, keepdims=True)
+    np.testing.assert_allclose(cam.unproject(uv), want, atol=1e-15)
+    d, valid = cam.backproject(uv)
+    np.testing.assert_allclose(d, want, atol=1e-15)
+    assert np.shape(valid) == shape and np.all(valid)
