@@ -124,3 +124,38 @@ def test_unproject_directions_of_any_batch_shape(shape):
     d, valid = cam.backproject(uv)
     np.testing.assert_allclose(d, want, atol=1e-15)
     assert np.shape(valid) == shape and np.all(valid)
+
+
+def _fold_by_hand(k1, k2, k3):
+    """First s = r² > 0 where 1 + 3k1 s + 5k2 s² + 7k3 s³ = 0, by Brent's method on a sign change (scipy)."""
+    from scipy.optimize import brentq
+
+    g = lambda s: 1.0 + 3.0 * k1 * s + 5.0 * k2 * s * s + 7.0 * k3 * s ** 3  # noqa: E731
+    s = np.linspace(0.0, 100.0, 100001)
+    i = np.flatnonzero(g(s) <= 0)
+    return 1e6 if i.size == 0 else brentq(g, s[i[0] - 1], s[i[0]], xtol=1e-15)
+
+
+@pytest.mark.parametrize("k", [
+    [[-0.3, 0.0, 0.01], [-0.2, 0.0, 0.02], [-0.5, 0.0, 0.05]],     # cubic with k2 = 0, k3 > 0
+    [[-0.3, -0.05, 0.0], [0.1, -0.2, 0.0], [0.0, -0.1, 0.0]],      # quadratic only (no cubic in the batch)
+    [[-0.3, 0.0, 0.0], [-0.1, 0.0, 0.0], [0.2, 0.0, 0.0]],         # linear only
+])
+def test_vectorised_fold_of_each_polynomial_degree(k):
+    """The batched fold equals the first root found by Brent's method, for batches holding one degree of
+    polynomial only, and for cubic ones without a quadratic term."""
+    k = np.array(k)
+    want = [_fold_by_hand(*r) for r in k]
+    np.testing.assert_allclose(C._radial_r2_max_array(k[:, 0], k[:, 1], k[:, 2]), want, rtol=1e-9)
+    prm = np.concatenate([np.tile([500.0, 500.0, 300.0, 300.0], (3, 1)), k[:, :2], np.zeros((3, 2)), k[:, 2:]], 1)
+    # a point just beyond each set's fold is outside the domain, one just inside is projected
+    for f, finite in ((1.001, False), (0.999, True)):
+        r = np.sqrt(np.minimum(want, 1e4) * f)
+        uv = project(np.stack([r, 0 * r, np.ones(3)], -1), prm)
+        assert (np.isfinite(uv).all(-1) == (finite | (np.array(want) == 1e6))).all()
+
+
+def test_empty_batches():
+    assert project(np.zeros((0, 3)), np.zeros((0, 9))).shape == (0, 2)
+    assert unproject(np.zeros((0, 2)), np.zeros((0, 9))).shape == (0, 2)
+    assert C._radial_r2_max_array(np.zeros(0), np.zeros(0), np.zeros(0)).shape == (0,)
