@@ -159,3 +159,22 @@ def test_empty_batches():
     assert project(np.zeros((0, 3)), np.zeros((0, 9))).shape == (0, 2)
     assert unproject(np.zeros((0, 2)), np.zeros((0, 9))).shape == (0, 2)
     assert C._radial_r2_max_array(np.zeros(0), np.zeros(0), np.zeros(0)).shape == (0,)
+
+
+SLOW_NEWTON = np.array([1000.0, 1000.0, 500.0, 500.0, -0.3849, 0.2654, 0.0406, -0.2161, 0.0064])
+
+
+def test_pixels_whose_newton_needs_its_20_steps_are_inverted():
+    """With a strong tangential term Newton's walk from the distorted point takes close to its 20 steps for
+    these pixels; each has a preimage in the domain (OpenCV projects it back onto the pixel, OpenCV's
+    Jacobian is positive there), so every entry point inverts them."""
+    q = np.array([[1265.0, 763.5], [1029.1, 5.2], [1067.7, -168.2]])
+    cam = PinholeBrown(*SLOW_NEWTON)
+    r2max = C.radial_r2_max(*SLOW_NEWTON[[4, 5, 8]])
+    d, valid = cam.backproject(q)
+    assert valid.all()
+    for xy in (unproject(q, SLOW_NEWTON), cam.pixel_to_normalized(q), cam.unproject(q)[:, :2] / cam.unproject(q)[:, 2:],
+               d[:, :2] / d[:, 2:]):
+        assert np.isfinite(xy).all()
+        np.testing.assert_allclose(_cv2_uv(xy, SLOW_NEWTON), q, atol=1e-6)
+        assert (_cv2_det(xy, SLOW_NEWTON) > 0).all() and (np.sum(xy * xy, -1) < r2max).all()
