@@ -178,3 +178,10 @@ def test_pixels_whose_newton_needs_its_20_steps_are_inverted():
         assert np.isfinite(xy).all()
         np.testing.assert_allclose(_cv2_uv(xy, SLOW_NEWTON), q, atol=1e-6)
         assert (_cv2_det(xy, SLOW_NEWTON) > 0).all() and (np.sum(xy * xy, -1) < r2max).all()
+
+
+def test_radial_fold_when_a_leading_coefficient_is_one():
+    """Polynomials 1 + 3k1 s + 5k2 s² + 7k3 s³ whose leading coefficient is exactly 1, roots by hand:
+    s² − 3s + 1 → (3 − √5)/2; s³ − 3s + 1 → 2·cos(4π/9) (the trigonometric solution)."""
+    assert C.radial_r2_max(-1.0, 0.2, 0.0) == pytest.approx((3 - np.sqrt(5)) / 2, rel=1e-12)
+    assert C.radial_r2_max(-1.0, 0.0, 1.0 / 7.0) == pytest.approx(2 * np.cos(4 * np.pi / 9), rel=1e-12)
