@@ -173,7 +173,9 @@ def test_pixels_whose_newton_needs_its_20_steps_are_inverted():
     r2max = C.radial_r2_max(*SLOW_NEWTON[[4, 5, 8]])
     d, valid = cam.backproject(q)
     assert valid.all()
-    for xy in (unproject(q, SLOW_NEWTON), cam.pixel_to_normalized(q), cam.unproject(q)[:, :2] / cam.unproject(q)[:, 2:],
+    x, y, ok = C.brown_undistort((q[:, 0] - 500.0) / 1000.0, (q[:, 1] - 500.0) / 1000.0, *SLOW_NEWTON[4:])
+    assert ok.all()
+    for xy in (np.stack([x, y], -1), unproject(q, SLOW_NEWTON), cam.pixel_to_normalized(q), cam.unproject(q)[:, :2] / cam.unproject(q)[:, 2:],
                d[:, :2] / d[:, 2:]):
         assert np.isfinite(xy).all()
         np.testing.assert_allclose(_cv2_uv(xy, SLOW_NEWTON), q, atol=1e-6)
