@@ -1,0 +1,156 @@
+"""rigsim.imaging.centroid's default centroiders (centroid_gauss for star fields, centroid_tcom for the boresight
+cameras and the autocollimator spot) against truths of their own: spots rendered with scipy's normal CDF,
+the Fisher matrix by central differences of that rendering, the weighted mean and moments by hand and with
+OpenCV. Written from the mutation run (docs/testing.md, "Centroiders")."""
+
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from rigsim.imaging import Flag, NoiseModel, centroid_gauss, centroid_tcom
+
+K, READ = 2.0, 3.0  # gain DN/e-, read noise e-
+NOISE = NoiseModel(K, READ)
+
+
+def _render(h, w, u, v, F, B, s):
+    """Pixel-integrated circular Gaussian: F·Ex(u)·Ey(v) + B, Ex from scipy's normal CDF at the pixel edges."""
+    ex = np.diff(norm.cdf((np.arange(w + 1) - 0.5 - u) / s))
+    ey = np.diff(norm.cdf((np.arange(h + 1) - 0.5 - v) / s))
+    return F * np.outer(ey, ex) + B
+
+
+def _first(b):
+    """The first spot of a CentroidBatch, with its ``extra`` entries."""
+    return SimpleNamespace(u=b.u[0], v=b.v[0], sigma_u=b.sigma_u[0], sigma_v=b.sigma_v[0], flux=b.flux[0],
+                           background=b.background[0], flags=int(b.flags[0]), extra={k: x[0] for k, x in b.extra.items()})
+
+
+def _var(mu):
+    return K * mu + (K * READ) ** 2
+
+
+def _fisher_sd(h, w, th, fit_sigma):
+    """√diag of the inverse Fisher matrix Jᵀ V⁻¹ J, J by central differences of `_render`."""
+    th = np.asarray(th, float)
+    f = (lambda t: _render(h, w, *t)) if fit_sigma else (lambda t: _render(h, w, *t, th[4]))
+    n = 5 if fit_sigma else 4
+    steps = [1e-5, 1e-5, 1e-3 * th[2], 1e-4, 1e-6][:n]
+    J = []
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = steps[j]
+        J.append(((f(th[:n] + e) - f(th[:n] - e)) / (2 * steps[j])).ravel())
+    J = np.array(J).T
+    A = J.T @ (J / _var(_render(h, w, *th)).ravel()[:, None])
+    return np.sqrt(np.diag(np.linalg.inv(A)))
+
+
+# spots on a non-square ROI (h ≠ w), at sub-pixel positions away from the centre, with a background
+SPOTS = [(9, 13, 7.3, 3.6, 5.0e4, 40.0, 1.1), (11, 8, 2.8, 6.45, 2.0e4, 15.0, 0.9), (10, 10, 4.5, 5.2, 8.0e3, 25.0, 1.4)]
+
+
+@pytest.mark.parametrize("fit_sigma", [False, True])
+def test_gauss_recovers_a_noise_free_spot_and_its_fisher_sigmas(fit_sigma):
+    for h, w, u, v, F, B, s in SPOTS:
+        img = _render(h, w, u, v, F, B, s)
+        r = _first(centroid_gauss(img[None], sigma_px=s if not fit_sigma else 1.0, fit_sigma=fit_sigma, noise=NOISE))
+        assert r.flags == 0
+        np.testing.assert_allclose([r.u, r.v, r.flux, r.background], [u, v, F, B], rtol=1e-7, atol=2e-6)
+        assert r.extra["sigma_px"] == pytest.approx(s, abs=1e-6)
+        sd = _fisher_sd(h, w, (u, v, F, B, s), fit_sigma)
+        np.testing.assert_allclose([r.sigma_u, r.sigma_v, r.extra["sigma_flux"]], sd[:3], rtol=1e-4)
+        assert 0 <= r.extra["chi2_red"] < 1e-4  # evaluated before the last step (< tol_px)
+
+
+def test_gauss_batch_of_spots_converging_at_different_steps():
+    """A stack whose spots need different numbers of Gauss–Newton steps (and one flagged INVALID on the way
+    in, which is left alone): each spot's fit equals its truth and its own single-spot fit."""
+    h = w = 11
+    truth = [(5.0, 5.0), (3.7, 6.9), (6.45, 3.2), (5.2, 4.9)]
+    img = np.stack([_render(h, w, u, v, 3.0e4, 20.0, 1.2) for u, v in truth])
+    fl = np.array([0, 0, int(Flag.INVALID), 0])
+    r = centroid_gauss(img, sigma_px=1.2, noise=NOISE, flags=fl)
+    ok = [0, 1, 3]
+    np.testing.assert_allclose(r.u[ok], [truth[i][0] for i in ok], atol=2e-6)
+    np.testing.assert_allclose(r.v[ok], [truth[i][1] for i in ok], atol=2e-6)
+    assert r.flags[2] & Flag.INVALID and np.isnan(r.u[2])
+    assert len(set(r.extra["n_iter"][ok].tolist())) > 1
+    for i in ok:
+        one = centroid_gauss(img[i], sigma_px=1.2, noise=NOISE)
+        assert (one.u, one.v, one.sigma_u) == pytest.approx((r.u[i], r.v[i], r.sigma_u[i]), abs=1e-9)
+
+
+def test_gauss_reduced_chi2_by_hand():
+    """chi2_red = Σ (data − model)² / var(model) / (n_pix − 4) at the fitted parameters (model rendered with
+    scipy), for a noisy spot."""
+    rng = np.random.default_rng(3)
+    h, w, u, v, F, B, s = SPOTS[0]
+    mu = _render(h, w, u, v, F, B, s)
+    img = mu + rng.normal(size=mu.shape) * np.sqrt(_var(mu))
+    r = _first(centroid_gauss(img[None], sigma_px=s, noise=NOISE))
+    m = _render(h, w, r.u, r.v, r.flux, r.background, s)
+    want = np.sum((img - m) ** 2 / _var(m)) / (h * w - 4)
+    assert r.extra["chi2_red"] == pytest.approx(want, rel=1e-3)
+
+
+def _tcom_by_hand(img, T, var):
+    wgt = np.where(img > T, img - T, 0.0)
+    m = cv2.moments(wgt.astype(np.float64))
+    u, v = m["m10"] / m["m00"], m["m01"] / m["m00"]
+    vv, uu = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    sel = img > T
+    su = np.sqrt(np.sum(var[sel] * (uu[sel] - u) ** 2)) / wgt.sum()
+    sv = np.sqrt(np.sum(var[sel] * (vv[sel] - v) ** 2)) / wgt.sum()
+    return u, v, su, sv, sel.sum()
+
+
+def test_tcom_position_sigmas_flux_and_count_by_hand():
+    """centroid_tcom with a given threshold and background: the weighted mean (OpenCV's moments of the
+    weights), σ_u, σ_v of the weighted mean with each pixel's variance, the flux above background and the
+    pixel count, by hand."""
+    h, w, u, v, F, B, s = SPOTS[0]
+    img = _render(h, w, u, v, F, B, s)
+    T = B + 50.0
+    r = _first(centroid_tcom(img[None], threshold=T, background=B, noise=NOISE, edge_margin_px=0.0))
+    cu, cv_, su, sv, npix = _tcom_by_hand(img, T, _var(img))
+    assert (r.u, r.v) == pytest.approx((cu, cv_), abs=1e-12)
+    assert (r.sigma_u, r.sigma_v) == pytest.approx((su, sv), rel=1e-12)
+    sel = img > T
+    assert r.flux == pytest.approx(np.sum(img[sel] - B), rel=1e-12)
+    assert r.extra["npix"] == npix and r.extra["threshold"] == T
+    assert r.background == B and r.flags == 0
+
+
+def test_tcom_default_threshold_is_background_plus_3_sigma():
+    """No threshold: T = background + 3·σ_bg, σ_bg the read noise with a NoiseModel; a pixel just above T
+    counts, one just below does not."""
+    B = 100.0
+    sd = np.sqrt(_var(B))
+    T = B + 3.0 * sd
+    img = np.full((7, 7), B)
+    img[3, 3] = B + 1000.0
+    img[3, 4] = T + 1e-6
+    img[2, 3] = T - 1e-6
+    r = _first(centroid_tcom(img[None], background=B, noise=NOISE))
+    assert r.extra["threshold"] == pytest.approx(T, rel=1e-12)
+    assert r.extra["npix"] == 2
+    w1, w2 = 1000.0 - 3.0 * sd, 1e-6
+    assert r.u == pytest.approx((3 * w1 + 4 * w2) / (w1 + w2), abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)
+
+
+def test_tcom_flags_empty_and_faint():
+    B = 10.0
+    img = np.full((7, 7), B)
+    e = centroid_tcom(img, threshold=B + 5.0, background=B, noise=NOISE)
+    assert e.flags & Flag.EMPTY and e.flags & Flag.INVALID
+    # one pixel 60 DN above background: snr = 60 / √var(B + 60) by hand; FAINT flips at that min_snr
+    img[3, 3] = B + 60.0
+    snr = 60.0 / np.sqrt(_var(B + 60.0))
+    for min_snr, faint in ((snr * (1 - 1e-9), False), (snr * (1 + 1e-9), True)):
+        r = centroid_tcom(img, threshold=B + 5.0, background=B, noise=NOISE, min_snr=min_snr)
+        assert bool(r.flags & Flag.FAINT) == faint, min_snr
+        assert (r.u, r.v) == (3.0, 3.0)
