@@ -82,9 +82,10 @@ def test_points_behind_the_camera_are_outside_the_domain():
 @pytest.mark.parametrize("edge", ["left", "right", "top", "bottom"])
 def test_on_detector_margin_at_each_edge(edge):
     """A point 0.3 px inside one edge and far from the others: on the detector without a margin, off it with
-    a 0.5 px margin, on it again 0.7 px inside (detector [-0.5, W-0.5) x [-0.5, H-0.5))."""
+    a 0.5 px margin, on it again 0.7 px inside; 0.3 px and 20 px outside it: off (detector [-0.5, W-0.5) x
+    [-0.5, H-0.5))."""
     cam = PinholeBrown(100.0, 100.0, 10.0, 20.0, width=64, height=48)
-    for inside, want in ((0.3, (True, False)), (0.7, (True, True))):
+    for inside, want in ((0.3, (True, False)), (0.7, (True, True)), (-0.3, (False, False)), (-20.0, (False, False))):
         uv = {"left": (-0.5 + inside, 24.0), "right": (63.5 - inside, 24.0),
               "top": (32.0, -0.5 + inside), "bottom": (32.0, 47.5 - inside)}[edge]
         got = (bool(cam.on_detector([uv])[0]), bool(cam.on_detector([uv], margin_px=0.5)[0]))
