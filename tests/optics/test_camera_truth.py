@@ -188,3 +188,17 @@ def test_radial_fold_when_a_leading_coefficient_is_one():
     s² − 3s + 1 → (3 − √5)/2; s³ − 3s + 1 → 2·cos(4π/9) (the trigonometric solution)."""
     assert C.radial_r2_max(-1.0, 0.2, 0.0) == pytest.approx((3 - np.sqrt(5)) / 2, rel=1e-12)
     assert C.radial_r2_max(-1.0, 0.0, 1.0 / 7.0) == pytest.approx(2 * np.cos(4 * np.pi / 9), rel=1e-12)
+
+
+@pytest.mark.parametrize("shape", [(), (4,), (2, 3)])
+def test_project_valid_and_normalized_to_pixel_of_any_batch_shape(shape):
+    prm = np.array([900.0, 880.0, 320.0, 250.0, -0.2, 0.05, 1e-3, -2e-3, 0.01])
+    cam = PinholeBrown(*prm, width=640, height=480)
+    rng = np.random.default_rng(2)
+    P = np.concatenate([rng.uniform(-0.3, 0.3, shape + (2,)), np.ones(shape + (1,))], -1) * 2.5
+    want = _cv2_uv(P.reshape(-1, 3)[:, :2] / P.reshape(-1, 3)[:, 2:], prm).reshape(shape + (2,))
+    uv, valid = cam.project_valid(P)
+    np.testing.assert_allclose(uv, want, atol=1e-9)
+    assert np.shape(valid) == shape and np.all(valid)
+    np.testing.assert_allclose(cam.normalized_to_pixel(P[..., :2] / P[..., 2:]), want, atol=1e-9)
+    np.testing.assert_allclose(cam.project(P), want, atol=1e-9)
