@@ -202,3 +202,16 @@ def test_project_valid_and_normalized_to_pixel_of_any_batch_shape(shape):
     assert np.shape(valid) == shape and np.all(valid)
     np.testing.assert_allclose(cam.normalized_to_pixel(P[..., :2] / P[..., 2:]), want, atol=1e-9)
     np.testing.assert_allclose(cam.project(P), want, atol=1e-9)
+
+
+def test_unproject_one_pixel_through_a_batch_of_cameras():
+    """One pixel (2,) and three distortion-free cameras (3, 9): xy = ((u − cx)/fx, (v − cy)/fy) each, by hand."""
+    prm = np.zeros((3, 9))
+    prm[:, :4] = [[800.0, 810.0, 300.0, 200.0], [500.0, 520.0, 310.0, 190.0], [1000.0, 990.0, 290.0, 240.0]]
+    q = np.array([412.0, 333.0])
+    want = np.stack([(q[0] - prm[:, 2]) / prm[:, 0], (q[1] - prm[:, 3]) / prm[:, 1]], -1)
+    np.testing.assert_allclose(unproject(q, prm), want, atol=1e-15)
+    xy, dxy_duv, dxy_dk = unproject(q, prm, get_gradients=True)
+    np.testing.assert_allclose(xy, want, atol=1e-15)
+    np.testing.assert_allclose(dxy_duv, [np.diag([1 / p[0], 1 / p[1]]) for p in prm], rtol=1e-12)
+    assert dxy_dk.shape == (3, 2, 9)
