@@ -66,6 +66,13 @@ def test_newton_stops_once_converged():
     finally:
         C.brown_distort = saved
     assert ok.all() and len(calls) <= 8
+    calls.clear()  # points beyond |x| = 1 as well
+    C.brown_distort = counting
+    try:
+        x2, y2, ok2 = C.brown_undistort(np.array([1.5, -2.0]), np.array([0.3, 1.0]), 0.01, 0.0, 0.0, 0.0, 0.0)
+    finally:
+        C.brown_distort = saved
+    assert ok2.all() and len(calls) <= 8
     np.testing.assert_allclose(_cv2_uv(np.stack([x, y], -1), np.r_[1.0, 1.0, 0.0, 0.0, -0.2, 0.05, 1e-3, -1e-3, 0.0]),
                                np.stack([xd, yd], -1), atol=1e-14)
 
@@ -141,6 +148,7 @@ def _fold_by_hand(k1, k2, k3):
     [[-0.3, 0.0, 0.01], [-0.2, 0.0, 0.02], [-0.5, 0.0, 0.05]],     # cubic with k2 = 0, k3 > 0
     [[-0.3, -0.05, 0.0], [0.1, -0.2, 0.0], [0.0, -0.1, 0.0]],      # quadratic only (no cubic in the batch)
     [[-0.3, 0.0, 0.0], [-0.1, 0.0, 0.0], [0.2, 0.0, 0.0]],         # linear only
+    [[-0.3, 0.0, 0.0], [-0.1, 0.02, 0.0]],                         # two sets
 ])
 def test_vectorised_fold_of_each_polynomial_degree(k):
     """The batched fold equals the first root found by Brent's method, for batches holding one degree of
@@ -148,11 +156,12 @@ def test_vectorised_fold_of_each_polynomial_degree(k):
     k = np.array(k)
     want = [_fold_by_hand(*r) for r in k]
     np.testing.assert_allclose(C._radial_r2_max_array(k[:, 0], k[:, 1], k[:, 2]), want, rtol=1e-9)
-    prm = np.concatenate([np.tile([500.0, 500.0, 300.0, 300.0], (3, 1)), k[:, :2], np.zeros((3, 2)), k[:, 2:]], 1)
+    n = len(k)
+    prm = np.concatenate([np.tile([500.0, 500.0, 300.0, 300.0], (n, 1)), k[:, :2], np.zeros((n, 2)), k[:, 2:]], 1)
     # a point just beyond each set's fold is outside the domain, one just inside is projected
     for f, finite in ((1.001, False), (0.999, True)):
         r = np.sqrt(np.minimum(want, 1e4) * f)
-        uv = project(np.stack([r, 0 * r, np.ones(3)], -1), prm)
+        uv = project(np.stack([r, 0 * r, np.ones(n)], -1), prm)
         assert (np.isfinite(uv).all(-1) == (finite | (np.array(want) == 1e6))).all()
 
 
