@@ -54,7 +54,7 @@ MODULES = {
     "star_ekf_batch": ("src/rigsim/estimation/star_ekf_batch.py", ["tests/estimation/test_star_ekf_batch.py"]),
     "camera": ("src/rigsim/optics/camera.py", ["tests/optics/test_camera_model.py", "tests/optics/test_camera_convention.py",
                                                "tests/optics/test_camera_entry_points.py", "tests/optics/test_camera_truth.py"]),
-    "centroid": ("src/rigsim/imaging/centroid.py", ["tests/imaging/test_imaging_centroid.py"]),
+    "centroid": ("src/rigsim/imaging/centroid.py", ["tests/imaging/test_imaging_centroid.py", "tests/imaging/test_centroid_truth.py"]),
     # the WCS's own unit tests and the catalogue check; the dataset test (a star frame rendered, 5 s) is left out
     "wcs": ("src/rigsim/optics/wcs.py", ["tests/optics/test_wcs.py",
                                          "tests/render/test_star_fits_wcs.py::test_the_wcs_puts_every_catalogue_star_on_its_true_pixel"]),
