@@ -154,3 +154,54 @@ def test_tcom_flags_empty_and_faint():
         r = centroid_tcom(img, threshold=B + 5.0, background=B, noise=NOISE, min_snr=min_snr)
         assert bool(r.flags & Flag.FAINT) == faint, min_snr
         assert (r.u, r.v) == (3.0, 3.0)
+
+
+def test_gauss_flat_image_is_empty():
+    """No spot at all: the fitted flux is 0 (to rounding), so the spot is EMPTY and INVALID."""
+    r = _first(centroid_gauss(np.full((1, 9, 9), 40.0), sigma_px=1.0, noise=NOISE))
+    assert r.flags & Flag.EMPTY and r.flags & Flag.INVALID
+
+
+@pytest.mark.parametrize("k_sigma,poor", [(4.5, False), (5.5, True)])
+def test_gauss_poor_fit_threshold_five_sigma_of_chi2(k_sigma, poor):
+    """POOR_FIT when chi2_red > 1 + 5·√(2/dof): a spot whose noise is scaled so that chi2_red, computed by hand
+    from the fitted model, lies 4.2–4.8 or 5.2–5.8 of √(2/dof) above 1."""
+    h, w, u, v, F, B, s = SPOTS[0]
+    mu = _render(h, w, u, v, F, B, s)
+    z = np.random.default_rng(5).normal(size=mu.shape)
+    dof = h * w - 4
+    a = np.sqrt((1 + k_sigma * np.sqrt(2 / dof)) / 0.8209)
+    img = mu + a * z * np.sqrt(_var(mu))
+    r = _first(centroid_gauss(img[None], sigma_px=s, noise=NOISE))
+    m = _render(h, w, r.u, r.v, r.flux, r.background, s)
+    k = (np.sum((img - m) ** 2 / _var(m)) / dof - 1) / np.sqrt(2 / dof)
+    assert abs(k - k_sigma) < 0.3
+    assert bool(r.flags & Flag.POOR_FIT) == poor
+
+
+def test_solve_spd_fallback_when_lapack_refuses(monkeypatch):
+    """_solve_spd's own Cholesky inverse (used when LAPACK's inv raises on a matrix the factorisation found
+    positive definite) against scipy's inverse and solve, for 4×4 and 5×5 stacks; a non-SPD matrix is not ok."""
+    import scipy.linalg
+
+    from rigsim.imaging.centroid import _solve_spd
+
+    rng = np.random.default_rng(4)
+    for P in (4, 5):
+        M = rng.normal(size=(3, P, P))
+        A = M @ M.transpose(0, 2, 1) + P * np.eye(P)
+        A[2] = np.diag(np.r_[1.0, -1.0, np.ones(P - 2)])  # not positive definite
+        g = rng.normal(size=(3, P))
+        want_inv = [scipy.linalg.inv(a) for a in A[:2]]
+        want_x = [scipy.linalg.solve(a, b, assume_a="pos") for a, b in zip(A[:2], g[:2])]
+
+        def refuse(a):
+            raise np.linalg.LinAlgError("refused")
+
+        monkeypatch.setattr(np.linalg, "inv", refuse)
+        x, inv, ok = _solve_spd(A, g)
+        monkeypatch.undo()
+        assert ok.tolist() == [True, True, False]
+        np.testing.assert_allclose(inv[:2], want_inv, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(x[:2], want_x, rtol=1e-10, atol=1e-12)
+        assert np.isnan(inv[2]).all()
