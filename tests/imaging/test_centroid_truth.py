@@ -205,3 +205,11 @@ def test_solve_spd_fallback_when_lapack_refuses(monkeypatch):
         np.testing.assert_allclose(inv[:2], want_inv, rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(x[:2], want_x, rtol=1e-10, atol=1e-12)
         assert np.isnan(inv[2]).all()
+
+
+@pytest.mark.parametrize("shape", [(2, 9), (9, 2), (2, 2)])
+def test_rois_narrower_than_3_px_are_invalid(shape):
+    img = np.full((1,) + shape, 10.0)
+    img[0, 1, 1] = 500.0
+    for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE)):
+        assert r.flags[0] & Flag.INVALID and np.isnan(r.u[0])
