@@ -214,3 +214,20 @@ def test_rois_narrower_than_3_px_are_invalid(shape):
     img[0, 1, 1] = 500.0
     for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE)):
         assert r.flags[0] & Flag.INVALID and np.isnan(r.u[0])
+
+
+def test_three_px_rois_are_fitted():
+    for h, w, u, v in ((3, 9, 4.3, 1.1), (9, 3, 0.9, 4.4)):
+        img = _render(h, w, u, v, 2.0e4, 30.0, 0.8)[None]
+        g = centroid_gauss(img, sigma_px=0.8, noise=NOISE)
+        assert not g.flags[0] & Flag.INVALID
+        assert (g.u[0], g.v[0]) == pytest.approx((u, v), abs=2e-6)
+
+
+def test_tcom_unknown_mode_is_refused_and_default_edge_margin_is_one_px():
+    img = np.full((7, 7), 10.0)
+    img[3, 0] = 500.0  # a one-pixel spot on the first column: centroid u = 0, within 1 px of the edge (-0.5)
+    with pytest.raises(ValueError, match="mode must be"):
+        centroid_tcom(img, threshold=20.0, mode="weights")
+    r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE)
+    assert r.u == 0.0 and r.flags & Flag.EDGE
