@@ -8,6 +8,10 @@ every mutant against the module's tests (one process, no xdist, stop at the firs
 limit) and writes the summary (killed, survived, timed out, and every survivor's line and operator) to
 ``<out>/<module>.json``. docs/testing.md gives the last results and the survivors judged equivalent.
 
+A module listed in FUNCTIONS is narrowed to those functions and methods ("name" or "Class.method"): after the
+operator filter, every mutant whose line lies outside their line ranges (found with ``ast`` in the scratch
+copy) is marked skipped in the session, as the operator filter marks its own, and left out of the summary.
+
     pip install -e ".[mutation]"
     nice python scripts/mutation.py --list
     nice python scripts/mutation.py atomic            # one module (run them one after another, never two at once)
@@ -49,11 +53,25 @@ MODULES = {
                                                                        "tests/estimation/test_star_equation_sets.py"]),
     "star_ekf_batch": ("src/rigsim/estimation/star_ekf_batch.py", ["tests/estimation/test_star_ekf_batch.py"]),
     "camera": ("src/rigsim/optics/camera.py", ["tests/optics/test_camera_model.py", "tests/optics/test_camera_convention.py",
-                                               "tests/optics/test_camera_entry_points.py"]),
-    "centroid": ("src/rigsim/imaging/centroid.py", ["tests/imaging/test_imaging_centroid.py"]),
+                                               "tests/optics/test_camera_entry_points.py", "tests/optics/test_camera_truth.py"]),
+    "centroid": ("src/rigsim/imaging/centroid.py", ["tests/imaging/test_imaging_centroid.py", "tests/imaging/test_centroid_truth.py"]),
     # the WCS's own unit tests and the catalogue check; the dataset test (a star frame rendered, 5 s) is left out
     "wcs": ("src/rigsim/optics/wcs.py", ["tests/optics/test_wcs.py",
                                          "tests/render/test_star_fits_wcs.py::test_the_wcs_puts_every_catalogue_star_on_its_true_pixel"]),
+}
+
+# modules narrowed to their mission-critical functions (top-level names or "Class.method"); the others are mutated whole
+FUNCTIONS = {
+    "camera": ["brown_distort", "brown_jacobian", "brown_undistort", "radial_r2_max", "_radial_r2_max_cached",
+               "_radial_r2_max_array", "_split", "_dist_partials", "distort", "project", "unproject",
+               "PinholeBrown.camera_matrix", "PinholeBrown.dist_coeffs", "PinholeBrown.params", "PinholeBrown.r2_max",
+               "PinholeBrown.distort", "PinholeBrown.distort_jacobian", "PinholeBrown.undistort",
+               "PinholeBrown.normalized_to_pixel", "PinholeBrown.project", "PinholeBrown.project_valid",
+               "PinholeBrown.pixel_to_normalized", "PinholeBrown.unproject", "PinholeBrown.backproject",
+               "PinholeBrown.on_detector"],
+    # the default centroiders: tcom (boresight cameras, autocollimator spot) and gauss (star fields), with helpers
+    "centroid": ["_threshold_moments", "centroid_tcom", "_pix_1d", "_gauss_init", "_basis_terms", "_normal_equations",
+                 "_chol", "_chol_solve", "_chol_inverse", "_solve_spd", "_gauss_newton", "centroid_gauss"],
 }
 
 # operators left out: bitwise, shift, power, modulo and floor-division swaps of arithmetic (thousands of mutants
@@ -100,6 +118,38 @@ exclude-operators = [{excl}]
     p = tree / f"{key}.toml"
     p.write_text(text)
     return p
+
+
+def _line_ranges(path: Path, names) -> list[tuple[int, int]]:
+    """First and last line of each named function or "Class.method" in a source file."""
+    import ast
+
+    found = {}
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            found[node.name] = (node.lineno, node.end_lineno)
+        elif isinstance(node, ast.ClassDef):
+            for m in node.body:
+                if isinstance(m, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    found[f"{node.name}.{m.name}"] = (m.lineno, m.end_lineno)
+    missing = [n for n in names if n not in found]
+    if missing:
+        raise SystemExit(f"FUNCTIONS names not found in {path}: {missing}")
+    return [found[n] for n in names]
+
+
+def _skip_outside(session: Path, tree: Path, key: str) -> int:
+    """Mark skipped every pending mutant outside FUNCTIONS[key] (as cr-filter-operators does); the count left."""
+    from cosmic_ray.work_db import use_db
+    from cosmic_ray.work_item import WorkerOutcome, WorkResult
+
+    ranges = _line_ranges(tree / MODULES[key][0], FUNCTIONS[key])
+    with use_db(str(session)) as db:
+        items = db.pending_work_items
+        out = [i.job_id for i in items if not all(any(a <= m.start_pos[0] <= b for a, b in ranges) for m in i.mutations)]
+        # one transaction for all (a commit per mutant, as the operator filter does, takes minutes)
+        db.set_multiple_results(out, WorkResult(output="Outside the narrowed functions", worker_outcome=WorkerOutcome.SKIPPED))
+    return len(items) - len(out)
 
 
 def summary(session: Path, tree: Path, key: str) -> dict:
@@ -165,6 +215,9 @@ def main(argv=None) -> int:
             return 1
         run(str(bin_ / "cosmic-ray"), "init", str(cfg), str(session))
         run(str(bin_ / "cr-filter-operators"), str(session), str(cfg))
+        if a.module in FUNCTIONS:
+            left = _skip_outside(session, tree, a.module)
+            print(f"{a.module}: narrowed to {', '.join(FUNCTIONS[a.module])}: {left} mutants left", flush=True)
         run(str(bin_ / "cosmic-ray"), "exec", str(cfg), str(session))
     s = summary(session, out / "tree", a.module)
     (out.parent / f"{a.module}.json").write_text(json.dumps(s, indent=1))

@@ -1,0 +1,233 @@
+"""rigsim.imaging.centroid's default centroiders (centroid_gauss for star fields, centroid_tcom for the boresight
+cameras and the autocollimator spot) against truths of their own: spots rendered with scipy's normal CDF,
+the Fisher matrix by central differences of that rendering, the weighted mean and moments by hand and with
+OpenCV. Written from the mutation run (docs/testing.md, "Centroiders")."""
+
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from rigsim.imaging import Flag, NoiseModel, centroid_gauss, centroid_tcom
+
+K, READ = 2.0, 3.0  # gain DN/e-, read noise e-
+NOISE = NoiseModel(K, READ)
+
+
+def _render(h, w, u, v, F, B, s):
+    """Pixel-integrated circular Gaussian: F·Ex(u)·Ey(v) + B, Ex from scipy's normal CDF at the pixel edges."""
+    ex = np.diff(norm.cdf((np.arange(w + 1) - 0.5 - u) / s))
+    ey = np.diff(norm.cdf((np.arange(h + 1) - 0.5 - v) / s))
+    return F * np.outer(ey, ex) + B
+
+
+def _first(b):
+    """The first spot of a CentroidBatch, with its ``extra`` entries."""
+    return SimpleNamespace(u=b.u[0], v=b.v[0], sigma_u=b.sigma_u[0], sigma_v=b.sigma_v[0], flux=b.flux[0],
+                           background=b.background[0], flags=int(b.flags[0]), extra={k: x[0] for k, x in b.extra.items()})
+
+
+def _var(mu):
+    return K * mu + (K * READ) ** 2
+
+
+def _fisher_sd(h, w, th, fit_sigma):
+    """√diag of the inverse Fisher matrix Jᵀ V⁻¹ J, J by central differences of `_render`."""
+    th = np.asarray(th, float)
+    f = (lambda t: _render(h, w, *t)) if fit_sigma else (lambda t: _render(h, w, *t, th[4]))
+    n = 5 if fit_sigma else 4
+    steps = [1e-5, 1e-5, 1e-3 * th[2], 1e-4, 1e-6][:n]
+    J = []
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = steps[j]
+        J.append(((f(th[:n] + e) - f(th[:n] - e)) / (2 * steps[j])).ravel())
+    J = np.array(J).T
+    A = J.T @ (J / _var(_render(h, w, *th)).ravel()[:, None])
+    return np.sqrt(np.diag(np.linalg.inv(A)))
+
+
+# spots on a non-square ROI (h ≠ w), at sub-pixel positions away from the centre, with a background
+SPOTS = [(9, 13, 7.3, 3.6, 5.0e4, 40.0, 1.1), (11, 8, 2.8, 6.45, 2.0e4, 15.0, 0.9), (10, 10, 4.5, 5.2, 8.0e3, 25.0, 1.4)]
+
+
+@pytest.mark.parametrize("fit_sigma", [False, True])
+def test_gauss_recovers_a_noise_free_spot_and_its_fisher_sigmas(fit_sigma):
+    for h, w, u, v, F, B, s in SPOTS:
+        img = _render(h, w, u, v, F, B, s)
+        r = _first(centroid_gauss(img[None], sigma_px=s if not fit_sigma else 1.0, fit_sigma=fit_sigma, noise=NOISE))
+        assert r.flags == 0
+        # to the fit's convergence (its last step < tol_px = 1e-4 px)
+        np.testing.assert_allclose([r.u, r.v], [u, v], rtol=0, atol=2e-6)
+        np.testing.assert_allclose([r.flux, r.background], [F, B], rtol=1e-6, atol=1e-4)
+        assert r.extra["sigma_px"] == pytest.approx(s, abs=1e-6)
+        sd = _fisher_sd(h, w, (u, v, F, B, s), fit_sigma)
+        np.testing.assert_allclose([r.sigma_u, r.sigma_v, r.extra["sigma_flux"]], sd[:3], rtol=1e-4)
+        assert 0 <= r.extra["chi2_red"] < 1e-4  # evaluated before the last step (< tol_px)
+
+
+def test_gauss_batch_of_spots_converging_at_different_steps():
+    """A stack whose spots need different numbers of Gauss–Newton steps (and one flagged INVALID on the way
+    in, which is left alone): each spot's fit equals its truth and its own single-spot fit."""
+    h = w = 11
+    truth = [(5.0, 5.0), (3.7, 6.9), (6.45, 3.2), (5.2, 4.9)]
+    img = np.stack([_render(h, w, u, v, 3.0e4, 20.0, 1.2) for u, v in truth])
+    fl = np.array([0, 0, int(Flag.INVALID), 0])
+    r = centroid_gauss(img, sigma_px=1.2, noise=NOISE, flags=fl)
+    ok = [0, 1, 3]
+    np.testing.assert_allclose(r.u[ok], [truth[i][0] for i in ok], atol=2e-6)
+    np.testing.assert_allclose(r.v[ok], [truth[i][1] for i in ok], atol=2e-6)
+    assert r.flags[2] & Flag.INVALID and np.isnan(r.u[2])
+    for i in ok:
+        one = centroid_gauss(img[i], sigma_px=1.2, noise=NOISE)
+        assert (one.u, one.v, one.sigma_u) == pytest.approx((r.u[i], r.v[i], r.sigma_u[i]), abs=1e-9)
+
+
+def test_gauss_reduced_chi2_by_hand():
+    """chi2_red = Σ (data − model)² / var(model) / (n_pix − 4) at the fitted parameters (model rendered with
+    scipy), for a noisy spot."""
+    rng = np.random.default_rng(3)
+    h, w, u, v, F, B, s = SPOTS[0]
+    mu = _render(h, w, u, v, F, B, s)
+    img = mu + rng.normal(size=mu.shape) * np.sqrt(_var(mu))
+    r = _first(centroid_gauss(img[None], sigma_px=s, noise=NOISE))
+    m = _render(h, w, r.u, r.v, r.flux, r.background, s)
+    want = np.sum((img - m) ** 2 / _var(m)) / (h * w - 4)
+    assert r.extra["chi2_red"] == pytest.approx(want, rel=1e-3)
+
+
+def _tcom_by_hand(img, T, var):
+    wgt = np.where(img > T, img - T, 0.0)
+    m = cv2.moments(wgt.astype(np.float64))
+    u, v = m["m10"] / m["m00"], m["m01"] / m["m00"]
+    vv, uu = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    sel = img > T
+    su = np.sqrt(np.sum(var[sel] * (uu[sel] - u) ** 2)) / wgt.sum()
+    sv = np.sqrt(np.sum(var[sel] * (vv[sel] - v) ** 2)) / wgt.sum()
+    return u, v, su, sv, sel.sum()
+
+
+def test_tcom_position_sigmas_flux_and_count_by_hand():
+    """centroid_tcom with a given threshold and background: the weighted mean (OpenCV's moments of the
+    weights), σ_u, σ_v of the weighted mean with each pixel's variance, the flux above background and the
+    pixel count, by hand."""
+    h, w, u, v, F, B, s = SPOTS[0]
+    img = _render(h, w, u, v, F, B, s)
+    T = B + 50.0
+    r = _first(centroid_tcom(img[None], threshold=T, background=B, noise=NOISE, edge_margin_px=0.0))
+    cu, cv_, su, sv, npix = _tcom_by_hand(img, T, _var(img))
+    assert (r.u, r.v) == pytest.approx((cu, cv_), abs=1e-12)
+    assert (r.sigma_u, r.sigma_v) == pytest.approx((su, sv), rel=1e-12)
+    sel = img > T
+    assert r.flux == pytest.approx(np.sum(img[sel] - B), rel=1e-12)
+    assert r.extra["npix"] == npix and r.extra["threshold"] == T
+    assert r.background == B and r.flags == 0
+
+
+def test_tcom_default_threshold_is_background_plus_3_sigma():
+    """No threshold: T = background + 3·σ_bg, σ_bg the read noise with a NoiseModel; a pixel just above T
+    counts, one just below does not."""
+    B = 100.0
+    sd = np.sqrt(_var(B))
+    T = B + 3.0 * sd
+    img = np.full((7, 7), B)
+    img[3, 3] = B + 1000.0
+    img[3, 4] = T + 1e-6
+    img[2, 3] = T - 1e-6
+    r = _first(centroid_tcom(img[None], background=B, noise=NOISE))
+    assert r.extra["threshold"] == pytest.approx(T, rel=1e-12)
+    assert r.extra["npix"] == 2
+    w1, w2 = 1000.0 - 3.0 * sd, 1e-6
+    assert r.u == pytest.approx((3 * w1 + 4 * w2) / (w1 + w2), abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)
+
+
+def test_tcom_flags_empty_and_faint():
+    B = 10.0
+    img = np.full((7, 7), B)
+    e = centroid_tcom(img, threshold=B + 5.0, background=B, noise=NOISE)
+    assert e.flags & Flag.EMPTY and e.flags & Flag.INVALID
+    # one pixel 60 DN above background: snr = 60 / √var(B + 60) by hand; FAINT flips at that min_snr
+    img[3, 3] = B + 60.0
+    snr = 60.0 / np.sqrt(_var(B + 60.0))
+    for min_snr, faint in ((snr * (1 - 1e-9), False), (snr * (1 + 1e-9), True)):
+        r = centroid_tcom(img, threshold=B + 5.0, background=B, noise=NOISE, min_snr=min_snr)
+        assert bool(r.flags & Flag.FAINT) == faint, min_snr
+        assert (r.u, r.v) == (3.0, 3.0)
+
+
+def test_gauss_flat_image_is_empty():
+    """No spot at all: the fitted flux is 0 (to rounding), so the spot is EMPTY and INVALID."""
+    r = _first(centroid_gauss(np.full((1, 9, 9), 40.0), sigma_px=1.0, noise=NOISE))
+    assert r.flags & Flag.EMPTY and r.flags & Flag.INVALID
+
+
+@pytest.mark.parametrize("k_sigma,poor", [(4.5, False), (5.5, True)])
+def test_gauss_poor_fit_threshold_five_sigma_of_chi2(k_sigma, poor):
+    """POOR_FIT when chi2_red > 1 + 5·√(2/dof): a spot whose noise is scaled so that chi2_red, computed by hand
+    from the fitted model, lies 4.2–4.8 or 5.2–5.8 of √(2/dof) above 1."""
+    h, w, u, v, F, B, s = SPOTS[0]
+    mu = _render(h, w, u, v, F, B, s)
+    z = np.random.default_rng(5).normal(size=mu.shape)
+    dof = h * w - 4
+    a = np.sqrt((1 + k_sigma * np.sqrt(2 / dof)) / 0.8209)
+    img = mu + a * z * np.sqrt(_var(mu))
+    r = _first(centroid_gauss(img[None], sigma_px=s, noise=NOISE))
+    m = _render(h, w, r.u, r.v, r.flux, r.background, s)
+    k = (np.sum((img - m) ** 2 / _var(m)) / dof - 1) / np.sqrt(2 / dof)
+    assert abs(k - k_sigma) < 0.3
+    assert bool(r.flags & Flag.POOR_FIT) == poor
+
+
+def test_solve_spd_fallback_when_lapack_refuses(monkeypatch):
+    """_solve_spd's own Cholesky inverse (used when LAPACK's inv raises on a matrix the factorisation found
+    positive definite) against scipy's inverse and solve, for 4×4 and 5×5 stacks; a non-SPD matrix is not ok."""
+    import scipy.linalg
+
+    from rigsim.imaging.centroid import _solve_spd
+
+    rng = np.random.default_rng(4)
+    for P in (4, 5):
+        M = rng.normal(size=(3, P, P))
+        A = M @ M.transpose(0, 2, 1) + P * np.eye(P)
+        A[2] = np.diag(np.r_[1.0, -1.0, np.ones(P - 2)])  # not positive definite
+        g = rng.normal(size=(3, P))
+        want_inv = [scipy.linalg.inv(a) for a in A[:2]]
+        want_x = [scipy.linalg.solve(a, b, assume_a="pos") for a, b in zip(A[:2], g[:2])]
+
+        def refuse(a):
+            raise np.linalg.LinAlgError("refused")
+
+        monkeypatch.setattr(np.linalg, "inv", refuse)
+        x, inv, ok = _solve_spd(A, g)
+        monkeypatch.undo()
+        assert ok.tolist() == [True, True, False]
+        np.testing.assert_allclose(inv[:2], want_inv, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(x[:2], want_x, rtol=1e-10, atol=1e-12)
+        assert np.isnan(inv[2]).all()
+
+
+@pytest.mark.parametrize("shape", [(2, 9), (9, 2), (2, 2)])
+def test_rois_narrower_than_3_px_are_invalid(shape):
+    img = np.full((1,) + shape, 10.0)
+    img[0, 1, 1] = 500.0
+    for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE)):
+        assert r.flags[0] & Flag.INVALID and np.isnan(r.u[0])
+
+
+def test_three_px_rois_are_fitted():
+    for h, w, u, v in ((3, 9, 4.3, 1.1), (9, 3, 0.9, 4.4)):
+        img = _render(h, w, u, v, 2.0e4, 30.0, 0.8)[None]
+        g = centroid_gauss(img, sigma_px=0.8, noise=NOISE)
+        assert not g.flags[0] & Flag.INVALID
+        assert (g.u[0], g.v[0]) == pytest.approx((u, v), abs=2e-6)
+
+
+def test_tcom_unknown_mode_is_refused_and_default_edge_margin_is_one_px():
+    img = np.full((7, 7), 10.0)
+    img[3, 0] = 500.0  # a one-pixel spot on the first column: centroid u = 0, within 1 px of the edge (-0.5)
+    with pytest.raises(ValueError, match="mode must be"):
+        centroid_tcom(img, threshold=20.0, mode="weights")
+    r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE)
+    assert r.u == 0.0 and r.flags & Flag.EDGE
