@@ -39,6 +39,20 @@ def test_simplified_inverts_the_paper_loop_on_an_asymmetric_camera():
     assert np.abs(p.delta_f_mm - df).max() < 1e-12
 
 
+def test_simplified_as_printed_takes_the_unsigned_distances_on_a_one_sided_camera():
+    """Both detectors on the same side (+700, +200 mm): the consistent L = Lc1 − Lc2 = 500 mm inverts the paper's
+    loop; the printed |Lc1| + |Lc2| = 900 mm scales eq 1's Δf and eq 4's tan γ by 500/900."""
+    g = GA.with_(center_y_mm=(700.0, 200.0))
+    ang, df = _states(50, 16)
+    meas = loop_spots_uv(g, rotation_xyz(*ang.T), df, loop_model="paper")
+    est = simplified(g, g.reference_uv, meas)
+    assert np.abs(est.angles_rad - ang).max() < 1e-14 and np.abs(est.delta_f_mm - df).max() < 1e-12
+    p = simplified(g, g.reference_uv, meas, "as_printed")
+    np.testing.assert_allclose(p.delta_f_mm, df * 500 / 900, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.tan(p.gamma_rad), np.tan(ang[:, 2]) * 500 / 900, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(p.beta_rad, ang[:, 1], rtol=0, atol=1e-14)
+
+
 def test_paper_loop_dvad_takes_eq15_and_removes_the_focal_shift():
     """The paper's loop puts Δf only in the spots' antisymmetric y shift, s·(Δf/Kf)·L/F: eq 15 in eq 1's form
     returns Δf exactly, and once the shift is removed a pure Δf leaves the spots where they were (no rotation)."""
@@ -69,6 +83,8 @@ def test_triad_columns_by_hand_batched_and_of_any_length():
 
 
 def test_estimate_refuses_every_unknown_method():
+    with pytest.raises(TypeError):                  # iterations and loop_model are keyword-only
+        dvad(G, G.reference_uv, G.reference_uv, "consistent", 2)
     for m in ("quest", "batch", "triad", ""):      # names on both sides of "dvad" and "simplified"
         with pytest.raises(ValueError, match="method"):
             estimate(G, G.reference_uv, G.reference_uv, method=m)
@@ -131,7 +147,7 @@ def test_as_printed_dvad_against_the_printed_equations_with_scipy():
     df = rng.uniform(-0.2, 0.2, 5)
     g = G.with_(tilt_rad=(0.01, -0.02))
     meas = spots_uv(g, rotation_xyz(*ang.T), df)
-    got = dvad(g, g.reference_uv, meas, "as_printed")
+    got = dvad(g, g.reference_uv, meas, reading="as_printed")
     F, w = g.F, g.off_axis_rad
     P0, P = g.xy_to_focal(g.uv_to_xy(g.reference_uv)), g.xy_to_focal(g.uv_to_xy(meas))
 
