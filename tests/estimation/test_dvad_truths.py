@@ -82,6 +82,20 @@ def test_triad_columns_by_hand_batched_and_of_any_length():
     np.testing.assert_allclose(got, exp, rtol=0, atol=1e-15)
 
 
+def test_estimate_dispatches_to_each_method():
+    """estimate(method=…) inverts the exact ray trace (DVAD, with its keywords) and the paper's loop (the
+    simplified method, which takes loop_model and refuses an unknown one)."""
+    ang, df = _states(20, 17)
+    est = estimate(G, G.reference_uv, spots_uv(G, rotation_xyz(*ang.T), df), method="dvad", iterations=4)
+    assert est.method == "dvad" and np.abs(est.angles_rad - ang).max() < 1e-12
+    meas = loop_spots_uv(GA, rotation_xyz(*ang.T), df, loop_model="paper")
+    for kw in ({}, {"loop_model": "paper"}, {"loop_model": "physical"}):
+        est = estimate(GA, GA.reference_uv, meas, "simplified", **kw)
+        assert est.method == "simplified" and np.abs(est.angles_rad - ang).max() < 1e-14
+    with pytest.raises(ValueError, match="loop_model"):
+        estimate(GA, GA.reference_uv, meas, "simplified", loop_model="exact")
+
+
 def test_estimate_refuses_every_unknown_method():
     with pytest.raises(TypeError):                  # iterations and loop_model are keyword-only
         dvad(G, G.reference_uv, G.reference_uv, "consistent", 2)
@@ -119,9 +133,11 @@ def test_solver_with_its_default_reference_and_with_a_batch_of_references():
     ang, df = _states(3, 14, 200.0, 150.0)
     meas = spots_uv(G, rotation_xyz(*ang.T), df)
     refs = np.repeat(G.reference_uv[None], 3, axis=0)
-    for solver in (DVADSolver(G), DVADSolver(G, refs)):
+    for solver in (DVADSolver(G), DVADSolver(G, ref_uv=refs)):
         est = solver.solve(meas)
         assert np.abs(est.angles_rad - ang).max() < 1e-12 and np.abs(est.delta_f_mm - df).max() < 1e-9
+    with pytest.raises(TypeError):                  # iterations and loop_model are keyword-only
+        DVADSolver(G, refs, 2)
     # shapes on both sides of (2, 2) in tuple order
     for bad in (np.zeros((3, 1, 2)), np.zeros((2, 3)), np.zeros((3, 2))):
         with pytest.raises(ValueError, match="ref_uv must have shape"):
@@ -148,6 +164,9 @@ def test_as_printed_dvad_against_the_printed_equations_with_scipy():
     g = G.with_(tilt_rad=(0.01, -0.02))
     meas = spots_uv(g, rotation_xyz(*ang.T), df)
     got = dvad(g, g.reference_uv, meas, reading="as_printed")
+    # the same with a reference per sample (M0 then a batch of matrices too)
+    per = dvad(g, np.repeat(g.reference_uv[None], 5, axis=0), meas, reading="as_printed")
+    np.testing.assert_allclose(per.angles_rad, got.angles_rad, rtol=1e-12, atol=1e-18)
     F, w = g.F, g.off_axis_rad
     P0, P = g.xy_to_focal(g.uv_to_xy(g.reference_uv)), g.xy_to_focal(g.uv_to_xy(meas))
 
