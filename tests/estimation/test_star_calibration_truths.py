@@ -111,8 +111,13 @@ def test_ekf_and_batch_refuse_unknown_settings(star_rig, frames):
                      ({"equations": "a"}, "equations")):
         with pytest.raises(ValueError, match=word):
             run_ekf(frames, th, **kw)
-    with pytest.raises(ValueError, match="model"):
-        frame_system(frames[0], th, "adz")
+    with pytest.raises(TypeError):                 # the options are keyword-only
+        batch_lsq(frames, th, ("u0", "v0"))
+    with pytest.raises(TypeError):
+        run_ekf(frames, th, "ads")
+    for model in ("adz", "a", "ac"):               # names on both sides of "ad" in string order
+        with pytest.raises(ValueError, match="model"):
+            frame_system(frames[0], th, model)
 
 
 def test_batch_is_the_weighted_least_squares_solution(star_rig, frames):
