@@ -103,6 +103,11 @@ def test_ekf_on_the_brightest_stars_is_the_filter_on_frames_cut_by_hand(star_rig
     small = np.argsort(np.hypot(fo.sigma_uv[:, 0], fo.sigma_uv[:, 1]))[:4]
     np.testing.assert_array_equal(np.sort(nf.brightest(4).uv[:, 0]), np.sort(fo.uv[small, 0]))
     assert nf.brightest(4).flux is None and len(fo.brightest(len(fo) - 1)) == len(fo) - 1
+    # a frame is shared by many filters (and memoised by its identity): it cannot be changed
+    import dataclasses
+
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fo.uv = fo.uv * 2
 
 
 def test_ekf_and_batch_refuse_unknown_settings(star_rig, frames):
@@ -181,6 +186,9 @@ def test_chain_without_fluxes_keeps_the_given_order():
     np.testing.assert_array_equal(trip, [[0, 1, 2], [1, 2, 3], [2, 3, 4]])
     pairs, trip = equation_sets(uv, "chain", flux=np.array([5.0, 1.0, 4.0, 2.0, 3.0]))
     np.testing.assert_array_equal(pairs, [[0, 2], [2, 4], [4, 3], [3, 1]])
+    for bad in ("every", "b", "c"):               # names on both sides of "chain" in string order
+        with pytest.raises(ValueError, match="equations"):
+            equation_sets(uv, bad)
 
 
 def test_cholesky_of_an_indefinite_covariance_takes_the_smallest_jitter_that_works():
@@ -199,3 +207,49 @@ def test_cholesky_of_an_indefinite_covariance_takes_the_smallest_jitter_that_wor
                                np.sqrt(np.array([3000.0, 3000.0, -5970.0]) + 1e4), rtol=1e-12)
     with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
         _cho(np.diag([3000.0, 3000.0, -5995.0]))
+
+
+def test_four_stars_all_pairs_are_projected_on_the_range_of_r(star_rig, frames):
+    """4 stars: all 6 AD pairs carry 2N − 3 = 5 independent angles, so their propagated R has rank 5 and the EKF
+    must use its pseudo-inverse: the information form P⁺ = (P⁻¹ + Hᵀ R⁺ H)⁻¹, Δx = P⁺ Hᵀ R⁺ ν with numpy's pinv
+    of G Σ Gᵀ (a full R with the 1e-9 floor would instead weight the noise-free combination by 1e9)."""
+    th = true_theta(star_rig)
+    start = th + [0.0, 1.0, -1.0, 0.0, 0.0]
+    four = [FrameObs(fo.uv[:4], fo.sigma_uv[:4], fo.dirs_icrs[:4], fo.flux[:4]) for fo in frames if len(fo) >= 4]
+    r = run_ekf(four, start, equations="all")
+    x, P = start.copy(), np.diag([100.0, 100.0])
+    for fo in four:
+        s = frame_system(fo, x, "ad", equations="all")
+        assert s.h.size == 6
+        Rp = np.linalg.pinv(s.G @ np.diag(s.var) @ s.G.T, rcond=1e-10, hermitian=True)
+        H = s.H[:, 1:3]
+        P = np.linalg.inv(np.linalg.inv(P) + H.T @ Rp @ H)
+        x[1:3] = x[1:3] + P @ H.T @ Rp @ (s.z - s.h)
+    np.testing.assert_allclose(r.x, x[1:3], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(r.P, P, rtol=1e-5)
+    np.testing.assert_array_equal(r.dof, [5] * len(four))
+
+
+def test_batch_of_one_four_star_frame(star_rig, frames):
+    """A frame of exactly 4 stars is used (2N − 3 = 5 AD equations): with the 5 entries estimated it is exactly
+    determined, n_eq = 5, and χ²/dof takes dof = max(1, 0) = 1."""
+    th = true_theta(star_rig)
+    fo = frames[0]
+    four = FrameObs(fo.uv[:4], fo.sigma_uv[:4], fo.dirs_icrs[:4], fo.flux[:4])
+    b = batch_lsq([four], th + [0.5, 0.3, -0.3, 0.0, 0.0])
+    assert b.n_eq == 5 and b.chi2_reduced == b.chi2
+
+
+def test_framework_hangs_on_the_two_stars_farthest_apart():
+    """(a, b) is the pair at the largest distance, found here by brute force over every pair; here it is not the
+    pair with the largest Δu + Δv."""
+    import itertools
+
+    uv = np.array([[0.0, 0.0], [10.0, -9.0], [6.0, 6.0], [3.0, 1.0]])
+    far = max(itertools.combinations(range(4), 2), key=lambda p: np.hypot(*(uv[p[0]] - uv[p[1]])))
+    pairs, trip = equation_sets(uv)
+    assert set(pairs[0]) == set(far) == {1, 2}
+    others = [j for j in range(4) if j not in far]
+    assert len(pairs) == 5 and {tuple(p) for p in pairs[1:]} == {(a, j) for a in pairs[0] for j in others}
+    assert {tuple(t) for t in trip} == ({(pairs[0][0], j, pairs[0][1]) for j in others}
+                                        | {(j, pairs[0][0], pairs[0][1]) for j in others})
