@@ -253,3 +253,17 @@ def test_framework_hangs_on_the_two_stars_farthest_apart():
     assert len(pairs) == 5 and {tuple(p) for p in pairs[1:]} == {(a, j) for a in pairs[0] for j in others}
     assert {tuple(t) for t in trip} == ({(pairs[0][0], j, pairs[0][1]) for j in others}
                                         | {(j, pairs[0][0], pairs[0][1]) for j in others})
+
+
+def test_normalized_coordinates_default_to_no_tangential_terms():
+    """normalized_with_jacobians(uv, θ) without p12: OpenCV's undistortPoints of the same camera with p1 = p2 = 0."""
+    import cv2
+
+    th = np.array([2886.7, 514.3, 508.6, -0.06, 0.10])
+    uv = np.array([[30.0, 40.0], [900.0, 120.0], [512.0, 512.0], [100.0, 980.0], [1000.0, 1000.0]])
+    K = np.array([[th[0], 0.0, th[1]], [0.0, th[0], th[2]], [0.0, 0.0, 1.0]])
+    ref = cv2.undistortPoints(uv.reshape(-1, 1, 2), K, np.array([th[3], th[4], 0.0, 0.0, 0.0]),
+                              criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)).reshape(-1, 2)
+    from rigsim.estimation.star_calibration import normalized_with_jacobians
+
+    np.testing.assert_allclose(normalized_with_jacobians(uv, th)[0], ref, rtol=0, atol=1e-10)
