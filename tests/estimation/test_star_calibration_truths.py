@@ -186,7 +186,7 @@ def test_chain_without_fluxes_keeps_the_given_order():
     np.testing.assert_array_equal(trip, [[0, 1, 2], [1, 2, 3], [2, 3, 4]])
     pairs, trip = equation_sets(uv, "chain", flux=np.array([5.0, 1.0, 4.0, 2.0, 3.0]))
     np.testing.assert_array_equal(pairs, [[0, 2], [2, 4], [4, 3], [3, 1]])
-    for bad in ("every", "b", "c"):               # names on both sides of "chain" in string order
+    for bad in ("every", "b", "c", "a"):          # names on both sides of "all" and "chain" in string order
         with pytest.raises(ValueError, match="equations"):
             equation_sets(uv, bad)
 
