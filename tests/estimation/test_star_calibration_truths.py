@@ -6,6 +6,7 @@ skipped frames) by hand."""
 import numpy as np
 import pytest
 from star_frames import noisy_frames, true_theta
+from textbook_ekf import textbook_ekf
 
 from rigsim.estimation.star_calibration import (
     THETA_NAMES,
@@ -26,28 +27,6 @@ def frames(star_rig, star_sky):
     return fr
 
 
-def _textbook_ekf(frames, theta0, est, prior_sigma, q, model, weighting, equations="framework"):
-    """x, P, history, NIS per frame of the textbook EKF (identity transition, P += q²I, one update per frame)."""
-    th = np.array(theta0, float)
-    P = np.diag(np.asarray(prior_sigma, float) ** 2)
-    hist, nis = [th[est].copy()], []
-    for fo in frames:
-        if len(fo) < 4:
-            nis.append(np.nan)
-            hist.append(th[est].copy())
-            continue
-        P = P + q**2 * np.eye(len(est))
-        s = frame_system(fo, th, model, weighting, equations=equations)
-        H, nu = s.H[:, est], s.z - s.h
-        S = H @ P @ H.T + s.R
-        K = np.linalg.solve(S, H @ P).T
-        th[est] = th[est] + K @ nu
-        P = (np.eye(len(est)) - K @ H) @ P
-        nis.append(nu @ np.linalg.solve(S, nu))
-        hist.append(th[est].copy())
-    return th, P, np.array(hist), np.array(nis)
-
-
 @pytest.mark.parametrize("model", ["ad", "ads"])
 @pytest.mark.parametrize("weighting", ["propagated", "diagonal", "unweighted"])
 def test_ekf_is_the_textbook_kalman_filter(star_rig, frames, model, weighting):
@@ -57,7 +36,7 @@ def test_ekf_is_the_textbook_kalman_filter(star_rig, frames, model, weighting):
     est = [THETA_NAMES.index(e) for e in names]
     ps, q = [4.0, 3.0, 3.0], 0.2
     r = run_ekf(frames, start, model=model, estimate=names, prior_sigma=ps, process_sigma=q, weighting=weighting)
-    t_th, t_P, t_hist, t_nis = _textbook_ekf(frames, start, est, ps, q, model, weighting)
+    t_th, t_P, t_hist, t_nis = textbook_ekf(frames, start, est, ps, q, model, weighting)
     np.testing.assert_allclose(r.history_x, t_hist, rtol=0, atol=1e-9)
     np.testing.assert_allclose(r.x, t_th[est], rtol=0, atol=1e-9)
     np.testing.assert_allclose(r.theta, t_th, rtol=0, atol=1e-9)
@@ -77,7 +56,7 @@ def test_ekf_default_prior_is_10_px(star_rig, frames):
     th = true_theta(star_rig)
     start = th + [0.0, 1.0, -1.0, 0.0, 0.0]
     r = run_ekf(frames, start)
-    t_th, t_P, t_hist, _ = _textbook_ekf(frames, start, [1, 2], [10.0, 10.0], 0.0, "ad", "propagated")
+    t_th, t_P, t_hist, _ = textbook_ekf(frames, start, [1, 2], [10.0, 10.0], 0.0, "ad", "propagated")
     np.testing.assert_allclose(r.history_sigma[0], [10.0, 10.0], rtol=1e-15)
     np.testing.assert_allclose(r.history_x, t_hist, rtol=0, atol=1e-9)
     np.testing.assert_allclose(r.P, t_P, rtol=1e-7, atol=1e-7 * np.abs(t_P).max())
@@ -91,7 +70,7 @@ def test_ekf_on_the_brightest_stars_is_the_filter_on_frames_cut_by_hand(star_rig
         o = sorted(range(len(fo)), key=lambda i: -fo.flux[i])[:6]
         cut.append(FrameObs(fo.uv[o], fo.sigma_uv[o], fo.dirs_icrs[o], fo.flux[o]))
     r = run_ekf(frames, start, max_stars=6)
-    t_th, t_P, t_hist, t_nis = _textbook_ekf(cut, start, [1, 2], [10.0, 10.0], 0.0, "ad", "propagated")
+    t_th, t_P, t_hist, t_nis = textbook_ekf(cut, start, [1, 2], [10.0, 10.0], 0.0, "ad", "propagated")
     np.testing.assert_allclose(r.history_x, t_hist, rtol=0, atol=1e-9)
     np.testing.assert_allclose(r.nis, t_nis, rtol=1e-7)
     # brightest(n): the n largest fluxes; without fluxes the n smallest σ; n ≥ the count: the frame itself
