@@ -224,3 +224,13 @@ def test_unproject_one_pixel_through_a_batch_of_cameras():
     np.testing.assert_allclose(xy, want, atol=1e-15)
     np.testing.assert_allclose(dxy_duv, [np.diag([1 / p[0], 1 / p[1]]) for p in prm], rtol=1e-12)
     assert dxy_dk.shape == (3, 2, 9)
+
+
+def test_project_takes_its_arrays_by_keyword_and_the_gradients_flag_only_by_keyword():
+    """project(p=…, params=…) is allowed, project(p, params, True) is not (get_gradients is keyword-only);
+    a distortion-free pixel is (fx·X/Z + cx, fy·Y/Z + cy) by hand."""
+    prm = np.array([800.0, 700.0, 300.0, 200.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    P = np.array([0.2, -0.1, 2.0])
+    np.testing.assert_allclose(project(p=P, params=prm), [380.0, 165.0], atol=1e-12)
+    with pytest.raises(TypeError):
+        project(P, prm, True)
