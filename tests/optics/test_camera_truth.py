@@ -66,10 +66,10 @@ def test_newton_stops_once_converged():
     finally:
         C.brown_distort = saved
     assert ok.all() and len(calls) <= 8
-    calls.clear()  # points beyond |x| = 1 as well
+    calls.clear()  # points beyond |x| = 1 or |y| = 1 as well
     C.brown_distort = counting
     try:
-        x2, y2, ok2 = C.brown_undistort(np.array([1.5, -2.0]), np.array([0.3, 1.0]), 0.01, 0.0, 0.0, 0.0, 0.0)
+        x2, y2, ok2 = C.brown_undistort(np.array([1.5, -2.0, 0.3]), np.array([0.3, 1.0, -1.6]), 0.01, 0.0, 0.0, 0.0, 0.0)
     finally:
         C.brown_distort = saved
     assert ok2.all() and len(calls) <= 8
@@ -149,6 +149,7 @@ def _fold_by_hand(k1, k2, k3):
     [[-0.3, -0.05, 0.0], [0.1, -0.2, 0.0], [0.0, -0.1, 0.0]],      # quadratic only (no cubic in the batch)
     [[-0.3, 0.0, 0.0], [-0.1, 0.0, 0.0], [0.2, 0.0, 0.0]],         # linear only
     [[-0.3, 0.0, 0.0], [-0.1, 0.02, 0.0]],                         # two sets
+    [[-0.3, 0.0, -0.01], [0.1, 0.0, -0.02]],                       # cubic with k2 = 0, k3 < 0
 ])
 def test_vectorised_fold_of_each_polynomial_degree(k):
     """The batched fold equals the first root found by Brent's method, for batches holding one degree of
@@ -226,11 +227,14 @@ def test_unproject_one_pixel_through_a_batch_of_cameras():
     assert dxy_dk.shape == (3, 2, 9)
 
 
-def test_project_takes_its_arrays_by_keyword_and_the_gradients_flag_only_by_keyword():
-    """project(p=…, params=…) is allowed, project(p, params, True) is not (get_gradients is keyword-only);
-    a distortion-free pixel is (fx·X/Z + cx, fy·Y/Z + cy) by hand."""
+def test_project_and_distort_take_their_arrays_by_keyword_and_the_gradients_flag_only_by_keyword():
+    """project(p=…, params=…) and distort(xy=…, dist=…) are allowed, project(p, params, True) is not
+    (get_gradients is keyword-only); a distortion-free pixel is (fx·X/Z + cx, fy·Y/Z + cy) by hand."""
     prm = np.array([800.0, 700.0, 300.0, 200.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     P = np.array([0.2, -0.1, 2.0])
     np.testing.assert_allclose(project(p=P, params=prm), [380.0, 165.0], atol=1e-12)
     with pytest.raises(TypeError):
         project(P, prm, True)
+    np.testing.assert_allclose(distort(xy=[0.1, -0.05], dist=np.zeros(5)), [0.1, -0.05], atol=1e-15)
+    with pytest.raises(TypeError):
+        distort([0.1, -0.05], np.zeros(5), True)
