@@ -227,8 +227,8 @@ def test_unproject_one_pixel_through_a_batch_of_cameras():
     assert dxy_dk.shape == (3, 2, 9)
 
 
-def test_project_and_distort_take_their_arrays_by_keyword_and_the_gradients_flag_only_by_keyword():
-    """project(p=…, params=…) and distort(xy=…, dist=…) are allowed, project(p, params, True) is not
+def test_project_distort_unproject_take_their_arrays_by_keyword_and_the_gradients_flag_only_by_keyword():
+    """project(p=…, params=…), distort(xy=…, dist=…), unproject(uv=…, params=…) are allowed, project(p, params, True) is not
     (get_gradients is keyword-only); a distortion-free pixel is (fx·X/Z + cx, fy·Y/Z + cy) by hand."""
     prm = np.array([800.0, 700.0, 300.0, 200.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     P = np.array([0.2, -0.1, 2.0])
@@ -238,3 +238,6 @@ def test_project_and_distort_take_their_arrays_by_keyword_and_the_gradients_flag
     np.testing.assert_allclose(distort(xy=[0.1, -0.05], dist=np.zeros(5)), [0.1, -0.05], atol=1e-15)
     with pytest.raises(TypeError):
         distort([0.1, -0.05], np.zeros(5), True)
+    np.testing.assert_allclose(unproject(uv=[380.0, 165.0], params=prm), [0.1, -0.05], atol=1e-15)
+    with pytest.raises(TypeError):
+        unproject([380.0, 165.0], prm, True)
