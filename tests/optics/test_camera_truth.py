@@ -110,6 +110,13 @@ def test_wrong_trailing_sizes_are_refused():
         project(np.ones((4, 3)), np.r_[FOLD, 0.0])
     with pytest.raises(ValueError, match=r"uv must have shape \(\.\.\., 2\)"):
         unproject(np.ones((4, 3)), FOLD)
+    # trailing sizes smaller than required too
+    with pytest.raises(ValueError, match=r"xy must have shape \(\.\.\., 2\)"):
+        distort(np.zeros((4, 1)), np.zeros(5))
+    with pytest.raises(ValueError, match=r"p must have shape \(\.\.\., 3\)"):
+        project(np.ones((4, 2)), FOLD)
+    with pytest.raises(ValueError, match=r"params must have shape \(\.\.\., 9\)"):
+        project(np.ones((4, 3)), FOLD[:8])
 
 
 def test_radial_fold_of_a_pure_k3_term():
