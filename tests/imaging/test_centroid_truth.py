@@ -231,3 +231,27 @@ def test_tcom_unknown_mode_is_refused_and_default_edge_margin_is_one_px():
         centroid_tcom(img, threshold=20.0, mode="weights")
     r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE)
     assert r.u == 0.0 and r.flags & Flag.EDGE
+
+
+def test_gauss_not_converged_flags_only_spots_it_fitted():
+    """One Gauss–Newton step from the 3×3 start does not reach tol_px: a valid spot is NOT_CONVERGED; a spot
+    passed in as INVALID is not fitted and does not get that flag; a fully converged spot has neither."""
+    img = _render(11, 11, 5.3, 4.8, 2.0e4, 20.0, 1.2)
+    imgs = np.stack([img, img])
+    b = centroid_gauss(imgs, sigma_px=1.2, noise=NOISE, max_iter=1, flags=np.array([0, int(Flag.INVALID)]))
+    f = b.flags.astype(int)
+    assert f[0] & Flag.NOT_CONVERGED and not f[0] & Flag.INVALID
+    assert f[1] & Flag.INVALID and not f[1] & Flag.NOT_CONVERGED and b.extra["n_iter"][1] == 0
+    r = _first(centroid_gauss(img[None], sigma_px=1.2, noise=NOISE))
+    assert not r.flags & (Flag.NOT_CONVERGED | Flag.INVALID)
+
+
+def test_gauss_second_spot_on_a_high_background_is_blended():
+    """Two noise-free Gaussians (scipy's CDF) 6 px apart on a 5000 DN background: the fainter one's peak
+    (~750 DN above the background) exceeds 5σ of the pixel noise and the dip between them 3σ and 10 % of its
+    height, so the ROI is BLENDED (heights taken above the background); the brighter spot alone is not."""
+    one = _render(15, 15, 5.2, 7.1, 3.0e4, 5000.0, 1.0)
+    two = one + _render(15, 15, 11.2, 7.1, 5.0e3, 0.0, 1.0)
+    b = centroid_gauss(np.stack([one, two]), sigma_px=1.0, noise=NOISE)
+    f = b.flags.astype(int)
+    assert not f[0] & Flag.BLENDED and f[1] & Flag.BLENDED
