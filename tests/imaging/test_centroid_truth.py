@@ -255,3 +255,19 @@ def test_gauss_second_spot_on_a_high_background_is_blended():
     b = centroid_gauss(np.stack([one, two]), sigma_px=1.0, noise=NOISE)
     f = b.flags.astype(int)
     assert not f[0] & Flag.BLENDED and f[1] & Flag.BLENDED
+
+
+def test_gauss_fit_sigma_from_a_start_three_times_too_wide():
+    """fit_sigma from σ = 3 px on a noise-free σ = 1 px spot (scipy's CDF) converges to the truth: the σ step's
+    trust region is ±50 % of the current σ."""
+    r = _first(centroid_gauss(_render(15, 15, 7.2, 6.7, 3.0e4, 20.0, 1.0)[None], sigma_px=3.0, fit_sigma=True, noise=NOISE))
+    assert not r.flags & (Flag.NOT_CONVERGED | Flag.INVALID)
+    assert abs(r.extra["sigma_px"] - 1.0) < 1e-6 and abs(r.u - 7.2) < 1e-6 and abs(r.v - 6.7) < 1e-6
+
+
+def test_gauss_edge_margin_is_two_sigma():
+    """EDGE where the centre lies within 2σ of the ROI's outer pixel boundary (u = −0.5): σ = 1, u = 1.0 (1.5 px
+    in) is EDGE, u = 1.7 (2.2 px in) is not; the brightest pixel is off the border in both."""
+    for u, edge in ((1.0, True), (1.7, False)):
+        r = _first(centroid_gauss(_render(15, 15, u, 7.0, 3.0e4, 20.0, 1.0)[None], sigma_px=1.0, noise=NOISE))
+        assert abs(r.u - u) < 1e-6 and bool(r.flags & Flag.EDGE) == edge, u
