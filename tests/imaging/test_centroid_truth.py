@@ -271,3 +271,14 @@ def test_gauss_edge_margin_is_two_sigma():
     for u, edge in ((1.0, True), (1.7, False)):
         r = _first(centroid_gauss(_render(15, 15, u, 7.0, 3.0e4, 20.0, 1.0)[None], sigma_px=1.0, noise=NOISE))
         assert abs(r.u - u) < 1e-6 and bool(r.flags & Flag.EDGE) == edge, u
+
+
+def test_tcom_default_edge_margin_is_not_two_px_and_its_options_are_keyword_only():
+    """A one-pixel spot on the second column (u = 1, 1.5 px inside the edge −0.5) is not EDGE with the default
+    1 px margin; centroid_tcom(img=…) is allowed, a positional threshold is not."""
+    img = np.full((7, 7), 10.0)
+    img[3, 1] = 500.0
+    r = centroid_tcom(img=img, threshold=20.0, background=10.0, noise=NOISE)
+    assert r.u == 1.0 and r.v == 3.0 and not r.flags & Flag.EDGE
+    with pytest.raises(TypeError):
+        centroid_tcom(img, 20.0)
