@@ -282,3 +282,9 @@ def test_tcom_default_edge_margin_is_not_two_px_and_its_options_are_keyword_only
     assert r.u == 1.0 and r.v == 3.0 and not r.flags & Flag.EDGE
     with pytest.raises(TypeError):
         centroid_tcom(img, 20.0)
+
+
+@pytest.mark.parametrize("s", [0.0, -1.0, np.inf])
+def test_gauss_refuses_a_sigma_that_is_not_finite_and_positive(s):
+    with pytest.raises(ValueError, match="sigma_px must be finite and > 0"):
+        centroid_gauss(_render(9, 9, 4.0, 4.0, 1.0e4, 10.0, 1.0)[None], sigma_px=s, noise=NOISE)
