@@ -212,8 +212,14 @@ def test_solve_spd_fallback_when_lapack_refuses(monkeypatch):
 def test_rois_narrower_than_3_px_are_invalid(shape):
     img = np.full((1,) + shape, 10.0)
     img[0, 1, 1] = 500.0
-    for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE)):
+    for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE),
+              centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE)):
         assert r.flags[0] & Flag.INVALID and np.isnan(r.u[0])
+
+
+def test_tcom_and_gauss_of_an_empty_batch():
+    for r in (centroid_tcom(np.zeros((0, 5, 5)), noise=NOISE), centroid_gauss(np.zeros((0, 5, 5)), sigma_px=1.0, noise=NOISE)):
+        assert r.u.shape == (0,) and r.flags.shape == (0,)
 
 
 def test_three_px_rois_are_fitted():
