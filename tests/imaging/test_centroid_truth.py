@@ -96,6 +96,11 @@ def test_gauss_reduced_chi2_by_hand():
     m = _render(h, w, r.u, r.v, r.flux, r.background, s)
     want = np.sum((img - m) ** 2 / _var(m)) / (h * w - 4)
     assert r.extra["chi2_red"] == pytest.approx(want, rel=1e-3)
+    # fitting σ too: five parameters
+    r = _first(centroid_gauss(img[None], sigma_px=s, fit_sigma=True, noise=NOISE))
+    m = _render(h, w, r.u, r.v, r.flux, r.background, r.extra["sigma_px"])
+    want = np.sum((img - m) ** 2 / _var(m)) / (h * w - 5)
+    assert r.extra["chi2_red"] == pytest.approx(want, rel=1e-3)
 
 
 def _tcom_by_hand(img, T, var):
@@ -294,3 +299,15 @@ def test_tcom_default_edge_margin_is_not_two_px_and_its_options_are_keyword_only
 def test_gauss_refuses_a_sigma_that_is_not_finite_and_positive(s):
     with pytest.raises(ValueError, match="sigma_px must be finite and > 0"):
         centroid_gauss(_render(9, 9, 4.0, 4.0, 1.0e4, 10.0, 1.0)[None], sigma_px=s, noise=NOISE)
+
+
+def test_gauss_faint_threshold_is_snr_five():
+    """SNR = F / σ_F with σ_F from the Fisher matrix (`_fisher_sd`): a noise-free spot at SNR ≈ 5.5 is not FAINT
+    with the default min_snr, FAINT with min_snr = 6."""
+    h, w, u, v, B, s = 11, 11, 5.3, 4.8, 40.0, 1.2
+    F = 325.0
+    snr = F / _fisher_sd(h, w, (u, v, F, B, s), False)[2]
+    assert 5.2 < snr < 5.8
+    img = _render(h, w, u, v, F, B, s)[None]
+    assert not _first(centroid_gauss(img, sigma_px=s, noise=NOISE)).flags & Flag.FAINT
+    assert _first(centroid_gauss(img, sigma_px=s, noise=NOISE, min_snr=6.0)).flags & Flag.FAINT
