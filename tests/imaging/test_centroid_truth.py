@@ -311,3 +311,11 @@ def test_gauss_faint_threshold_is_snr_five():
     img = _render(h, w, u, v, F, B, s)[None]
     assert not _first(centroid_gauss(img, sigma_px=s, noise=NOISE)).flags & Flag.FAINT
     assert _first(centroid_gauss(img, sigma_px=s, noise=NOISE, min_snr=6.0)).flags & Flag.FAINT
+
+
+def test_tcom_mask_mode_weights_are_above_the_background():
+    """mode="mask": the pixels above T weigh (I − B), by hand: (3·490 + 4·190) / 680 along u."""
+    img = np.full((7, 7), 10.0)
+    img[3, 3], img[3, 4] = 500.0, 200.0
+    r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE, mode="mask")
+    assert r.u == pytest.approx((3 * 490 + 4 * 190) / 680, abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)
