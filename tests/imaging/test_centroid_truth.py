@@ -311,11 +311,17 @@ def test_gauss_faint_threshold_is_snr_five():
     img = _render(h, w, u, v, F, B, s)[None]
     assert not _first(centroid_gauss(img, sigma_px=s, noise=NOISE)).flags & Flag.FAINT
     assert _first(centroid_gauss(img, sigma_px=s, noise=NOISE, min_snr=6.0)).flags & Flag.FAINT
+    F = 270.0  # SNR ≈ 4.6: FAINT with the default
+    assert 4.3 < F / _fisher_sd(h, w, (u, v, F, B, s), False)[2] < 4.8
+    assert _first(centroid_gauss(_render(h, w, u, v, F, B, s)[None], sigma_px=s, noise=NOISE)).flags & Flag.FAINT
 
 
 def test_tcom_mask_mode_weights_are_above_the_background():
-    """mode="mask": the pixels above T weigh (I − B), by hand: (3·490 + 4·190) / 680 along u."""
+    """mode="mask": the pixels above T weigh (I − B), by hand: (3·490 + 4·190) / 680 along u; a pixel at T is not above it."""
     img = np.full((7, 7), 10.0)
     img[3, 3], img[3, 4] = 500.0, 200.0
+    r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE, mode="mask")
+    assert r.u == pytest.approx((3 * 490 + 4 * 190) / 680, abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)
+    img[4, 3] = 20.0  # exactly at T: not above it, not counted
     r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE, mode="mask")
     assert r.u == pytest.approx((3 * 490 + 4 * 190) / 680, abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)
