@@ -96,6 +96,11 @@ def test_gauss_reduced_chi2_by_hand():
     m = _render(h, w, r.u, r.v, r.flux, r.background, s)
     want = np.sum((img - m) ** 2 / _var(m)) / (h * w - 4)
     assert r.extra["chi2_red"] == pytest.approx(want, rel=1e-3)
+    # fitting σ too: five parameters
+    r = _first(centroid_gauss(img[None], sigma_px=s, fit_sigma=True, noise=NOISE))
+    m = _render(h, w, r.u, r.v, r.flux, r.background, r.extra["sigma_px"])
+    want = np.sum((img - m) ** 2 / _var(m)) / (h * w - 5)
+    assert r.extra["chi2_red"] == pytest.approx(want, rel=1e-3)
 
 
 def _tcom_by_hand(img, T, var):
@@ -212,8 +217,14 @@ def test_solve_spd_fallback_when_lapack_refuses(monkeypatch):
 def test_rois_narrower_than_3_px_are_invalid(shape):
     img = np.full((1,) + shape, 10.0)
     img[0, 1, 1] = 500.0
-    for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE)):
+    for r in (centroid_gauss(img, sigma_px=1.0, noise=NOISE), centroid_tcom(img, noise=NOISE),
+              centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE)):
         assert r.flags[0] & Flag.INVALID and np.isnan(r.u[0])
+
+
+def test_tcom_and_gauss_of_an_empty_batch():
+    for r in (centroid_tcom(np.zeros((0, 5, 5)), noise=NOISE), centroid_gauss(np.zeros((0, 5, 5)), sigma_px=1.0, noise=NOISE)):
+        assert r.u.shape == (0,) and r.flags.shape == (0,)
 
 
 def test_three_px_rois_are_fitted():
@@ -231,3 +242,86 @@ def test_tcom_unknown_mode_is_refused_and_default_edge_margin_is_one_px():
         centroid_tcom(img, threshold=20.0, mode="weights")
     r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE)
     assert r.u == 0.0 and r.flags & Flag.EDGE
+
+
+def test_gauss_not_converged_flags_only_spots_it_fitted():
+    """One Gauss–Newton step from the 3×3 start does not reach tol_px: a valid spot is NOT_CONVERGED; a spot
+    passed in as INVALID is not fitted and does not get that flag; a fully converged spot has neither."""
+    img = _render(11, 11, 5.3, 4.8, 2.0e4, 20.0, 1.2)
+    imgs = np.stack([img, img])
+    b = centroid_gauss(imgs, sigma_px=1.2, noise=NOISE, max_iter=1, flags=np.array([0, int(Flag.INVALID)]))
+    f = b.flags.astype(int)
+    assert f[0] & Flag.NOT_CONVERGED and not f[0] & Flag.INVALID
+    assert f[1] & Flag.INVALID and not f[1] & Flag.NOT_CONVERGED and b.extra["n_iter"][1] == 0
+    r = _first(centroid_gauss(img[None], sigma_px=1.2, noise=NOISE))
+    assert not r.flags & (Flag.NOT_CONVERGED | Flag.INVALID)
+
+
+def test_gauss_second_spot_on_a_high_background_is_blended():
+    """Two noise-free Gaussians (scipy's CDF) 6 px apart on a 5000 DN background: the fainter one's peak
+    (~750 DN above the background) exceeds 5σ of the pixel noise and the dip between them 3σ and 10 % of its
+    height, so the ROI is BLENDED (heights taken above the background); the brighter spot alone is not."""
+    one = _render(15, 15, 5.2, 7.1, 3.0e4, 5000.0, 1.0)
+    two = one + _render(15, 15, 11.2, 7.1, 5.0e3, 0.0, 1.0)
+    b = centroid_gauss(np.stack([one, two]), sigma_px=1.0, noise=NOISE)
+    f = b.flags.astype(int)
+    assert not f[0] & Flag.BLENDED and f[1] & Flag.BLENDED
+
+
+def test_gauss_fit_sigma_from_a_start_three_times_too_wide():
+    """fit_sigma from σ = 3 px on a noise-free σ = 1 px spot (scipy's CDF) converges to the truth: the σ step's
+    trust region is ±50 % of the current σ."""
+    r = _first(centroid_gauss(_render(15, 15, 7.2, 6.7, 3.0e4, 20.0, 1.0)[None], sigma_px=3.0, fit_sigma=True, noise=NOISE))
+    assert not r.flags & (Flag.NOT_CONVERGED | Flag.INVALID)
+    assert abs(r.extra["sigma_px"] - 1.0) < 1e-6 and abs(r.u - 7.2) < 1e-6 and abs(r.v - 6.7) < 1e-6
+
+
+def test_gauss_edge_margin_is_two_sigma():
+    """EDGE where the centre lies within 2σ of the ROI's outer pixel boundary (u = −0.5): σ = 1, u = 1.0 (1.5 px
+    in) is EDGE, u = 1.7 (2.2 px in) is not; the brightest pixel is off the border in both."""
+    for u, edge in ((1.0, True), (1.7, False)):
+        r = _first(centroid_gauss(_render(15, 15, u, 7.0, 3.0e4, 20.0, 1.0)[None], sigma_px=1.0, noise=NOISE))
+        assert abs(r.u - u) < 1e-6 and bool(r.flags & Flag.EDGE) == edge, u
+
+
+def test_tcom_default_edge_margin_is_not_two_px_and_its_options_are_keyword_only():
+    """A one-pixel spot on the second column (u = 1, 1.5 px inside the edge −0.5) is not EDGE with the default
+    1 px margin; centroid_tcom(img=…) is allowed, a positional threshold is not."""
+    img = np.full((7, 7), 10.0)
+    img[3, 1] = 500.0
+    r = centroid_tcom(img=img, threshold=20.0, background=10.0, noise=NOISE)
+    assert r.u == 1.0 and r.v == 3.0 and not r.flags & Flag.EDGE
+    with pytest.raises(TypeError):
+        centroid_tcom(img, 20.0)
+
+
+@pytest.mark.parametrize("s", [0.0, -1.0, np.inf])
+def test_gauss_refuses_a_sigma_that_is_not_finite_and_positive(s):
+    with pytest.raises(ValueError, match="sigma_px must be finite and > 0"):
+        centroid_gauss(_render(9, 9, 4.0, 4.0, 1.0e4, 10.0, 1.0)[None], sigma_px=s, noise=NOISE)
+
+
+def test_gauss_faint_threshold_is_snr_five():
+    """SNR = F / σ_F with σ_F from the Fisher matrix (`_fisher_sd`): a noise-free spot at SNR ≈ 5.5 is not FAINT
+    with the default min_snr, FAINT with min_snr = 6."""
+    h, w, u, v, B, s = 11, 11, 5.3, 4.8, 40.0, 1.2
+    F = 325.0
+    snr = F / _fisher_sd(h, w, (u, v, F, B, s), False)[2]
+    assert 5.2 < snr < 5.8
+    img = _render(h, w, u, v, F, B, s)[None]
+    assert not _first(centroid_gauss(img, sigma_px=s, noise=NOISE)).flags & Flag.FAINT
+    assert _first(centroid_gauss(img, sigma_px=s, noise=NOISE, min_snr=6.0)).flags & Flag.FAINT
+    F = 270.0  # SNR ≈ 4.6: FAINT with the default
+    assert 4.3 < F / _fisher_sd(h, w, (u, v, F, B, s), False)[2] < 4.8
+    assert _first(centroid_gauss(_render(h, w, u, v, F, B, s)[None], sigma_px=s, noise=NOISE)).flags & Flag.FAINT
+
+
+def test_tcom_mask_mode_weights_are_above_the_background():
+    """mode="mask": the pixels above T weigh (I − B), by hand: (3·490 + 4·190) / 680 along u; a pixel at T is not above it."""
+    img = np.full((7, 7), 10.0)
+    img[3, 3], img[3, 4] = 500.0, 200.0
+    r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE, mode="mask")
+    assert r.u == pytest.approx((3 * 490 + 4 * 190) / 680, abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)
+    img[4, 3] = 20.0  # exactly at T: not above it, not counted
+    r = centroid_tcom(img, threshold=20.0, background=10.0, noise=NOISE, mode="mask")
+    assert r.u == pytest.approx((3 * 490 + 4 * 190) / 680, abs=1e-12) and r.v == pytest.approx(3.0, abs=1e-12)

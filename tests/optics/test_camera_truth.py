@@ -66,10 +66,10 @@ def test_newton_stops_once_converged():
     finally:
         C.brown_distort = saved
     assert ok.all() and len(calls) <= 8
-    calls.clear()  # points beyond |x| = 1 as well
+    calls.clear()  # points beyond |x| = 1 or |y| = 1 as well
     C.brown_distort = counting
     try:
-        x2, y2, ok2 = C.brown_undistort(np.array([1.5, -2.0]), np.array([0.3, 1.0]), 0.01, 0.0, 0.0, 0.0, 0.0)
+        x2, y2, ok2 = C.brown_undistort(np.array([1.5, -2.0, 0.3]), np.array([0.3, 1.0, -1.6]), 0.01, 0.0, 0.0, 0.0, 0.0)
     finally:
         C.brown_distort = saved
     assert ok2.all() and len(calls) <= 8
@@ -110,6 +110,13 @@ def test_wrong_trailing_sizes_are_refused():
         project(np.ones((4, 3)), np.r_[FOLD, 0.0])
     with pytest.raises(ValueError, match=r"uv must have shape \(\.\.\., 2\)"):
         unproject(np.ones((4, 3)), FOLD)
+    # trailing sizes smaller than required too
+    with pytest.raises(ValueError, match=r"xy must have shape \(\.\.\., 2\)"):
+        distort(np.zeros((4, 1)), np.zeros(5))
+    with pytest.raises(ValueError, match=r"p must have shape \(\.\.\., 3\)"):
+        project(np.ones((4, 2)), FOLD)
+    with pytest.raises(ValueError, match=r"params must have shape \(\.\.\., 9\)"):
+        project(np.ones((4, 3)), FOLD[:8])
 
 
 def test_radial_fold_of_a_pure_k3_term():
@@ -149,6 +156,7 @@ def _fold_by_hand(k1, k2, k3):
     [[-0.3, -0.05, 0.0], [0.1, -0.2, 0.0], [0.0, -0.1, 0.0]],      # quadratic only (no cubic in the batch)
     [[-0.3, 0.0, 0.0], [-0.1, 0.0, 0.0], [0.2, 0.0, 0.0]],         # linear only
     [[-0.3, 0.0, 0.0], [-0.1, 0.02, 0.0]],                         # two sets
+    [[-0.3, 0.0, -0.01], [0.1, 0.0, -0.02]],                       # cubic with k2 = 0, k3 < 0
 ])
 def test_vectorised_fold_of_each_polynomial_degree(k):
     """The batched fold equals the first root found by Brent's method, for batches holding one degree of
@@ -224,3 +232,19 @@ def test_unproject_one_pixel_through_a_batch_of_cameras():
     np.testing.assert_allclose(xy, want, atol=1e-15)
     np.testing.assert_allclose(dxy_duv, [np.diag([1 / p[0], 1 / p[1]]) for p in prm], rtol=1e-12)
     assert dxy_dk.shape == (3, 2, 9)
+
+
+def test_project_distort_unproject_take_their_arrays_by_keyword_and_the_gradients_flag_only_by_keyword():
+    """project(p=…, params=…), distort(xy=…, dist=…), unproject(uv=…, params=…) are allowed, project(p, params, True) is not
+    (get_gradients is keyword-only); a distortion-free pixel is (fx·X/Z + cx, fy·Y/Z + cy) by hand."""
+    prm = np.array([800.0, 700.0, 300.0, 200.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    P = np.array([0.2, -0.1, 2.0])
+    np.testing.assert_allclose(project(p=P, params=prm), [380.0, 165.0], atol=1e-12)
+    with pytest.raises(TypeError):
+        project(P, prm, True)
+    np.testing.assert_allclose(distort(xy=[0.1, -0.05], dist=np.zeros(5)), [0.1, -0.05], atol=1e-15)
+    with pytest.raises(TypeError):
+        distort([0.1, -0.05], np.zeros(5), True)
+    np.testing.assert_allclose(unproject(uv=[380.0, 165.0], params=prm), [0.1, -0.05], atol=1e-15)
+    with pytest.raises(TypeError):
+        unproject([380.0, 165.0], prm, True)
