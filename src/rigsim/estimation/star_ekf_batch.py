@@ -46,40 +46,13 @@ def _normalized(uv, thetas, p12):
     return xy, dxy_dp @ _THETA_TO_PARAMS, dxy_duv
 
 
-def _dot3(a, b):
-    """Σ_i a[..., i] b[..., i] over a last axis of 3, written out (einsum is slow on these shapes)."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
-def _dwT(dw, v):
-    """(∂w/∂x)ᵀ v: dw (..., 3, 2), v (..., 3) → (..., 2)."""
-    return dw[..., 0, :] * v[..., 0, None] + dw[..., 1, :] * v[..., 1, None] + dw[..., 2, :] * v[..., 2, None]
-
-
-def _model_terms(model: str, x: np.ndarray, pairs, trip):
-    """Batched :func:`rigsim.estimation.star_calibration._model_terms` with per-filter star sets (pairs
-    (B, M, 2), triplets (B, M, 3)): h (B, M), indices (B, M, 3), ∂h/∂x (B, M, 3, 2)."""
+def _model_terms(x: np.ndarray, trip):
+    """The improved ADS model's terms with per-filter star triplets (B, M, 3): h (B, M), indices (B, M, 3),
+    ∂h/∂x (B, M, 3, 2). (AD and ADS go through :func:`_pair_terms`.)"""
     p = np.concatenate([x, np.ones(x.shape[:-1] + (1,))], -1)
     n = np.linalg.norm(p, axis=-1)
-    w = p / n[..., None]
-    dw = (np.eye(3)[None, None, :, :2] - w[..., :, None] * w[..., None, :2]) / n[..., None, None]
     bb = np.arange(x.shape[0])[:, None]
-    if model == "ad":
-        ia, ib = pairs[..., 0], pairs[..., 1]
-        wa, wb = w[bb, ia], w[bb, ib]
-        h = _dot3(wa, wb)
-        ca = _dwT(dw[bb, ia], wb)
-        cb = _dwT(dw[bb, ib], wa)
-        return h, np.stack([ia, ib, ia], -1), np.stack([ca, cb, np.zeros_like(ca)], 2)
     i, j, k = trip[..., 0], trip[..., 1], trip[..., 2]
-    if model == "ads":
-        wi, wj, wk = w[bb, i], w[bb, j], w[bb, k]
-        h = _dot3(wi, wj) - _dot3(wj, wk)
-        ci = _dwT(dw[bb, i], wj)
-        cj = _dwT(dw[bb, j], wi - wk)
-        ck = -_dwT(dw[bb, k], wj)
-        return h, trip, np.stack([ci, cj, ck], 2)
-    # ads_improved
     xi, xj, xk = x[bb, i], x[bb, j], x[bb, k]
     ni, nk = n[bb, i], n[bb, k]
     den = ni * nk
@@ -180,7 +153,7 @@ def _frame_update(fos, thetas, est, P, model, weighting, p12, equations, cache):
     x, dx_dth, dx_duv = _normalized(uv, thetas, p12)
     dxe = dx_dth[..., est]
     if model == "ads_improved":
-        h, idx, coef = _model_terms(model, x, pairs, trip)
+        h, idx, coef = _model_terms(x, trip)
         H = sum(coef[:, :, s, c, None] * dxe[bb, idx[..., s], c] for s in range(3) for c in range(2))
         du = dx_duv[bb[..., None], idx]                                        # (B, M, 3, 2, 2)
         gs = coef[..., 0, None] * du[..., 0, :] + coef[..., 1, None] * du[..., 1, :]
