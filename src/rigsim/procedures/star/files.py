@@ -123,10 +123,16 @@ def calibrate_star_files(paths: Sequence, log_path, nominal: NominalStarRig, *, 
         pipe.set_sequence_pattern(obs)
     elif nominal.calibration.fixed_pattern == "sequence":
         pipe.fixed_pattern_note = "none: no commanded attitudes to check that the stars move"
-    for o in obs:
+    check = identification == "commanded" and log_path is not None
+    for k, o in enumerate(obs):
         pipe.add(o)
+        if check and k + 1 == CONVENTION_SAMPLE < len(obs) and not any(i.ok for i in pipe.ident):
+            # none of the first frames identifies from the log: a log in another convention is named now, not after
+            # every frame's stars are extracted
+            check_attitude_convention(obs[:k + 1], names[:k + 1], log_path, nominal, sky, [False] * (k + 1),
+                                      first=True)
     ok = [i.ok for i in pipe.ident]
-    if identification == "commanded" and log_path is not None and sum(ok) < 0.5 * len(ok):
+    if check and sum(ok) < 0.5 * len(ok):
         check_attitude_convention(obs, names, log_path, nominal, sky, ok)  # a log in another convention is named
     if not any(ok):
         why = "; ".join(f"{n}: {i.reason}" for n, i in zip(names, pipe.ident))
@@ -151,14 +157,15 @@ def _convention_attitudes(R_log: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky: SkyCatalogue,
-                              identified: Sequence[bool]) -> None:
+                              identified: Sequence[bool], *, first: bool = False) -> None:
     """When most frames do not identify from the log (``identified``: each frame's identification with the log's
     attitude as the prior): up to :data:`CONVENTION_SAMPLE` of the frames that did not (first, middle, last) are
     identified lost in space (no prior), and their attitudes from the stars are compared with the log's quaternion
     read under each convention it might have been written in (scalar first or last, R(cam←ICRS) or its inverse). A
     log that matches under another convention is refused with one line naming it; a log that matches under none is
     refused as not describing these frames. When the stars agree with the log as written, or no frame identifies
-    lost in space either, nothing can be said here."""
+    lost in space either, nothing can be said here. ``first``: ``obs`` are the first frames of a longer sequence (the
+    check runs before the other frames are read; the message says so)."""
     from rigsim.frames import rotation_angle
 
     failing = [i for i, ok in enumerate(identified) if not ok]
@@ -182,7 +189,8 @@ def check_attitude_convention(obs, names, log_path, nominal: NominalStarRig, sky
     if best == "as written" and err[best] <= tol:
         return  # the log is right; the frames fail to identify for another reason
     if best != "as written" and err[best] <= tol and all(min(e, key=e.get) == best for _, e in seen):
-        raise InputError(f"{log_path}: {sum(identified)} of {len(identified)} frames identify with its attitudes as "
+        counted = f"the first {len(identified)}" if first else f"{len(identified)}"
+        raise InputError(f"{log_path}: {sum(identified)} of {counted} frames identify with its attitudes as "
                          "written (R(cam←ICRS), scalar first); "
                          f"read {best}, they agree with the stars of {len(seen)} frame(s) identified without a prior "
                          f"({name}: {err[best]:.3g}° instead of {err['as written']:.3g}°): {CONVENTIONS[best]}")
