@@ -194,6 +194,13 @@ def _children(pid: int) -> set[int]:
     return out
 
 
+def _cmdline(pid: int) -> str:
+    try:
+        return (Path("/proc") / str(pid) / "cmdline").read_text(errors="replace")
+    except OSError:
+        return ""
+
+
 def _alive(pid: int) -> bool:
     try:
         return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
@@ -214,15 +221,17 @@ def test_workers_die_with_a_killed_main_process(tmp_path):
         if time.time() - t0 > 120:
             break
         time.sleep(0.05)
-    workers = _children(main.pid) - {main.pid}
-    workers = {w for w in workers if "spawn_main" in (Path("/proc") / str(w) / "cmdline").read_text(errors="replace")}
+    # spawned workers are the run's children; forked by a forkserver (rigsim.render.workers), the server's
+    servers = {c for c in _children(main.pid) if "forkserver" in _cmdline(c)}
+    workers = {w for w in _children(main.pid) if "spawn_main" in _cmdline(w)}
+    workers |= {w for s in servers for w in _children(s)}
     assert len(workers) == 2, workers
     os.kill(main.pid, signal.SIGKILL)  # the main process only, not its group
     main.wait()
     t1 = time.time()
-    while any(_alive(w) for w in workers) and time.time() - t1 < 10:
+    while any(_alive(w) for w in workers | servers) and time.time() - t1 < 10:
         time.sleep(0.05)
-    assert not any(_alive(w) for w in workers), "workers outlived their main process"
+    assert not any(_alive(w) for w in workers | servers), "workers outlived their main process"
     n = len(list((d / "frames").glob("*.json")))
     time.sleep(1.0)
     assert len(list((d / "frames").glob("*.json"))) == n  # nothing written after the kill

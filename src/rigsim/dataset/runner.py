@@ -274,7 +274,10 @@ def _die_with_parent(parent: int | None = None) -> None:
 
     # the parent's pid comes from the parent: a worker that starts after its parent died (a slow
     # start on a busy machine) would otherwise take init's pid for its parent's and live on
+    # A forkserver's child (rigsim.render.workers) has the server for its parent: the server exits when the run
+    # that started it dies, and the parent-death signal follows; the watchdog watches the run itself as well.
     parent = os.getppid() if parent is None else int(parent)
+    server = os.getppid()
     try:
         import ctypes
 
@@ -282,15 +285,33 @@ def _die_with_parent(parent: int | None = None) -> None:
     except (OSError, AttributeError):
         pass
 
+    def orphaned() -> bool:
+        return os.getppid() != server or (server != parent and not _alive(parent))
+
     def watch():
         while True:
-            if os.getppid() != parent:
+            if orphaned():
                 os._exit(1)
             time.sleep(0.5)
 
-    if os.getppid() != parent:
+    if orphaned():
         os._exit(1)
     threading.Thread(target=watch, name="rigsim-parent-watch", daemon=True).start()
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, killed but not yet reaped, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True
+    return stat.rpartition(")")[2].split()[0] != "Z"
 
 
 def _init_worker(threads: int | None, parent: int | None = None) -> None:
@@ -309,18 +330,19 @@ def _set_threads(threads: int | None) -> None:
 
 
 def _run_pool(workers, kind, rig_text, rig_source, opts, root, fmt, chunks, retries, bar) -> int:
-    import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
+
+    from rigsim.render.workers import process_pool
 
     threads = 1 if workers > 1 else None
     attempts = {k: 0 for k in range(len(chunks))}
     pending = set(range(len(chunks)))
     n_retries = 0
     while pending:
-        ctx = mp.get_context("spawn")  # Mitsuba/Dr.Jit state must not be forked
-        with ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx, initializer=_init_worker,
-                                 initargs=(threads, os.getpid())) as ex:
+        # Mitsuba/Dr.Jit state must not be forked: the workers start from a forkserver that never loads them
+        with process_pool(min(workers, len(pending)), "rigsim.dataset.runner:_init_worker",
+                          (threads, os.getpid())) as ex:
             futs = {ex.submit(render_chunk, kind, rig_text, rig_source, opts, str(root), fmt, chunks[k]): k
                     for k in sorted(pending)}
             broken = False

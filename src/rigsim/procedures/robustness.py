@@ -123,14 +123,12 @@ def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None, store
         for c, s in jobs:
             done(c, s, trial(c, s))
         return out
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    from rigsim.dataset.runner import _die_with_parent
+    from rigsim.render.workers import process_pool
 
     # workers die with this process (a killed run must not leave them behind)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_die_with_parent,
-                             initargs=(os.getpid(),)) as ex:
+    with process_pool(workers, "rigsim.dataset.runner:_die_with_parent", (os.getpid(),)) as ex:
         futs = {ex.submit(trial, c, s): (c, s) for c, s in jobs}
         for f in as_completed(futs):
             done(*futs[f], f.result())

@@ -54,7 +54,8 @@ def default_workers() -> int:
 def _start_method() -> str:
     """fork (cheap; a caller's script needs no ``if __name__ == "__main__"`` guard) unless this process
     runs other threads — Mitsuba's, after a rendered campaign — that a fork would copy half-alive: then
-    spawn (a fresh interpreter; ``rigsim`` and ``python -m rigsim`` are guarded)."""
+    "spawn", which here means rigsim's pools' start (:mod:`rigsim.render.workers`: a forkserver that never loads
+    Mitsuba, or spawn; ``rigsim`` and ``python -m rigsim`` are guarded)."""
     if "fork" not in multiprocessing.get_all_start_methods():
         return "spawn"
     busy = threading.active_count() > 1 or any(m in sys.modules for m in ("drjit", "mitsuba"))
@@ -71,8 +72,13 @@ class EstimatePool:
         self.rig = rig
         self._ex = None
         if workers > 0:
-            self._ex = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(_start_method()),
-                                           initializer=_init_worker, initargs=(rig,))
+            if _start_method() == "fork":
+                self._ex = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
+                                               initializer=_init_worker, initargs=(rig,))
+            else:  # rigsim's pools' start (a forkserver that never loads Mitsuba, or spawn)
+                from rigsim.render.workers import process_pool
+
+                self._ex = process_pool(workers, f"{__name__}:_init_worker", (rig,))
 
     def submit(self, real: Realization, null_readings, axis_order: str, sweep_readings=None, sweep_uv=None) -> Future:
         args = (real, list(null_readings), axis_order, sweep_readings, sweep_uv)

@@ -91,11 +91,9 @@ class PencilChunks:
         if self.workers > 1:
             if init is None:
                 raise ValueError("workers > 1 needs the renderer's init arguments")
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
+            from rigsim.render.workers import process_pool
 
-            self._pool = ProcessPoolExecutor(self.workers - 1, mp_context=mp.get_context("spawn"),
-                                             initializer=_worker_init, initargs=init)
+            self._pool = process_pool(self.workers - 1, f"{__name__}:_worker_init", init)
             weakref.finalize(self, _shutdown, self._pool)
             atexit.register(_shutdown, self._pool)
             self._pool.submit(_worker_warm)  # start the worker and compile its kernels now
