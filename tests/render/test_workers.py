@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from rigsim.errors import InputError
 from rigsim.render.workers import START_METHOD_ENV, pool_context, process_pool
 
 
@@ -33,11 +34,17 @@ def test_a_worker_runs_in_the_callers_environment_of_the_moment(monkeypatch):
         assert ex.submit(os.getenv, "HOME").result(timeout=120) is None
 
 
-def test_spawn_on_request_and_a_bad_method_named(monkeypatch):
+def test_spawn_on_request_and_a_bad_method_named(monkeypatch, tmp_path, capsys):
     monkeypatch.setenv(START_METHOD_ENV, "spawn")
     assert pool_context().get_start_method() == "spawn"
     with process_pool(1) as ex:
         assert ex.submit(os.getppid).result(timeout=120) == os.getpid()
     monkeypatch.setenv(START_METHOD_ENV, "fork")
-    with pytest.raises(ValueError, match=r"RIGSIM_START_METHOD='fork': allowed forkserver, spawn"):
+    with pytest.raises(InputError, match=r"environment variable RIGSIM_START_METHOD='fork': allowed forkserver, spawn"):
         pool_context()
+    from rigsim.cli import main
+
+    assert main(["dataset", "generate", "star_sensor", "--out", str(tmp_path / "ds"), "--frames", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "RIGSIM_START_METHOD='fork'" in err, err
+    assert not (tmp_path / "ds").exists()

@@ -143,7 +143,11 @@ def generate(rig: str, out, *, frames: int | None = None, sweep: str | None = No
              renderer: str | None = None) -> GenerateResult:
     from rigsim.rig.load import parse_rig_text, read_rig_text, resolve_rig_path
 
+    from rigsim.render.workers import pool_context
+
     t0 = time.perf_counter()
+    if scheduler is None:
+        pool_context()  # a bad RIGSIM_START_METHOD is named before anything is written
     rig_path = resolve_rig_path(rig)
     rig_text = read_rig_text(rig_path)
     rig_table = parse_rig_text(rig_text, rig_path)

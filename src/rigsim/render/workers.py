@@ -12,6 +12,8 @@ import multiprocessing as mp
 import os
 from concurrent.futures import ProcessPoolExecutor
 
+from rigsim.errors import InputError
+
 START_METHOD_ENV = "RIGSIM_START_METHOD"
 START_METHODS = ("forkserver", "spawn")
 
@@ -22,8 +24,9 @@ def pool_context():
     """The multiprocessing context of rigsim's pools (module docstring)."""
     method = os.environ.get(START_METHOD_ENV) or ("forkserver" if "forkserver" in mp.get_all_start_methods()
                                                   else "spawn")
-    if method not in START_METHODS or method not in mp.get_all_start_methods():
-        raise ValueError(f"{START_METHOD_ENV}={method!r}: allowed {', '.join(m for m in START_METHODS if m in mp.get_all_start_methods())}")
+    allowed = [m for m in START_METHODS if m in mp.get_all_start_methods()]
+    if method not in allowed:
+        raise InputError(f"environment variable {START_METHOD_ENV}={method!r}: allowed {', '.join(allowed)}")
     ctx = mp.get_context(method)
     if method == "forkserver":
         ctx.set_forkserver_preload(["rigsim._worker"])
