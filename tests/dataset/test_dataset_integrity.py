@@ -239,17 +239,19 @@ def test_workers_die_with_a_killed_main_process(tmp_path):
 
 COARSE_AIMING = {  # the aiming camera with 1/16 of the pixels over the same field (as the file chain's)
     r"resolution_px = \[1600, 1200\]": "resolution_px = [400, 300]", r"pixel_pitch_um = 15\.0": "pixel_pitch_um = 60.0"}
+SLOW = pytest.mark.slow  # the kinds rendered without a light tracer's float atomics: in the slow stage
 KINDS = [  # (rig, generator, renderer, spp): every generator, each renderer of star-field
-    ("sun_sensor_2axis_diaphragm", "sun-sensor", None, 16),
+    pytest.param("sun_sensor_2axis_diaphragm", "sun-sensor", None, 16, marks=SLOW),
     ("sun_sensor_2axis_diaphragm", "aiming-camera", None, 1),  # the coarse camera (COARSE_AIMING): the same light tracer
     ("sun_sensor_3axis_autocollimator", "autocollimator", None, 4),
-    ("star_sensor", "star-field", "analytic", None),
-    ("star_sensor", "star-field", "mitsuba", 16),
+    pytest.param("star_sensor", "star-field", "analytic", None, marks=SLOW),
+    pytest.param("star_sensor", "star-field", "mitsuba", 16, marks=SLOW),
     ("dual_line_array_prism", "boresight-roi", None, 64),
 ]
 
 
-@pytest.mark.parametrize("rig,kind,renderer,spp", KINDS, ids=[f"{k}-{r or ''}" for _, k, r, _ in KINDS])
+@pytest.mark.parametrize("rig,kind,renderer,spp", KINDS,
+                         ids=[f"{k}-{r or ''}" for _, k, r, _ in (getattr(x, "values", x) for x in KINDS)])
 def test_the_same_seed_gives_byte_identical_frames_for_one_or_two_workers(tmp_path, rig, kind, renderer, spp):
     """Light tracers splat with float atomics whose order depends on the thread count; a single worker
     renders with every thread, two workers with one each: the frames must not differ by a single DN. The

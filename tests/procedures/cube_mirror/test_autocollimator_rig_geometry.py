@@ -40,7 +40,9 @@ CHANGES = {
 
 
 @pytest.mark.render
-@pytest.mark.parametrize("change", list(CHANGES))
+# twice the focal length in the slow stage: the default stage renders it through `rigsim render autocollimator` below
+@pytest.mark.parametrize("change", [pytest.param(c, marks=pytest.mark.slow) if c == "focal length x2" else c
+                                    for c in CHANGES])
 def test_rendered_reading_near_null_on_a_modified_autocollimator(tmp_path, change):
     from rigsim.procedures.cube_mirror.autocollimation import FaceReadingMeasurer
     from rigsim.procedures.cube_mirror.null_files import autocollimator_roi_px
