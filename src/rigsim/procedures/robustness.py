@@ -97,7 +97,7 @@ class BoundTrial:
 
 def run_configs(trial, configs, seeds, *, workers: int = 1, progress=None, store=None) -> dict:
     """``trial(config, seed) -> dict`` for every config and seed (same seeds for every config), in
-    ``workers`` processes (spawned; results do not depend on the worker count). With a
+    ``workers`` processes (:mod:`rigsim.render.workers`; results do not depend on the worker count). With a
     :class:`~rigsim.procedures.trial_store.TrialStore`, the trials it holds are taken from it and
     every new one is written to it as soon as it finishes."""
     out: dict = {}

@@ -60,7 +60,7 @@ class ConcentricityRenderer:
     ``grid_mm`` is the screen-plane resampling step of the convolution (default 0.01 mm,
     finer than the 15 µm object pixel). ``workers`` processes (this one included) render the
     pencil's fixed sample chunks (:mod:`rigsim.render.cube_mirror.pencil_chunks`): the frames are
-    bit-identical for any ``workers``; ``workers > 1`` spawns ``workers - 1`` processes, stopped by
+    bit-identical for any ``workers``; ``workers > 1`` starts ``workers - 1`` processes, stopped by
     :meth:`close`, with the renderer or at exit.
 
     ``spp`` is the pencil's light paths per camera pixel. They are traced onto a film binned

@@ -7,8 +7,8 @@ the other (docs/campaign.md). The pencil's ``spp`` samples
 are therefore split into a fixed number of chunks, each rendered single-threaded with its own seed
 (:func:`chunk_seeds`); the chunks are averaged in chunk order. Which process renders a chunk does
 not matter (each is a pure function of the scene, the pose and its seed), so the image depends on
-the seed only, never on ``workers``. With ``workers = 2`` the second chunk is rendered by a spawned
-process holding its own copy of the scene while this process renders the first.
+the seed only, never on ``workers``. With ``workers = 2`` the second chunk is rendered by a worker
+process (:mod:`rigsim.render.workers`) holding its own copy of the scene while this process renders the first.
 """
 
 from __future__ import annotations
