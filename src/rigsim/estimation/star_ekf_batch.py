@@ -228,9 +228,7 @@ def run_ekf_batch(frames, theta0s, *, model: str = "ad", estimate=("u0", "v0"), 
                 for b, r in zip(sel, run_ekf_batch([frames[b] for b in sel], thetas[sel], **kw)):
                     out[b] = r
             return out
-        steps = [list(fos) for fos in zip(*frames)]
-        if any(len(seq) != len(steps) for seq in frames):
-            raise ValueError("the filters' frame sequences differ in length")
+        steps = [list(fos) for fos in zip(*frames)]   # one pattern: the sequences have its length
     else:
         steps = list(frames)
     return _run(steps, thetas, **kw)
