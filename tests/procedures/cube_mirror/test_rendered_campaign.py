@@ -116,7 +116,8 @@ def test_cli_rendered_bad_arguments(args, msg, capsys):
     assert msg in capsys.readouterr().err
 
 
-@pytest.mark.render
+@pytest.mark.slow  # the default stage runs seed 001's rendered campaign through the commands (test_file_chain.py) and
+@pytest.mark.render  # its noise-free step A and face search to 0.05″ (test_autocollimation.py)
 def test_noise_free_seed_001_campaign_on_rendered_frames():
     """Seed 001 end to end (step A on the plane mirror, a coarse sweep, step C on two faces):
     ideal rig, noise-free detector, 0.01″ threshold → R(cube←rot) within 0.05″ (the face reads 0.09 % high,
