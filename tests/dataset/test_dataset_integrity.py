@@ -239,14 +239,16 @@ def test_workers_die_with_a_killed_main_process(tmp_path):
 
 COARSE_AIMING = {  # the aiming camera with 1/16 of the pixels over the same field (as the file chain's)
     r"resolution_px = \[1600, 1200\]": "resolution_px = [400, 300]", r"pixel_pitch_um = 15\.0": "pixel_pitch_um = 60.0"}
-SLOW = pytest.mark.slow  # the kinds rendered without a light tracer's float atomics: in the slow stage
+SLOW = pytest.mark.slow  # in the slow stage: the kinds rendered without a light tracer's float atomics, and one more
 KINDS = [  # (rig, generator, renderer, spp): every generator, each renderer of star-field
     pytest.param("sun_sensor_2axis_diaphragm", "sun-sensor", None, 16, marks=SLOW),
     ("sun_sensor_2axis_diaphragm", "aiming-camera", None, 1),  # the coarse camera (COARSE_AIMING): the same light tracer
     ("sun_sensor_3axis_autocollimator", "autocollimator", None, 4),
     pytest.param("star_sensor", "star-field", "analytic", None, marks=SLOW),
     pytest.param("star_sensor", "star-field", "mitsuba", 16, marks=SLOW),
-    ("dual_line_array_prism", "boresight-roi", None, 64),
+    # the boresight ROIs' light tracer: the same LoopRenderer frames are compared bit for bit between one and two
+    # processes by default in tests/procedures/boresight/test_frame_pool.py
+    pytest.param("dual_line_array_prism", "boresight-roi", None, 64, marks=SLOW),
 ]
 
 
