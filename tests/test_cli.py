@@ -81,8 +81,9 @@ def test_run_ideal_analytic_prints_truth_vs_recovered(tmp_path):
 
 def test_run_with_budget_is_reproducible(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
-    for p in (a, b):
-        r = run("run", "cube-mirror", "--analytic", "--trials", "20", "--seed", "5", "--quiet", "--json-out", str(p))
+    for p, sub in ((a, True), (b, False)):  # as a subprocess, then through the same body in this process
+        r = run("run", "cube-mirror", "--analytic", "--trials", "20", "--seed", "5", "--quiet", "--json-out", str(p),
+                subprocess_run=sub)
         assert r.returncode == 0, r.stderr
     ja, jb = json.loads(a.read_text()), json.loads(b.read_text())
     assert ja == jb

@@ -242,7 +242,9 @@ COARSE_AIMING = {  # the aiming camera with 1/16 of the pixels over the same fie
 SLOW = pytest.mark.slow  # in the slow stage: the kinds rendered without a light tracer's float atomics, and one more
 KINDS = [  # (rig, generator, renderer, spp): every generator, each renderer of star-field
     pytest.param("sun_sensor_2axis_diaphragm", "sun-sensor", None, 16, marks=SLOW),
-    ("sun_sensor_2axis_diaphragm", "aiming-camera", None, 1),  # the coarse camera (COARSE_AIMING): the same light tracer
+    # the coarse camera (COARSE_AIMING), the same light tracer: its pencil chunks are compared between one and two
+    # processes by default in tests/procedures/cube_mirror/test_concentricity.py
+    pytest.param("sun_sensor_2axis_diaphragm", "aiming-camera", None, 1, marks=SLOW),
     ("sun_sensor_3axis_autocollimator", "autocollimator", None, 4),
     pytest.param("star_sensor", "star-field", "analytic", None, marks=SLOW),
     pytest.param("star_sensor", "star-field", "mitsuba", 16, marks=SLOW),

@@ -80,7 +80,8 @@ def short_star_rig(tmp_path_factory):
     return p
 
 
-def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_rig, tmp_path):
+@pytest.mark.slow  # the command and its files are read by default below (a resumed run), the filter and the pattern
+def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_rig, tmp_path):  # in test_cosmetics.py
     out = tmp_path / "rob"
     rc = main(["run", "robustness", str(short_star_rig), "--trials", "2", "--effects", "hot_pixels",
                "--workers", "1", "--out", str(out), "--quiet"])
