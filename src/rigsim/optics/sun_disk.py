@@ -83,26 +83,12 @@ def spot_outline(camera: PinholeBrown, sun_dir, full_angle_rad: float, n: int = 
     return camera.project_valid(_rim_directions(_unit(sun_dir), full_angle_rad, n))
 
 
-def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
-               response: str = "flux", radiance=None, radiance_axis=None, direction_weight=None) -> dict:
-    """Exact (quadrature) description of the spot image of a uniform disk. Pure numpy.
-
-    Returns pixel positions (u, v) in the OpenCV convention:
-
-    * ``center_uv``: distorted projection of the disk centre (the sun direction itself);
-    * ``mean_uv``: flux-weighted mean of the projection over the disk = centroid of the continuous
-      image (weight per solid angle: cos(theta) for ``flux``, |dA/dOmega| for ``radiance``);
-    * ``pixel_centroid_uv``: the first moment of the pixel-integrated image (each quadrature point
-      binned into the pixel that contains it) -- what a perfect renderer's window centroid is;
-    * ``disk_bias_px`` = mean - centre, ``pixel_bias_px`` = pixel_centroid - mean;
-    * ``relative_flux``: flux relative to the same disk on axis (= <cos theta> for ``flux``).
-
-    ``radiance``: a non-uniform disk, a callable L(r, cos φ) of the position on the disk (r = tan ρ
-    / tan(a/2), φ the azimuth from ``radiance_axis``, a camera-frame vector across the disk), e.g.
-    :class:`rigsim.optics.sun_radiance.DiskRadiance`; each point's weight is multiplied by L.
-    ``direction_weight``: a callable of the directions (3, n) rows (x, y, z in the camera frame)
-    multiplying each point's weight (e.g. a thick pinhole's vignetting).
-    """
+def disk_image_points(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int, response: str = "flux",
+                      radiance=None, radiance_axis=None, direction_weight=None) -> dict:
+    """The quadrature of :func:`spot_truth`: each of ``n`` points of the disk projected through
+    ``camera`` (``uv``, (n, 2)) with its weight (``weight``: per solid angle, × the radiance and the
+    direction weight when given), and the centre's projection (``center_uv``). ``valid`` False (and no
+    points) when part of the disk falls outside the camera model."""
     s = _unit(sun_dir)
     e1, e2 = _basis(s)
     # the directions of disk_directions as rows (x, y, z) of one (3, n) array: contiguous columns
@@ -130,6 +116,34 @@ def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int =
         w = w * _disk_weight(radiance, radiance_axis, s, e1, e2, float(full_angle_rad), int(n))
     if direction_weight is not None:
         w = w * direction_weight(d)
+    return {"valid": True, "uv": uv, "weight": w, "center_uv": c_uv[0]}
+
+
+def spot_truth(camera: PinholeBrown, sun_dir, full_angle_rad: float, *, n: int = 2_000_000,
+               response: str = "flux", radiance=None, radiance_axis=None, direction_weight=None) -> dict:
+    """Exact (quadrature) description of the spot image of a uniform disk. Pure numpy.
+
+    Returns pixel positions (u, v) in the OpenCV convention:
+
+    * ``center_uv``: distorted projection of the disk centre (the sun direction itself);
+    * ``mean_uv``: flux-weighted mean of the projection over the disk = centroid of the continuous
+      image (weight per solid angle: cos(theta) for ``flux``, |dA/dOmega| for ``radiance``);
+    * ``pixel_centroid_uv``: the first moment of the pixel-integrated image (each quadrature point
+      binned into the pixel that contains it) -- what a perfect renderer's window centroid is;
+    * ``disk_bias_px`` = mean - centre, ``pixel_bias_px`` = pixel_centroid - mean;
+    * ``relative_flux``: flux relative to the same disk on axis (= <cos theta> for ``flux``).
+
+    ``radiance``: a non-uniform disk, a callable L(r, cos φ) of the position on the disk (r = tan ρ
+    / tan(a/2), φ the azimuth from ``radiance_axis``, a camera-frame vector across the disk), e.g.
+    :class:`rigsim.optics.sun_radiance.DiskRadiance`; each point's weight is multiplied by L.
+    ``direction_weight``: a callable of the directions (3, n) rows (x, y, z in the camera frame)
+    multiplying each point's weight (e.g. a thick pinhole's vignetting).
+    """
+    pts = disk_image_points(camera, sun_dir, full_angle_rad, n=n, response=response, radiance=radiance,
+                            radiance_axis=radiance_axis, direction_weight=direction_weight)
+    if not pts["valid"]:
+        return {"valid": False, "center_uv": pts["center_uv"]}
+    uv, w, c_uv = pts["uv"], pts["weight"], pts["center_uv"][None, :]
     wsum = w.sum()
     mean = (w[:, None] * uv).sum(axis=0) / wsum
     np.floor(uv + 0.5, out=uv)  # each point binned into the pixel that holds it

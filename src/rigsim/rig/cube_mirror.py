@@ -248,6 +248,9 @@ class CubeProcedure(_Model):
     command_resolution_deg: float = Field(0.0, ge=0.0, le=1.0, description="rendered campaign: turntable commands are "
                                           "rounded to this step (Table 1: 0.001°); 0 = continuous")
     max_search_iterations: int = Field(15, ge=1, le=200, description="rendered campaign: give up a null search after this many frames")
+    sweep_centroider: Literal["model", "scurve", "tcom", "wcom", "gauss"] = Field(
+        "model", description="sweep frames: 'model' fits the spot the rig's optics predict by maximum likelihood "
+        "(docs/forward-model.md); 'scurve' is the first moment with the uniform disk's pixel-phase correction")
     sweep_outlier_sigma: float = Field(
         0.0, ge=0.0, le=1000.0, description="sweep fit: leave out a frame whose residual, over its centroid's 1σ, "
         "exceeds this many times the robust (MAD) scale of all frames, and refit; 0 keeps every frame (docs/campaign.md)")

@@ -92,3 +92,30 @@ class SunSensorEffects(EffectsTable):
     cover_glass_ghost: CoverGlassGhost = Field(default_factory=CoverGlassGhost)
     vignetting: Vignetting = Field(default_factory=Vignetting)
     pinhole_diffraction: PinholeDiffraction = Field(default_factory=PinholeDiffraction)
+
+    def disk_radiance(self, with_gradient: bool = True):
+        """The disk's radiance these effects give (:class:`rigsim.optics.sun_radiance.DiskRadiance`):
+        limb darkening, and the angular non-uniformity's gradient when ``with_gradient``."""
+        from rigsim.optics.sun_radiance import DiskRadiance
+
+        nu = self.simulator_nonuniformity
+        return DiskRadiance(u=self.limb_darkening.u if self.limb_darkening.enabled else 0.0,
+                            g=nu.nonuniformity if with_gradient and nu.enabled and nu.kind == "angular" else 0.0)
+
+    def thick_pinhole(self):
+        """The thick pinhole's vignetting (:class:`rigsim.optics.pinhole.ThickPinhole`), None when off."""
+        from rigsim.optics.pinhole import ThickPinhole
+
+        v = self.vignetting
+        return ThickPinhole(v.pinhole_diameter_mm, v.mask_thickness_mm) if v.enabled else None
+
+    def pinhole_psf(self, focal_length_mm: float):
+        """The pinhole's diffraction PSF (:class:`rigsim.optics.pinhole_diffraction.PinholePSF`) for a
+        detector ``focal_length_mm`` behind it, None when off."""
+        from rigsim.optics.pinhole_diffraction import PinholePSF, band_weights
+
+        pd = self.pinhole_diffraction
+        if not pd.enabled:
+            return None
+        return PinholePSF(pd.pinhole_diameter_mm, pd.mask_thickness_mm, focal_length_mm, tuple(pd.wavelengths_nm),
+                          tuple(band_weights(pd.wavelengths_nm, pd.source_temperature_k).tolist()), pd.propagation)

@@ -44,12 +44,13 @@ def test_noise_free_cube_chain_is_exact_to_a_hundredth_of_an_arcsecond(coarse_id
 @pytest.mark.render
 def test_noise_free_sweep_error_matches_its_own_uncertainty(coarse_ideal_000):
     """The sun-sensor step on a coarse (10°) noise-free sweep: the error of R(sun←rot) is within 4σ
-    of the covariance of its residual scatter (S-curve-corrected centroids, 0.002–0.003 px; the fit's own
-    covariance is the centroider's noise model's, larger on noise-free frames: its fit is judged good)."""
+    of the covariance of its residual scatter (the forward-model centroids, 0.003–0.005 px: the renderer's
+    sampling noise at 256 spp; the fit's own covariance is the centroider's detector-noise bound, about
+    as large: its fit is judged good)."""
     rig, c = coarse_ideal_000
     cal = c.calibration
     res = cal.residuals_px.ravel()
-    assert cal.fit.verdict == "good" and cal.fit.residual_rms < cal.fit.noise_rms
+    assert cal.fit.verdict == "good" and cal.fit.residual_rms < 1.2 * cal.fit.noise_rms
     to_scatter = (res @ res / (res.size - len(cal.params))) / cal.fit.noise_rms**2  # the scatter's σ² over the model's
     sd = np.sqrt(np.diag(cal.rotation_covariance_rad2) * to_scatter) * 206264.806
     e = c.result.sun_error_arcsec

@@ -16,11 +16,17 @@ import numpy as np
 from rigsim.estimation.sun_calibration import SunCalibration, sweep_poses
 from rigsim.imaging import NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
+from rigsim.procedures.cube_mirror.spot_fit import SunSpotFitter
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sun_disk import spot_truth
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TruePose, TurntableReading
 from rigsim.truth.cube_mirror.realization import Noise, Realization
+
+SWEEP_CENTROIDERS = ("model", *FRAME_METHODS)
+"""``model``: the forward-model fit of the spot the rig's optics predict
+(:class:`rigsim.procedures.cube_mirror.spot_fit.SunSpotFitter`); the others: a method of
+:func:`rigsim.imaging.frame_spots.measure_frame`."""
 
 
 @dataclass
@@ -70,22 +76,23 @@ def render_sweep(
     progress: Callable[[int], None] | None = None,
     noiseless: bool = False,
     step_deg: float | None = None,
-    centroider: str = "scurve",
+    centroider: str | None = None,
     on_frame: Callable | None = None,
 ) -> tuple[SweepObservation, SweepTruth]:
     """Render, centroid and record the sweep (module docstring): (observation, truth). ``noiseless``: detector noise off
     (rendering noise and quantisation stay). ``step_deg`` overrides the procedure's sweep step.
-    ``centroider``: a method of :func:`rigsim.imaging.frame_spots.measure_frame` (the ``rigsim
-    centroid`` stage): ``"scurve"`` (default: first moment with the disk's pixel-phase correction)
-    or ``"tcom"``/``"wcom"``/``"gauss"``. ``on_frame(frame, spots, k, reading_rad, pose_index)`` sees
+    ``centroider``: one of :data:`SWEEP_CENTROIDERS` (None: the rig's ``procedure.sweep_centroider``): ``"model"`` (the forward-model fit) or a
+    method of :func:`rigsim.imaging.frame_spots.measure_frame` (the ``rigsim centroid`` stage):
+    ``"scurve"`` (first moment with the disk's pixel-phase correction), ``"tcom"``/``"wcom"``/``"gauss"``. ``on_frame(frame, spots, k, reading_rad, pose_index)`` sees
     every rendered frame, its spots, the index of the one measured (None: rejected), the turntable
     reading and the sweep pose's index (the frame carries its full sidecar truth).
 
     Every spot in the field is rendered in a few Mitsuba launches (:class:`SunSpotBatch`: tiles just
     large enough for each group of spots, at most three sizes, pasted into the readout window); each
     frame is then digitised with its own detector seed and measured."""
-    if centroider not in FRAME_METHODS:
-        raise ValueError(f"centroider = {centroider!r}: allowed {', '.join(FRAME_METHODS)}")
+    centroider = rig.procedure.sweep_centroider if centroider is None else centroider
+    if centroider not in SWEEP_CENTROIDERS:
+        raise ValueError(f"centroider = {centroider!r}: allowed {', '.join(SWEEP_CENTROIDERS)}")
     import time
 
     from rigsim.detector import apply_detector
@@ -128,10 +135,10 @@ def render_sweep(
     noise_model = NoiseModel.from_detector(det)
     shape = (rig.sun_sensor.resolution_px[1], rig.sun_sensor.resolution_px[0])
     W = renderer.window_px
-    keep, uv, sig = [], [], []
-    rejected = 0
+    measured = []  # per frame in the field: (dn, origin, spots, index of the measured spot or None, frame or None)
     for j, i in enumerate(field_idx):
         fseed = frame_seeds[j]
+        fr = None
         if on_frame is not None:
             import warnings
 
@@ -149,9 +156,21 @@ def render_sweep(
             photons, origin = detector_part(photons, origin_w, shape)
             dn = apply_detector(photons, det, seed=fseed, noiseless=noiseless, origin_uv=origin,
                                 detector_shape=shape).dn
-        spots = measure_frame(dn, noise_model, method=centroider, saturation_dn=det.saturation_dn,
-                              threshold_dn=0.5 * det.code_step_dn if noiseless else None, origin_uv=origin, detector_shape=shape)
-        k = single_spot(spots)
+        spots = measure_frame(dn, noise_model, method="scurve" if centroider == "model" else centroider,
+                              saturation_dn=det.saturation_dn, threshold_dn=0.5 * det.code_step_dn if noiseless else None,
+                              origin_uv=origin, detector_shape=shape)
+        measured.append((dn, origin, spots, single_spot(spots), fr))
+        if progress:
+            progress(1)
+    if centroider == "model":
+        first = [j for j, m in enumerate(measured) if m[3] is not None]
+        fitter = sweep_fitter(rig, {ax: r[field_idx[first]] for ax, r in read.items()},
+                              np.array([[measured[j][2].u[0], measured[j][2].v[0]] for j in first]).reshape(-1, 2),
+                              np.array([[measured[j][2].sigma_u[0], measured[j][2].sigma_v[0]] for j in first]).reshape(-1, 2))
+        measured = [(dn, o, sp, model_spot(fitter, sp, dn, o), fr) for dn, o, sp, _, fr in measured]
+    keep, uv, sig = [], [], []
+    rejected = 0
+    for i, (dn, origin, spots, k, fr) in zip(field_idx, measured):
         if on_frame is not None:
             on_frame(fr, spots, k, {ax: float(r[i]) for ax, r in read.items()}, int(i))
         if k is None:
@@ -160,8 +179,6 @@ def render_sweep(
             keep.append(int(i))
             uv.append([float(spots.u[k]), float(spots.v[k])])
             sig.append([float(spots.sigma_u[k]), float(spots.sigma_v[k])])
-        if progress:
-            progress(1)
     keep = np.array(keep, dtype=int)
     readings = TurntableReading({ax: r[keep] for ax, r in read.items()})
     obs = SweepObservation(readings, np.array(uv).reshape(-1, 2), len(field_idx), rejected, time.perf_counter() - t0,
@@ -175,3 +192,36 @@ def calibrate_from_sweep(rig: CubeMirrorRig, sweep: SweepObservation, axis_order
     from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
 
     return fit_sun_sensor(rig, sweep.readings, sweep.uv, axis_order or default_axis_order(rig), sigma_uv=sweep.sigma_uv)
+
+
+def sweep_fitter(rig: CubeMirrorRig, readings: dict, uv, sigma_uv, axis_order: str | None = None) -> SunSpotFitter:
+    """The forward-model centroider for a sweep's frames: the spot's shape from the camera a first
+    calibration finds on the frames' moment centroids (``uv``, ``sigma_uv`` at the turntable's
+    ``readings``); the nominal camera when there are too few of them or that fit fails. The shape of
+    a spot far off axis follows the lens's distortion, which only the sweep itself measures."""
+    from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
+
+    camera = None
+    if len(uv) >= 20:
+        try:
+            camera = fit_sun_sensor(rig, TurntableReading(readings), uv, axis_order or default_axis_order(rig),
+                                    sigma_uv=sigma_uv).camera
+        except (ValueError, np.linalg.LinAlgError):
+            camera = None
+    return SunSpotFitter(rig, camera=camera)
+
+
+def model_spot(fitter: SunSpotFitter, spots, dn, origin):
+    """The forward-model fit of the frame's brightest spot (its thresholded centroid the start), written
+    into ``spots`` in its place (u, v, σ, flags); its index (0), or None when there is no spot, a
+    pixel of it saturates, or the model does not fit."""
+    from rigsim.imaging import Flag
+
+    if len(spots) == 0 or spots.flags[0] & int(Flag.INVALID | Flag.SATURATED):
+        return None
+    f = fitter.fit(dn, origin, (float(spots.u[0]), float(spots.v[0])))
+    if not f.ok:
+        return None
+    spots.u[0], spots.v[0], spots.sigma_u[0], spots.sigma_v[0] = f.u, f.v, f.sigma_u, f.sigma_v
+    spots.flags[0] = int(spots.flags[0]) & ~int(Flag.EDGE)  # the model knows where the window and the detector end
+    return 0

@@ -21,7 +21,7 @@ from rigsim.errors import GeometryWarning
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.cover_glass import CoverGlass
 from rigsim.optics.pinhole import ThickPinhole
-from rigsim.optics.pinhole_diffraction import PinholePSF, band_weights, kernel_moments
+from rigsim.optics.pinhole_diffraction import PinholePSF, kernel_moments
 from rigsim.optics.sun_disk import (
     SUN_FULL_ANGLE_RAD,
     _basis,
@@ -404,20 +404,13 @@ class SunSensorScene:
         if window_px is None:  # from the geometry: the largest spot on this detector plus a margin
             window_px = sun_window_px(self.camera, self.full_angle_rad)
         eff = rig.effects
-        radiance = DiskRadiance(
-            u=eff.limb_darkening.u if eff.limb_darkening.enabled else 0.0,
-            g=eff.simulator_nonuniformity.nonuniformity
-            if eff.simulator_nonuniformity.enabled and eff.simulator_nonuniformity.kind == "angular" else 0.0)
+        radiance = eff.disk_radiance()
         ghost = eff.cover_glass_ghost
         ghost = CoverGlass(ghost.thickness_mm, ghost.refractive_index, rig.sun_sensor.focal_length_mm,
                            ghost.coating_reflectance) if ghost.enabled else None
-        vig = eff.vignetting
-        pinhole = ThickPinhole(vig.pinhole_diameter_mm, vig.mask_thickness_mm) if vig.enabled else None
+        pinhole = eff.thick_pinhole()
         pd = eff.pinhole_diffraction
-        diffraction = PinholePSF(pd.pinhole_diameter_mm, pd.mask_thickness_mm, rig.sun_sensor.focal_length_mm,
-                                 tuple(pd.wavelengths_nm),
-                                 tuple(band_weights(pd.wavelengths_nm, pd.source_temperature_k).tolist()),
-                                 pd.propagation) if pd.enabled else None
+        diffraction = eff.pinhole_psf(rig.sun_sensor.focal_length_mm)
         self.renderer = SunSpotRenderer(self.camera, full_angle_rad=self.full_angle_rad, window_px=window_px,
                                         spp=spp, spot_photons=self.spot_photons, radiance=radiance, ghost=ghost,
                                         pinhole=pinhole, diffraction=diffraction, supersampling=pd.supersampling)
