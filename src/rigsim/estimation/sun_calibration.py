@@ -16,10 +16,12 @@ robust (MAD) scale of all such normalised residuals, exceeds the limit is left o
 repeated until no frame does. The first judgement uses a Cauchy-loss fit, which an outlier with
 leverage cannot bend towards itself (docs/campaign.md, "Outliers in the sweep").
 
-With the centroids' σ, the fit is judged against their rms σ̄ (the fit is unweighted;
-:class:`~rigsim.estimation.fit_quality.FitQuality`): the covariance is then the noise model's,
+With the centroids' σ, an unweighted fit is judged against their rms σ̄
+(:class:`~rigsim.estimation.fit_quality.FitQuality`): the covariance is then the noise model's,
 σ̄²(JᵀJ)⁻¹, scaled by χ²/dof when that is above 1 beyond chance — the residual scatter's,
-s²(JᵀJ)⁻¹ with s² = RSS/dof.
+s²(JᵀJ)⁻¹ with s² = RSS/dof. ``weighted``: each residual is weighted by 1/√(σᵢ² + s²), with the
+floor s that brings χ²/dof to 1 (0 when the σ alone fit); the covariance is (JᵀWJ)⁻¹, and the fit
+is judged against each frame's own σ.
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ class SunCalibration:
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # input rows left out as outliers
     outside_field: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # input rows beyond the field
     fit: FitQuality | None = None  # the residuals against the centroids' σ (when the caller gave one)
+    noise_floor_px: float = 0.0  # weighted fit: the σ added to every centroid's in quadrature (noise_floor)
 
     @property
     def sigma(self) -> dict[str, float]:
@@ -134,13 +137,15 @@ def calibrate_sun_sensor(
     outlier_sigma: float = 0.0,
     max_field_deg: float = 90.0,
     noise_source: str = "the centroids' σ",
+    weighted: bool = False,
 ) -> SunCalibration:
     """Fit intrinsics and R(sun←rot) to observed sun-image centroids.
 
     ``poses_rad``: the turntable *readings* per observation (a :class:`~rigsim.rig.turntable.TurntableReading`
     of arrays, or a mapping {label: rad array}; a true pose is refused); ``uv``: (N, 2) centroids.
     ``f_guess_px``: design focal length in pixels (a starting value only). ``sigma_uv``: each
-    centroid's 1σ (N, 2) or None (all equal); it only scales the outlier test, the fit is unweighted.
+    centroid's 1σ (N, 2) or None (all equal); it scales the outlier test, and with ``weighted`` it
+    weights the fit (module docstring), else the fit is unweighted.
     ``outlier_sigma`` > 0: leave out, and refit without, every frame whose normalised residual
     (module docstring) exceeds it; 0 keeps every frame. ``max_field_deg`` < 90: leave out every frame
     whose centroid lies farther than that from the axis, through the nominal camera (``f_guess_px``,
@@ -159,15 +164,22 @@ def calibrate_sun_sensor(
     if n < 8:
         raise ValueError(f"calibration needs at least 8 points on the detector, got {n}"
                          + (f" within {max_field_deg:g}° of the axis" if n < len(uv) else ""))
-    fit = _judge(m_dirs[inside], uv[inside], None if sigma_uv is None else np.asarray(sigma_uv, float)[inside],
-                 outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+    sig_in = None if sigma_uv is None else np.array(np.broadcast_to(np.asarray(sigma_uv, float), uv.shape))[inside]
+    weighted = bool(weighted and sig_in is not None and np.all(np.isfinite(sig_in)) and np.all(sig_in > 0))
+    fit = _judge(m_dirs[inside], uv[inside], sig_in, outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential,
+                 centroid_sigma_px, weighted)
     fit.outliers = inside[fit.outliers]
     fit.outside_field = np.setdiff1d(np.arange(len(uv)), inside)
     if sigma_uv is not None:
         sig = np.array(np.broadcast_to(np.asarray(sigma_uv, float), uv.shape))
         used = np.setdiff1d(inside, fit.outliers)
         if np.all(np.isfinite(sig[used])) and np.all(sig[used] > 0):
-            _judge_against_noise(fit, sig[used], noise_source)
+            if weighted:
+                fit.fit = judge_residuals(fit.residuals_px, sig[used], len(fit.params),
+                                          f"{noise_source}, rms {float(np.sqrt(np.mean(sig[used] ** 2))):.3g} px, "
+                                          f"each frame's own (weighted fit; floor {fit.noise_floor_px:.3g} px)")
+            else:
+                _judge_against_noise(fit, sig[used], noise_source)
     return fit
 
 
@@ -185,10 +197,14 @@ def _judge_against_noise(fit: SunCalibration, sig: np.ndarray, noise_source: str
 
 
 def _judge(m_dirs, uv, sigma_uv, outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential,
-           centroid_sigma_px) -> SunCalibration:
+           centroid_sigma_px, weighted: bool = False) -> SunCalibration:
     """The fit with the outlier test of :func:`calibrate_sun_sensor` (``outliers`` index ``uv``)."""
     n = len(uv)
-    fit = _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+    def fit_all(m, u, *a, rows=None):
+        if not weighted:
+            return _fit(m, u, *a)
+        return _weighted_fit(m, u, sigma_uv if rows is None else np.asarray(sigma_uv)[rows], *a)
+    fit = fit_all(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
     if outlier_sigma <= 0.0:
         return fit
     sig = np.ones_like(uv) if sigma_uv is None else np.array(np.broadcast_to(sigma_uv, uv.shape))
@@ -204,7 +220,8 @@ def _judge(m_dirs, uv, sigma_uv, outlier_sigma, width, height, f_guess_px, fit_k
         if len(keep) < 8 or np.array_equal(keep, used):
             break
         try:
-            refit = _fit(m_dirs[keep], uv[keep], width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+            refit = fit_all(m_dirs[keep], uv[keep], width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px,
+                            rows=keep)
         except ValueError:  # a non-physical camera on the frames left: keep the last fit
             break
         used, fit = keep, refit
@@ -212,6 +229,41 @@ def _judge(m_dirs, uv, sigma_uv, outlier_sigma, width, height, f_guess_px, fit_k
     if len(used) == n:
         return plain
     fit.outliers = np.setdiff1d(np.arange(n), used)
+    return fit
+
+
+def noise_floor(residuals, sigma, n_params: int) -> float:
+    """The floor s ≥ 0 that, added in quadrature to each residual's σ, makes χ²/dof = 1 (0 when the
+    σ alone leave χ²/dof ≤ 1): what the residuals show beyond the centroids' noise (the model's own
+    errors: the turntable's, the distortion model's)."""
+    from scipy.optimize import brentq
+
+    r2 = np.asarray(residuals, float).ravel() ** 2
+    v = np.broadcast_to(np.asarray(sigma, float), np.shape(residuals)).ravel() ** 2
+    dof = max(r2.size - n_params, 1)
+
+    def excess(s):
+        return float(np.sum(r2 / (v + s * s))) / dof - 1.0
+
+    if excess(0.0) <= 0.0:
+        return 0.0
+    hi = float(np.sqrt(np.mean(r2))) * 2.0 + 1e-12
+    while excess(hi) > 0.0:
+        hi *= 2.0
+    return float(brentq(excess, 0.0, hi, xtol=1e-9 * hi))
+
+
+def _weighted_fit(m_dirs, uv, sigma_uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px):
+    """The least squares weighted by each centroid's σ in quadrature with :func:`noise_floor`'s floor,
+    which is found from the residuals (twice: from the unweighted fit's, then the weighted fit's)."""
+    sig = np.array(np.broadcast_to(np.asarray(sigma_uv, float), np.shape(uv)))
+    fit = _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px)
+    s = 0.0
+    for _ in range(2):
+        s = noise_floor(fit.residuals_px, sig, len(fit.params))
+        fit = _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px,
+                   weights=1.0 / np.sqrt(sig**2 + s * s))
+    fit.noise_floor_px = s
     return fit
 
 
@@ -230,8 +282,10 @@ def _robust_residuals(fit: SunCalibration, m_dirs, uv, sig) -> np.ndarray:
     return sm.residual(sol.x, R).reshape(-1, 2)
 
 
-def _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px) -> SunCalibration:
-    """The least squares of :func:`calibrate_sun_sensor` on the given frames."""
+def _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid_sigma_px,
+         weights=None) -> SunCalibration:
+    """The least squares of :func:`calibrate_sun_sensor` on the given frames; ``weights`` (N, 2): each
+    residual's 1/σ (None: unweighted; the covariance is then the residual scatter's or the given σ's)."""
     n = len(uv)
     names = ["fx", "fy", "cx", "cy", "k1", "k2"] + (["p1", "p2"] if fit_tangential else []) + (["k3"] if fit_k3 else [])
     p0 = {"fx": f_guess_px, "fy": f_guess_px, "cx": (width - 1) / 2, "cy": (height - 1) / 2}
@@ -247,7 +301,16 @@ def _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid
     x_int = np.array([p0.get(k, 0.0) for k in names])
 
     sm = SweepModel(m_dirs, uv, names)
-    residual, jacobian = sm.residual, sm.jacobian
+    if weights is None:
+        residual, jacobian = sm.residual, sm.jacobian
+    else:
+        w = np.asarray(weights, float).ravel()
+
+        def residual(x, R):
+            return sm.residual(x, R) * w
+
+        def jacobian(x, R):
+            return sm.jacobian(x, R) * w[:, None]
 
     # first pass from the start; the second re-linearises δ around its estimate (δ ≈ 0 at the end,
     # so the covariance of δ is that of R(sun←rot) about the sensor axes)
@@ -258,9 +321,12 @@ def _fit(m_dirs, uv, width, height, f_guess_px, fit_k3, fit_tangential, centroid
     sol = least_squares(residual, x, jac=jacobian, args=(R_ref,), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
                         x_scale="jac")
     R_fin = Rotation.from_rotvec(sol.x[-3:]).as_matrix() @ R_ref
-    res = sol.fun
+    res = sol.fun if weights is None else sol.fun / w
     dof = max(res.size - sol.x.size, 1)
-    s2 = centroid_sigma_px**2 if centroid_sigma_px is not None else float(res @ res) / dof
+    if weights is None:
+        s2 = centroid_sigma_px**2 if centroid_sigma_px is not None else float(res @ res) / dof
+    else:  # the weights are the residuals' 1/σ: the covariance is the noise model's, χ²/dof 1 by construction
+        s2 = 1.0
     J = sol.jac
     cov = np.linalg.pinv(J.T @ J) * s2
     return SunCalibration(

@@ -74,3 +74,15 @@ class DiskRadiance:
         area = np.diff(r * r / 2.0)[None, :] * dphi[:, None]
         out = (a[None, :] * dphi[:, None] + self.g * b[None, :] * dsin[:, None]) / area
         return out
+
+
+def gradient_across(beam, direction_deg: float) -> np.ndarray:
+    """A simulator's gradient direction across its ``beam`` (unit, any frame): ``direction_deg`` from
+    the frame's axis most nearly across the beam, towards beam × that axis."""
+    d = np.asarray(beam, dtype=np.float64).reshape(3)
+    d = d / np.linalg.norm(d)
+    a = np.eye(3)[int(np.argmin(np.abs(d)))]
+    a = a - (a @ d) * d
+    a /= np.linalg.norm(a)
+    t = math.radians(direction_deg)
+    return math.cos(t) * a + math.sin(t) * np.cross(d, a)

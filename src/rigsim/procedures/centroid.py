@@ -9,7 +9,7 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,95 +18,12 @@ from rigsim.errors import CliError
 from rigsim.files import read_image, write_table
 from rigsim.files.options import integer, number
 from rigsim.files.outputs import declare
-from rigsim.imaging import Flag, NoiseModel, estimate_background
-from rigsim.imaging.frame_spots import FRAME_METHODS, default_threshold_dn, measure_frame
+from rigsim.imaging import Flag
+from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame
+
+from rigsim.procedures.detector_settings import CAMERAS, DetectorSettings, detector_settings, frame_background
 
 __all__ = ["CAMERAS", "DetectorSettings", "add_cli", "centroid_files", "detector_settings", "frame_background"]
-
-CAMERAS = {"sun-sensor": "sun_sensor", "aiming-camera": "aiming_camera", "autocollimator": "autocollimator",
-           "star-sensor": "sensor"}
-"""``--camera`` of a rig: the rig attribute that holds its detector (cube-mirror rigs: the first three;
-star rigs: ``star-sensor``; boresight rigs: the one shared detector)."""
-
-
-def frame_background(img: np.ndarray) -> tuple[float, float]:
-    """The frame's background level and noise (DN): the sigma-clipped median and rms of its pixels
-    (:func:`rigsim.imaging.estimate_background`; spots and lit areas are clipped away)."""
-    b = estimate_background(np.asarray(img, float))
-    return float(b.level), float(b.rms)
-
-
-@dataclass(frozen=True)
-class DetectorSettings:
-    """What the centroid stage needs to know about a camera: noise model, saturation, frame size."""
-
-    noise: NoiseModel
-    saturation_dn: float | None
-    shape: tuple[int, int] | None  # (rows, cols), checked against every frame; None: any size
-    estimate_background: bool = False  # offset and noise from each frame (frame_background) instead of ``noise``
-
-    def describe(self) -> str:
-        n = self.noise
-        sat = f"saturation {self.saturation_dn:g} DN" if self.saturation_dn is not None else "no saturation level"
-        if self.estimate_background:
-            return f"offset and noise measured per frame (clipped median, rms), gain {n.gain_dn_per_e:g} DN/e-, {sat}"
-        return f"offset {n.offset_dn:g} DN, gain {n.gain_dn_per_e:g} DN/e-, read noise {n.read_noise_e:g} e-, {sat}"
-
-    def mismatch(self, img: np.ndarray, threshold_dn: float | None = None) -> str | None:
-        """When the frame's own background (:func:`frame_background`) does not fit the detector model, a sentence saying how (None when it fits, and always with
-        ``estimate_background``): a background more than half the detection threshold above the
-        offset (the threshold counts from the offset: the background itself would be detected), or
-        below the offset by more than 5σ, or a spread more than 1.5× the model's at that level."""
-        if self.estimate_background:
-            return None
-        med, sd = frame_background(img)
-        n = self.noise
-        thr = default_threshold_dn(n) if threshold_dn is None else float(threshold_dn)
-        sd_dark = float(np.sqrt(n.variance(n.offset_dn)))
-        sd_at = float(np.sqrt(n.variance(max(med, n.offset_dn))))
-        said = f"background {med:.1f} DN with {sd:.2f} DN rms noise"
-        if med - n.offset_dn > 0.5 * thr:
-            return (f"{said}, {med - n.offset_dn:.1f} DN above the detector's offset ({n.offset_dn:g} DN); "
-                    f"spots are pixels more than {thr:.3g} DN above the offset")
-        if med < n.offset_dn - 5.0 * sd_dark - 1.0:
-            return f"{said}, below the detector's offset ({n.offset_dn:g} DN)"
-        if sd > 1.5 * sd_at + 0.5:
-            return f"{said}; the detector model expects {sd_at:.2f} DN there (threshold {thr:.3g} DN)"
-        return None
-
-    def noise_for(self, img: np.ndarray) -> NoiseModel:
-        """The noise model of one frame (measured on it when ``estimate_background``)."""
-        if not self.estimate_background:
-            return self.noise
-        med, sd = frame_background(img)
-        g = self.noise.gain_dn_per_e
-        return replace(self.noise, read_noise_e=sd / g, offset_dn=med)
-
-
-def detector_settings(rig=None, camera: str | None = None, *, offset_dn=None, gain_dn_per_e=None, read_noise_e=None,
-                      saturation_dn=None) -> DetectorSettings:
-    """The detector of ``rig``'s ``camera`` (one of :data:`CAMERAS`; default the rig's main camera),
-    each value overridden by the keyword when given. Without a rig the keywords alone (gain 1 by
-    default); with neither a rig nor an offset, each frame's offset and noise are measured on it
-    (:func:`frame_background`)."""
-    det, shape = None, None
-    if rig is not None:
-        if hasattr(rig, "cameras"):  # boresight: one detector for every ROI
-            det = rig.detector
-        else:
-            attr = CAMERAS.get(camera or ("star-sensor" if hasattr(rig, "sensor") else "sun-sensor"))
-            part = getattr(rig, attr, None) if attr else None
-            if part is None or not hasattr(part, "detector"):
-                have = [k for k, a in CAMERAS.items() if getattr(rig, a, None) is not None]
-                raise CliError(f"--camera = {camera!r}: this rig ({rig.name}) has {', '.join(have)}")
-            det = part.detector
-            shape = tuple(part.resolution_px[::-1])
-    base = NoiseModel.from_detector(det) if det is not None else NoiseModel(1.0, 0.0, 0.0, 1.0 / 12.0)  # in frame DN
-    noise = replace(base, **{k: float(v) for k, v in (("gain_dn_per_e", gain_dn_per_e), ("read_noise_e", read_noise_e),
-                                                      ("offset_dn", offset_dn)) if v is not None})
-    sat = float(saturation_dn) if saturation_dn is not None else (float(det.saturation_dn) if det is not None else None)
-    return DetectorSettings(noise, sat, shape, estimate_background=det is None and offset_dn is None)
-
 
 def flag_names(flags: int) -> str:
     return "|".join(f.name for f in Flag if f.value & int(flags)) or ""
@@ -116,7 +33,11 @@ STAR_METHOD = "star"
 """``rigsim centroid --method star``: a star field (:func:`rigsim.imaging.star_field.extract_star_field`):
 a position-dependent sky level and noise, a matched filter down to the noise floor, a Gaussian fit
 of every star with the frame's PSF width."""
-METHODS = (*FRAME_METHODS, STAR_METHOD)
+MODEL_METHOD = "model"
+"""``rigsim centroid --method model``: the sun sensor's forward-model centroider
+(:func:`rigsim.procedures.cube_mirror.spot_fit.model_frame_spots`; a cube-mirror ``--rig``; with
+``--angles`` the sweep's two passes)."""
+METHODS = (*FRAME_METHODS, STAR_METHOD, MODEL_METHOD)
 
 
 def _star_spots(img: np.ndarray, settings: DetectorSettings, psf_sigma_px: float, threshold_sigma: float,
@@ -139,33 +60,51 @@ def _star_spots(img: np.ndarray, settings: DetectorSettings, psf_sigma_px: float
 def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str = "scurve",
                    threshold_dn: float | None = None, max_spots: int | None = None, progress=None,
                    warn=None, psf_sigma_px: float = 1.0, threshold_sigma: float = 5.0,
-                   gain_dn_per_e: float | None = None, psf_sigmas: list | None = None) -> dict[str, list]:
+                   gain_dn_per_e: float | None = None, psf_sigmas: list | None = None, rig=None,
+                   readings: dict | None = None) -> dict[str, list]:
     """Every spot of every frame file, brightest first per frame: the table's columns
     (frame, spot, u_px, v_px, sigma_u_px, sigma_v_px, flux_dn, flags, flag_names). ``warn(text)``
     hears of the first frame whose background disagrees with the detector model
     (:meth:`DetectorSettings.mismatch`). ``method`` ``star`` (:data:`STAR_METHOD`) measures its own sky
     map on each frame, with the PSF σ ``psf_sigma_px`` and the matched filter's ``threshold_sigma``; the
     stars' shot noise takes ``gain_dn_per_e`` (default the settings' gain); each frame's PSF σ (px, from
-    its bright stars) is appended to ``psf_sigmas``."""
+    its bright stars) is appended to ``psf_sigmas``. ``model`` (:data:`MODEL_METHOD`) needs the
+    cube-mirror ``rig``, and takes the frames' turntable ``readings`` ({axis: (N,) rad}, in ``paths``'
+    order) when there are some."""
     cols: dict[str, list] = {k: [] for k in ("frame", "spot", "u_px", "v_px", "sigma_u_px", "sigma_v_px", "flux_dn",
                                              "flags", "flag_names")}
     from rigsim.files.inputs import check_distinct
 
     check_distinct(paths, "FRAME")  # the table names each frame by its base name
     warned = False
+
+    def measure(img, path, method=method):
+        nonlocal warned
+        if warn is not None and not warned:
+            text = settings.mismatch(img, threshold_dn)
+            if text is not None:
+                warn(f"{path}: {text}")
+                warned = True
+        return measure_frame(img, settings.noise_for(img), method=method, threshold_dn=threshold_dn,
+                             saturation_dn=settings.saturation_dn)
+
+    modelled = None
+    if method == MODEL_METHOD:
+        from rigsim.procedures.cube_mirror.spot_fit import model_frame_spots
+
+        if rig is None or not hasattr(rig, "sun_sensor"):
+            raise CliError("--method model fits the sun sensor's spot model: give a cube-mirror --rig")
+        modelled = iter(model_frame_spots(rig, paths, lambda img, path: measure(img, path, "scurve"), readings, progress,
+                                          noise_of=settings.noise_for))
     for p in paths:
-        img = read_image(p, shape=settings.shape)
-        if method == STAR_METHOD:
+        if modelled is not None:
+            spots = next(modelled)
+        elif method == STAR_METHOD:
+            img = read_image(p, shape=settings.shape)
             spots = _star_spots(img, settings, psf_sigma_px, threshold_sigma,
                                 settings.noise.gain_dn_per_e if gain_dn_per_e is None else gain_dn_per_e, psf_sigmas)
         else:
-            if warn is not None and not warned:
-                text = settings.mismatch(img, threshold_dn)
-                if text is not None:
-                    warn(f"{p}: {text}")
-                    warned = True
-            spots = measure_frame(img, settings.noise_for(img), method=method, threshold_dn=threshold_dn,
-                                  saturation_dn=settings.saturation_dn)
+            spots = measure(read_image(p, shape=settings.shape), p)
         n = len(spots) if max_spots is None else min(len(spots), max_spots)
         for k in range(n):
             for key, val in (("frame", Path(p).name), ("spot", k), ("u_px", spots.u[k]), ("v_px", spots.v[k]),
@@ -173,7 +112,7 @@ def centroid_files(paths: Sequence, settings: DetectorSettings, *, method: str =
                              ("flux_dn", spots.flux[k]), ("flags", int(spots.flags[k])),
                              ("flag_names", flag_names(spots.flags[k]))):
                 cols[key].append(val)
-        if progress is not None:
+        if progress is not None and modelled is None:
             progress(1)
     return cols
 
@@ -192,8 +131,14 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--method", default=None, choices=METHODS,
                    help="scurve: S-curve corrected first moment (sun disk); tcom, wcom, gauss: rigsim.imaging's; star: a "
                         "star field (sky level and noise mapped across the frame, matched-filter detection to the noise "
-                        "floor, Gaussian fit with the frame's PSF width). Default: star with a star-sensor --rig, else "
-                        "scurve")
+                        "floor, Gaussian fit with the frame's PSF width); model: the sun sensor's spot as the rig's optics "
+                        "draw it, fitted by maximum likelihood (a cube-mirror --rig; with --angles, the sweep's two passes). "
+                        "Default: star with a star-sensor --rig, the rig's procedure.sweep_centroider with a cube-mirror "
+                        "--rig's sun sensor, else scurve")
+    c.add_argument("--angles", default=None, metavar="FILE",
+                   help="--method model: the sweep's angle log (frame, x_deg, y_deg[, z_deg]; every frame in it): a first "
+                        "calibration on the moment centroids shapes every spot (the lens's distortion) and gives the "
+                        "simulator's gradient direction at each pose; without it the design camera shapes them")
     c.add_argument("--psf-sigma-px", type=number(0.2, 20), default=None,
                    help="--method star: the PSF's σ for the matched filter (default the rig's, else 1 px; each frame's "
                         "width is then measured on its bright stars)")
@@ -231,6 +176,22 @@ def _check_options(args) -> None:
         raise CliError(f"--out = {args.out}: expected a .csv or .parquet file name")
 
 
+def _readings_of(frames, angles_path, rig) -> dict:
+    """The turntable readings {axis: (N,) rad} of ``frames`` (in their order) from the angle log."""
+    from rigsim.errors import InputError
+    from rigsim.procedures.cube_mirror.files import read_angle_log
+
+    names, reading, _ = read_angle_log(angles_path, rig)
+    row = {n: i for i, n in enumerate(names)}
+    missing = [Path(f).name for f in frames if Path(f).name not in row]
+    if missing:
+        raise InputError(f"{angles_path}: column frame: no row for {missing[0]!r}"
+                         + (f" (and {len(missing) - 1} other frames)" if len(missing) > 1 else "")
+                         + "; --angles must give every frame's turntable reading")
+    idx = [row[Path(f).name] for f in frames]
+    return {k: np.asarray(v, float)[idx] for k, v in reading.items()}
+
+
 def cmd_centroid(args) -> int:
     from tqdm import tqdm
 
@@ -241,7 +202,13 @@ def cmd_centroid(args) -> int:
     if args.camera and rig is None:
         raise CliError("--camera needs --rig")
     star_rig = rig is not None and hasattr(rig, "sensor") and (args.camera in (None, "star-sensor"))
-    method = args.method or (STAR_METHOD if star_rig else "scurve")
+    sun_rig = rig is not None and hasattr(rig, "sun_sensor") and args.camera in (None, "sun-sensor")
+    method = args.method or (STAR_METHOD if star_rig else rig.procedure.sweep_centroider if sun_rig else "scurve")
+    if method == MODEL_METHOD and not sun_rig:
+        raise CliError("--method model fits the sun sensor's spot model: give a cube-mirror --rig (its sun-sensor camera)")
+    if args.angles is not None and method != MODEL_METHOD:
+        raise CliError("--angles is for --method model")
+    readings = _readings_of(args.frames, args.angles, rig) if args.angles is not None else None
     if method != STAR_METHOD and args.psf_sigma_px is not None:
         raise CliError("--psf-sigma-px is for --method star")
     psf = args.psf_sigma_px if args.psf_sigma_px is not None else (rig.sensor.psf_sigma_px if star_rig else 1.0)
@@ -270,7 +237,8 @@ def cmd_centroid(args) -> int:
     with tqdm(total=len(args.frames), desc="centroid", unit="frame", disable=True if args.quiet else None) as pb:
         cols = centroid_files(args.frames, st, method=method, threshold_dn=args.threshold_dn,
                               max_spots=args.max_spots, progress=pb.update, warn=warnings.append, psf_sigma_px=psf,
-                              threshold_sigma=args.threshold_sigma, gain_dn_per_e=gain, psf_sigmas=psf_sigmas)
+                              threshold_sigma=args.threshold_sigma, gain_dn_per_e=gain, psf_sigmas=psf_sigmas, rig=rig,
+                              readings=readings)
     for w in warnings:
         print(f"warning: {w}. Use --background frame, or describe the camera that took the frames "
               "(--rig/--camera, --offset-dn, --read-noise-e)", file=sys.stderr)

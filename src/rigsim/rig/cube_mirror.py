@@ -251,6 +251,9 @@ class CubeProcedure(_Model):
     sweep_centroider: Literal["model", "scurve", "tcom", "wcom", "gauss"] = Field(
         "model", description="sweep frames: 'model' fits the spot the rig's optics predict by maximum likelihood "
         "(docs/forward-model.md); 'scurve' is the first moment with the uniform disk's pixel-phase correction")
+    sweep_fit_weights: Literal["centroid_sigma", "equal"] = Field(
+        "centroid_sigma", description="sweep fit: 'centroid_sigma' weights each frame by its centroid's 1σ in quadrature "
+        "with the floor the residuals show beyond it (docs/forward-model.md); 'equal' weighs every frame alike")
     sweep_outlier_sigma: float = Field(
         0.0, ge=0.0, le=1000.0, description="sweep fit: leave out a frame whose residual, over its centroid's 1σ, "
         "exceeds this many times the robust (MAD) scale of all frames, and refit; 0 keeps every frame (docs/campaign.md)")

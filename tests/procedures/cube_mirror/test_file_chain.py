@@ -6,7 +6,8 @@ campaign's decisions (each null search's next command and its null) and numbers 
 rotations to 1e-9 relative, their covariances to 1e-6, the same fit verdicts).
 
 Cheap campaigns (run in-process as `run cube-mirror --export-frames` runs them, without the report): a
-±60° sweep every 30° at 16 spp; seed 000 with a coarse aiming camera (400 × 300 px of 60 µm: 1/16 of the
+±60° sweep every 30° at 64 spp (the forward-model centroids' σ is the detector's Cramér–Rao bound; at
+16 spp the renderer's own sampling noise exceeds it and seed 001's sweep fit is judged poor); seed 000 with a coarse aiming camera (400 × 300 px of 60 µm: 1/16 of the
 pixels, the same field), seed 001 with the autocollimator's frames at 64 spp."""
 
 import json
@@ -36,7 +37,7 @@ def _campaign(d, rig_file, fmt, **kw):
     frames.out_dir.mkdir()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        c = run_rendered_campaign(rig, realization_from_rig(rig), seed=2009, sweep_spp=16, sweep_step_deg=30.0,
+        c = run_rendered_campaign(rig, realization_from_rig(rig), seed=2009, sweep_spp=64, sweep_step_deg=30.0,
                                   frames=frames, **kw)
     frames.write_logs([s.final_reading_rad for s in c.searches], rig.procedure.faces)
     camp = json.loads(json.dumps({**campaign_json(c.result, rig, mode="rendered", seed=2009),
@@ -58,7 +59,7 @@ def _campaign(d, rig_file, fmt, **kw):
 def _stages(bare, rig, frames, run=rigsim):
     """centroid → calibrate sun-sensor → triad → compose, each in its own process (``run=rigsim``; the seed-001
     chain runs the same commands through ``rigsim.cli.main`` in this process)."""
-    run("centroid", *frames, "--rig", rig, "--out", "c.csv", "--quiet", cwd=bare)
+    run("centroid", *frames, "--rig", rig, "--angles", "angles.csv", "--out", "c.csv", "--quiet", cwd=bare)
     run("calibrate", "sun-sensor", "--rig", rig, "--angles", "angles.csv", "--centroids", "c.csv", "--out", "sun.json",
         "--opencv", "cam.yml", cwd=bare)
     run("triad", "--nulls", "nulls.csv", "--rig", rig, "--out", "cube.json", cwd=bare)

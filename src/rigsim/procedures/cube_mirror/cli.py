@@ -454,7 +454,7 @@ def cmd_render_sun_sensor(args) -> int:
         print(f"true spot: centre {np.round(t['center_uv'], 4).tolist()} px, pixel-binned centroid "
               f"{np.round(t['pixel_centroid_uv'], 4).tolist()} px")
         from rigsim.imaging.frame_spots import measure_frame, single_spot
-        from rigsim.procedures.centroid import detector_settings
+        from rigsim.procedures.detector_settings import detector_settings
 
         det = detector_settings(rig, "sun-sensor")
         sp = measure_frame(fr.dn, det.noise, saturation_dn=det.saturation_dn)

@@ -143,7 +143,7 @@ def frame_noise_problems(rig: CubeMirrorRig, camera: str, frames: Mapping[str, n
     """The frames whose background noise (clipped rms) exceeds :data:`NOISE_LIMIT` times the
     rig's detector model at their level (the σ of every measurement on them rests on that model),
     and a phrase with the largest ratio."""
-    from rigsim.procedures.centroid import detector_settings, frame_background
+    from rigsim.procedures.detector_settings import detector_settings, frame_background
 
     n = detector_settings(rig, camera).noise
     out, worst = [], 0.0

@@ -41,13 +41,15 @@ def fit_sun_sensor(rig: CubeMirrorRig, readings, uv, axis_order: str, d_rot=NOMI
     sun-image centroids, with the nominal turntable (nesting ``axis_order``) and the design focal
     length as the start. Frames beyond ``procedure.sweep_max_field_deg`` from the axis or beyond
     ``procedure.sweep_outlier_sigma`` are left out (``sigma_uv``: the centroids' 1σ, which scales the
-    outlier test, and the fit is judged against it, :func:`sweep_sigma`)."""
+    outlier test, weights the fit when ``procedure.sweep_fit_weights`` says so, and the fit is judged
+    against it, :func:`sweep_sigma`)."""
     ss = rig.sun_sensor
     sig, source = sweep_sigma(rig, sigma_uv, len(np.asarray(uv).reshape(-1, 2)))
     return calibrate_sun_sensor(readings, uv, TurntableModel.nominal(list(axis_order)), *ss.resolution_px,
                                 f_guess_px=ss.fx_px, d_rot=d_rot, sigma_uv=sig, noise_source=source,
                                 outlier_sigma=rig.procedure.sweep_outlier_sigma,
-                                max_field_deg=rig.procedure.sweep_max_field_deg)
+                                max_field_deg=rig.procedure.sweep_max_field_deg,
+                                weighted=rig.procedure.sweep_fit_weights == "centroid_sigma")
 
 
 def sweep_sigma(rig: CubeMirrorRig, sigma_uv, n: int) -> tuple[np.ndarray | None, str]:

@@ -16,16 +16,16 @@ import numpy as np
 from rigsim.estimation.sun_calibration import SunCalibration, sweep_poses
 from rigsim.imaging import NoiseModel
 from rigsim.imaging.frame_spots import FRAME_METHODS, measure_frame, single_spot
-from rigsim.procedures.cube_mirror.spot_fit import SunSpotFitter
 from rigsim.optics.camera import PinholeBrown
 from rigsim.optics.sun_disk import spot_truth
+from rigsim.procedures.cube_mirror.spot_fit import model_centroids
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TruePose, TurntableReading
 from rigsim.truth.cube_mirror.realization import Noise, Realization
 
 SWEEP_CENTROIDERS = ("model", *FRAME_METHODS)
 """``model``: the forward-model fit of the spot the rig's optics predict
-(:class:`rigsim.procedures.cube_mirror.spot_fit.SunSpotFitter`); the others: a method of
+(:func:`rigsim.procedures.cube_mirror.spot_fit.model_centroids`); the others: a method of
 :func:`rigsim.imaging.frame_spots.measure_frame`."""
 
 
@@ -162,12 +162,10 @@ def render_sweep(
         measured.append((dn, origin, spots, single_spot(spots), fr))
         if progress:
             progress(1)
-    if centroider == "model":
-        first = [j for j, m in enumerate(measured) if m[3] is not None]
-        fitter = sweep_fitter(rig, {ax: r[field_idx[first]] for ax, r in read.items()},
-                              np.array([[measured[j][2].u[0], measured[j][2].v[0]] for j in first]).reshape(-1, 2),
-                              np.array([[measured[j][2].sigma_u[0], measured[j][2].sigma_v[0]] for j in first]).reshape(-1, 2))
-        measured = [(dn, o, sp, model_spot(fitter, sp, dn, o), fr) for dn, o, sp, _, fr in measured]
+    if centroider == "model":  # the forward-model fits, in place of each frame's brightest spot
+        ks = model_centroids(rig, [(dn, o, sp) for dn, o, sp, _, _ in measured],
+                             {ax: r[field_idx] for ax, r in read.items()}, shape)
+        measured = [(dn, o, sp, k, fr) for (dn, o, sp, _, fr), k in zip(measured, ks)]
     keep, uv, sig = [], [], []
     rejected = 0
     for i, (dn, origin, spots, k, fr) in zip(field_idx, measured):
@@ -192,36 +190,3 @@ def calibrate_from_sweep(rig: CubeMirrorRig, sweep: SweepObservation, axis_order
     from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
 
     return fit_sun_sensor(rig, sweep.readings, sweep.uv, axis_order or default_axis_order(rig), sigma_uv=sweep.sigma_uv)
-
-
-def sweep_fitter(rig: CubeMirrorRig, readings: dict, uv, sigma_uv, axis_order: str | None = None) -> SunSpotFitter:
-    """The forward-model centroider for a sweep's frames: the spot's shape from the camera a first
-    calibration finds on the frames' moment centroids (``uv``, ``sigma_uv`` at the turntable's
-    ``readings``); the nominal camera when there are too few of them or that fit fails. The shape of
-    a spot far off axis follows the lens's distortion, which only the sweep itself measures."""
-    from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
-
-    camera = None
-    if len(uv) >= 20:
-        try:
-            camera = fit_sun_sensor(rig, TurntableReading(readings), uv, axis_order or default_axis_order(rig),
-                                    sigma_uv=sigma_uv).camera
-        except (ValueError, np.linalg.LinAlgError):
-            camera = None
-    return SunSpotFitter(rig, camera=camera)
-
-
-def model_spot(fitter: SunSpotFitter, spots, dn, origin):
-    """The forward-model fit of the frame's brightest spot (its thresholded centroid the start), written
-    into ``spots`` in its place (u, v, σ, flags); its index (0), or None when there is no spot, a
-    pixel of it saturates, or the model does not fit."""
-    from rigsim.imaging import Flag
-
-    if len(spots) == 0 or spots.flags[0] & int(Flag.INVALID | Flag.SATURATED):
-        return None
-    f = fitter.fit(dn, origin, (float(spots.u[0]), float(spots.v[0])))
-    if not f.ok:
-        return None
-    spots.u[0], spots.v[0], spots.sigma_u[0], spots.sigma_v[0] = f.u, f.v, f.sigma_u, f.sigma_v
-    spots.flags[0] = int(spots.flags[0]) & ~int(Flag.EDGE)  # the model knows where the window and the detector end
-    return 0

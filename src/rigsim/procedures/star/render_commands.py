@@ -70,7 +70,7 @@ def cmd_render_star_field(args) -> int:
     from rigsim.files import write_image, write_table
     from rigsim.imaging.frame_spots import measure_frame
     from rigsim.optics.attitude import pointing
-    from rigsim.procedures.centroid import detector_settings
+    from rigsim.procedures.detector_settings import detector_settings
     from rigsim.render.star import MitsubaStarRenderer, render_frame
     from rigsim.rig.load import load_star_rig
     from rigsim.truth.star import StarSky

@@ -31,7 +31,7 @@ from rigsim.optics.sun_disk import (
     sun_window_px,
     window_centroid,
 )
-from rigsim.optics.sun_radiance import DiskRadiance
+from rigsim.optics.sun_radiance import DiskRadiance, gradient_across
 from rigsim.render.backend import ensure_variant
 from rigsim.render.budget import check_memory
 from rigsim.render.frame import Frame, digitise
@@ -424,12 +424,7 @@ class SunSensorScene:
     def _gradient_rot(self) -> np.ndarray:
         """The gradient's direction across the beam, in the rot frame (``direction_deg`` from the
         rot axis most nearly across the beam, towards beam × that axis)."""
-        d = self.real.d_sun_rot / np.linalg.norm(self.real.d_sun_rot)
-        a = np.eye(3)[int(np.argmin(np.abs(d)))]
-        a = a - (a @ d) * d
-        a /= np.linalg.norm(a)
-        t = math.radians(self.rig.effects.simulator_nonuniformity.direction_deg)
-        return math.cos(t) * a + math.sin(t) * np.cross(d, a)
+        return gradient_across(self.real.d_sun_rot, self.rig.effects.simulator_nonuniformity.direction_deg)
 
     def gradient_axis_cam(self, pose_rad: dict) -> np.ndarray | None:
         """The angular gradient's direction in the camera frame at a pose (None without it)."""
