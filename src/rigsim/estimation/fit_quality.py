@@ -41,6 +41,7 @@ class FitQuality:
     noise_rms: float = math.nan
     problems: tuple[str, ...] = field(default_factory=tuple)
     limit: float = POOR_CHI2_DOF
+    floor: float = 0.0  # a weighted fit's σ floor (in ``unit``), added to every σ in quadrature: its covariance has it
 
     @property
     def chi2_dof(self) -> float:
@@ -66,7 +67,10 @@ class FitQuality:
     @property
     def covariance_scale(self) -> float:
         """The factor the noise model's covariance is multiplied by: χ²/dof when it is above 1 beyond
-        chance (and finite), else 1."""
+        chance (and finite), else 1; 1 for a fit whose σ carry a floor (its covariance is the fit's with
+        the floor)."""
+        if self.floor > 0.0:
+            return 1.0
         return self.chi2_dof if self.beyond_chance and math.isfinite(self.chi2_dof) else 1.0
 
     @property
@@ -87,8 +91,11 @@ class FitQuality:
                 head += (f", residual rms {_num(self.residual_rms)} {self.unit} = {_num(self.residual_rms / self.noise_rms)}× "
                          "the noise")
         v = self.verdict
+        scaled = (f"above the noise beyond chance: each σ widened by a floor of {_num(self.floor)} {self.unit} in "
+                  "quadrature, the covariance with it" if self.floor > 0.0 else
+                  f"above the noise beyond chance: covariance scaled ×{_num(self.covariance_scale)}")
         tail = {"good": "fits within the noise",
-                "scaled": f"above the noise beyond chance: covariance scaled ×{_num(self.covariance_scale)}",
+                "scaled": scaled,
                 "poor": (f"POOR FIT (limit χ²/dof {_num(self.limit)})" if self.dof > 0 and not self.chi2_dof <= self.limit
                          else "POOR FIT"),
                 "not judged": "no χ² to judge"}[v]
@@ -101,7 +108,8 @@ class FitQuality:
                 "p_value": _finite(self.p_value), "noise": self.noise_source, "unit": self.unit,
                 "residual_rms": _finite(self.residual_rms), "noise_rms": _finite(self.noise_rms),
                 "problems": list(self.problems), "limit_chi2_dof": self.limit, "verdict": self.verdict,
-                "covariance_scale": self.covariance_scale, "covariance_scaled": self.covariance_scale != 1.0}
+                "covariance_scale": self.covariance_scale, "covariance_scaled": self.covariance_scale != 1.0,
+                "sigma_floor": self.floor}
 
 
 def judge_residuals(residuals, sigma, n_params: int, noise_source: str, *, unit: str = "px",

@@ -27,6 +27,7 @@ is judged against each frame's own σ.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -175,9 +176,9 @@ def calibrate_sun_sensor(
         used = np.setdiff1d(inside, fit.outliers)
         if np.all(np.isfinite(sig[used])) and np.all(sig[used] > 0):
             if weighted:
-                fit.fit = judge_residuals(fit.residuals_px, sig[used], len(fit.params),
-                                          f"{noise_source}, rms {float(np.sqrt(np.mean(sig[used] ** 2))):.3g} px, "
-                                          f"each frame's own (weighted fit; floor {fit.noise_floor_px:.3g} px)")
+                q = judge_residuals(fit.residuals_px, sig[used], len(fit.params),
+                                    f"{noise_source}, rms {float(np.sqrt(np.mean(sig[used] ** 2))):.3g} px, each frame's own")
+                fit.fit = dataclasses.replace(q, floor=fit.noise_floor_px if q.beyond_chance else 0.0)
             else:
                 _judge_against_noise(fit, sig[used], noise_source)
     return fit

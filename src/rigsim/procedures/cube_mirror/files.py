@@ -220,6 +220,9 @@ def covariance_source(q: FitQuality | None) -> str:
     """How a sun-sensor calibration's covariance was made (the JSON's ``sigma_source``)."""
     if q is None or q.dof <= 0:
         return "residual scatter of the fit (σ² = RSS / dof): no centroid σ to judge it against"
+    if q.floor > 0.0:
+        return (f"{q.noise_source}, each widened by a floor of {q.floor:.4g} px in quadrature (the fit's weights; the "
+                f"residuals exceed the σ alone beyond chance: χ²/dof {q.chi2_dof:.3g} without the floor, 1 with it)")
     if q.covariance_scale != 1.0:
         return (f"{q.noise_source}, scaled by χ²/dof = {q.covariance_scale:.4g} (the residuals exceed the noise beyond "
                 "chance)")
