@@ -111,7 +111,7 @@ def sweep_fitter(rig: CubeMirrorRig, readings: dict, uv, sigma_uv, axis_order: s
     spot's shape comes from the camera a first calibration finds on the frames' moment centroids
     (``uv``, ``sigma_uv`` at the turntable's ``readings``), the gradient's direction from its
     R(sun←rot); the nominal camera (and no gradient) when there are too few frames or that fit
-    fails. The shape of a spot far off axis follows the lens's distortion, which only the sweep
+    fails or is poor (a wrong angle log: the calibration that follows refuses it and names the cause). The shape of a spot far off axis follows the lens's distortion, which only the sweep
     itself measures."""
     from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
     from rigsim.rig.turntable import TurntableModel, TurntableReading
@@ -122,6 +122,8 @@ def sweep_fitter(rig: CubeMirrorRig, readings: dict, uv, sigma_uv, axis_order: s
         try:
             cal = fit_sun_sensor(rig, TurntableReading(readings), uv, order, sigma_uv=sigma_uv)
         except (ValueError, np.linalg.LinAlgError):
+            cal = None
+        if cal is not None and cal.fit is not None and cal.fit.poor:  # a wrong log: its camera would shape nothing right
             cal = None
     fitter = SunSpotFitter(rig, camera=None if cal is None else cal.camera)
     if cal is None or not fitter.needs_axis:
