@@ -166,7 +166,9 @@ def calibrate_sun_sensor(
         raise ValueError(f"calibration needs at least 8 points on the detector, got {n}"
                          + (f" within {max_field_deg:g}° of the axis" if n < len(uv) else ""))
     sig_in = None if sigma_uv is None else np.array(np.broadcast_to(np.asarray(sigma_uv, float), uv.shape))[inside]
-    weighted = bool(weighted and sig_in is not None and np.all(np.isfinite(sig_in)) and np.all(sig_in > 0))
+    # equal σ weigh every frame alike: the unweighted fit is the same solution, at a third of the cost
+    weighted = bool(weighted and sig_in is not None and np.all(np.isfinite(sig_in)) and np.all(sig_in > 0)
+                    and np.ptp(sig_in) > 0.0)
     fit = _judge(m_dirs[inside], uv[inside], sig_in, outlier_sigma, width, height, f_guess_px, fit_k3, fit_tangential,
                  centroid_sigma_px, weighted)
     fit.outliers = inside[fit.outliers]

@@ -39,6 +39,7 @@ class SweepObservation:
     n_rejected: int  # frames whose spot was flagged (edge, saturated, …) and left out
     seconds: float
     sigma_uv: np.ndarray | None = None  # the centroider's 1σ of each kept centroid (N, 2), px
+    windows: list | None = field(default=None, repr=False)  # ``keep_windows``: (dn, origin_uv) of each kept frame
 
 
 @dataclass
@@ -78,6 +79,7 @@ def render_sweep(
     step_deg: float | None = None,
     centroider: str | None = None,
     on_frame: Callable | None = None,
+    keep_windows: bool = False,
 ) -> tuple[SweepObservation, SweepTruth]:
     """Render, centroid and record the sweep (module docstring): (observation, truth). ``noiseless``: detector noise off
     (rendering noise and quantisation stay). ``step_deg`` overrides the procedure's sweep step.
@@ -85,7 +87,9 @@ def render_sweep(
     method of :func:`rigsim.imaging.frame_spots.measure_frame` (the ``rigsim centroid`` stage):
     ``"scurve"`` (first moment with the disk's pixel-phase correction), ``"tcom"``/``"wcom"``/``"gauss"``. ``on_frame(frame, spots, k, reading_rad, pose_index)`` sees
     every rendered frame, its spots, the index of the one measured (None: rejected), the turntable
-    reading and the sweep pose's index (the frame carries its full sidecar truth).
+    reading and the sweep pose's index (the frame carries its full sidecar truth). ``keep_windows``:
+    the observation keeps each kept frame's readout window (for the image-based calibration,
+    :mod:`rigsim.procedures.cube_mirror.image_fit`).
 
     Every spot in the field is rendered in a few Mitsuba launches (:class:`SunSpotBatch`: tiles just
     large enough for each group of spots, at most three sizes, pasted into the readout window); each
@@ -166,7 +170,7 @@ def render_sweep(
         ks = model_centroids(rig, [(dn, o, sp) for dn, o, sp, _, _ in measured],
                              {ax: r[field_idx] for ax, r in read.items()}, shape)
         measured = [(dn, o, sp, k, fr) for (dn, o, sp, _, fr), k in zip(measured, ks)]
-    keep, uv, sig = [], [], []
+    keep, uv, sig, wins = [], [], [], []
     rejected = 0
     for i, (dn, origin, spots, k, fr) in zip(field_idx, measured):
         if on_frame is not None:
@@ -175,12 +179,14 @@ def render_sweep(
             rejected += 1
         else:
             keep.append(int(i))
+            if keep_windows:
+                wins.append((np.asarray(dn), np.asarray(origin)))
             uv.append([float(spots.u[k]), float(spots.v[k])])
             sig.append([float(spots.sigma_u[k]), float(spots.sigma_v[k])])
     keep = np.array(keep, dtype=int)
     readings = TurntableReading({ax: r[keep] for ax, r in read.items()})
     obs = SweepObservation(readings, np.array(uv).reshape(-1, 2), len(field_idx), rejected, time.perf_counter() - t0,
-                           np.array(sig).reshape(-1, 2))
+                           np.array(sig).reshape(-1, 2), wins if keep_windows else None)
     truth = SweepTruth(TruePose({k: v[keep] for k, v in poses.items()}), c[keep].reshape(-1, 2), S[keep],
                        cam, scene.full_angle_rad, renderer.response)
     return obs, truth
