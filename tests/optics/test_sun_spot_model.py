@@ -47,8 +47,11 @@ def window_at(s, W):
     return c, np.floor(c + 0.5).astype(int) - W // 2
 
 
-@pytest.mark.parametrize("theta_deg", [0.5, 40.0, 60.0])
-@pytest.mark.parametrize("psf", [None, PSF], ids=["point pinhole", "diffraction"])
+@pytest.mark.parametrize("theta_deg,psf", [
+    (0.5, None), (40.0, None), (60.0, None), (40.0, PSF),
+    pytest.param(0.5, PSF, marks=pytest.mark.slow), pytest.param(60.0, PSF, marks=pytest.mark.slow)],
+    ids=["point pinhole-0.5", "point pinhole-40", "point pinhole-60", "diffraction-40", "diffraction-0.5",
+         "diffraction-60"])
 def test_the_model_image_is_the_second_methods(theta_deg, psf):
     """Pixel by pixel to 1 % of the peak (a 2.5 px sharp-edged disk, or its 9 px diffracted image;
     at 60° the camera's distortion shapes it); the same light in the window to 0.5 %; the same

@@ -72,6 +72,15 @@ def model_derivatives(model: SpotModel, u: float, v: float, step_px: float = 1e-
     return p, du, dv
 
 
+def _weighted_squares(model, keep, y, w, u, v) -> float:
+    """Σ w·(y − F·p − B)² at (u, v), with F and B solved for these weights."""
+    p = np.asarray(model(u, v), dtype=float)[keep]
+    A = np.stack([p, np.ones_like(p)])
+    fb = np.linalg.solve((A * w) @ A.T, (A * w) @ y)
+    r = y - fb @ A
+    return float(np.sum(w * r * r))
+
+
 def _fisher(p, du, dv, flux, var):
     J = np.stack([flux * du.ravel(), flux * dv.ravel(), p.ravel(), np.ones(p.size)])
     return (J / var.ravel()) @ J.T, J
@@ -96,7 +105,8 @@ def fit_spot_model(roi: np.ndarray, model: SpotModel, noise: NoiseModel, u0: flo
     """Fit ``model`` (module docstring) to the window ``roi`` (DN) starting from (u0, v0), by
     maximum likelihood under ``noise``. ``mask``: the pixels that count (False: saturated, defective
     or another source's). Flux and background enter linearly and are solved exactly at every step
-    (variable projection); the position takes damped Gauss–Newton steps of at most ``max_step_px``.
+    (variable projection); the position takes damped Gauss–Newton steps of at most ``max_step_px``,
+    until a step is below ``tol_px`` or 1 % of the position's σ.
     ``effects`` names what the model includes; it is copied into the result."""
     d = np.asarray(roi, dtype=float)
     keep = np.isfinite(d) if mask is None else (np.asarray(mask, bool) & np.isfinite(d))
@@ -130,9 +140,19 @@ def fit_spot_model(roi: np.ndarray, model: SpotModel, noise: NoiseModel, u0: flo
         s = float(np.max(np.abs(duv)))
         if s > max_step_px:
             duv = duv * (max_step_px / s)
+        # a step that does not lower the weighted squares (these weights) is halved: no limit cycles
+        now = float(np.sum(w * r * r))
+        for _ in range(6):
+            if _weighted_squares(model, keep, y, w, u + float(duv[0]), v + float(duv[1])) <= now:
+                break
+            duv = duv / 2.0
+        s = float(np.max(np.abs(duv)))
         u, v = u + float(duv[0]), v + float(duv[1])
         var = noise.variance(np.maximum(F * p + B, 0.0))  # weights from the model (IRLS)
-        if s < tol_px:
+        # converged: a step below tol_px, or below 1 % of the position's own σ (a faint spot's
+        # reweighted steps shrink slowly, far below what the data can tell)
+        sig = np.sqrt(np.abs(np.diag(np.linalg.inv(H))[:2]))
+        if s < tol_px or s < 0.01 * float(np.min(sig)):
             converged = True
             break
     p, du, dv = (np.asarray(a, dtype=float)[keep] for a in model_derivatives(model, u, v))
