@@ -62,7 +62,13 @@ def bench_centroids(psfs, oversample: int, radius_px: int, nominal: NominalStarR
     px = img.reshape(rows * cell, os_, per_row * cell, os_).sum(axis=(1, 3))
     d = s.detector
     dn = (d.offset_dn + d.gain_dn_per_e * BENCH_SIGNAL_E * px) * d.code_step_dn  # frame DN
-    found = extract_stars(dn, d, s.psf_sigma_px, method=c.centroid_method, repair_single_pixels=c.single_pixel_filter)
+    psf_model = None
+    if c.centroid_method == "model":
+        from rigsim.procedures.star.psf_model import star_image_model
+
+        psf_model = star_image_model(nominal)
+    found = extract_stars(dn, d, s.psf_sigma_px, method=c.centroid_method, repair_single_pixels=c.single_pixel_filter,
+                          psf_model=psf_model)
     out = np.full((k, 2), np.nan)
     if len(found):
         dist = np.linalg.norm(found.uv[None, :, :] - chief[:, None, :], axis=2)

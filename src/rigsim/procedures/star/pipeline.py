@@ -23,9 +23,10 @@ from rigsim.estimation.star_joint import joint_calibration
 from rigsim.estimation.star_lis import identify_lost_in_space
 from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
-from rigsim.imaging.stars import Observations, extract_stars
+from rigsim.imaging.stars import Observations, extract_stars, refit_stars
 from rigsim.optics.sky import SkyCatalogue
 from rigsim.procedures.star.ground_map import corrected_centroids, ground_centroid_map
+from rigsim.procedures.star.psf_model import star_image_model
 from rigsim.rig.star import NominalStarRig
 
 __all__ = [
@@ -108,6 +109,8 @@ class StarPipeline:
         self.identification = identification
         self.camera = nominal.sensor.camera()
         self.centroid_map = ground_centroid_map(nominal)
+        # the forward-model centroider's star image (the traced lens's PSF or the Gaussian)
+        self.psf_model = star_image_model(nominal) if nominal.calibration.centroid_method == "model" else None
         self.usable: list[Observations] = []
         self.ident: list[IdentResult] = []
         self.frames_obs: list[FrameObs] = []
@@ -122,7 +125,8 @@ class StarPipeline:
         self._extractions = extractions
         c, s = nominal.calibration, nominal.sensor
         self._extraction_settings = (s.detector.model_dump_json(), s.psf_sigma_px, c.centroid_method,
-                                     c.single_pixel_filter, c.poor_fit_reference, c.background)
+                                     c.single_pixel_filter, c.poor_fit_reference, c.background,
+                                     None if s.traced_lens is None else s.traced_lens.model_dump_json())
 
     def _refract(self, k: int, dirs: np.ndarray) -> np.ndarray:
         if self.refraction is None:
@@ -146,13 +150,13 @@ class StarPipeline:
         if found is None:
             found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px,
                                   method=c.centroid_method, repair_single_pixels=c.single_pixel_filter,
-                                  poor_fit=c.poor_fit_reference, background=c.background)
+                                  poor_fit=c.poor_fit_reference, background=c.background, psf_model=self.psf_model)
             if self._extractions is not None:
                 self._extractions[key] = found
         keep = found.usable
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
-        usable = found.subset(np.flatnonzero(keep))
+        usable = found_kept = found.subset(np.flatnonzero(keep))
         if self.centroid_map is not None:  # the ground calibration of the lens's centroid shift ([nominal] centroid_map)
             usable = replace(usable, uv=corrected_centroids(usable.uv, self.centroid_map, self.camera))
         t1 = time.perf_counter()
@@ -166,6 +170,14 @@ class StarPipeline:
                              match_tolerance_px=idc.match_tolerance_px, min_matches=idc.min_matches)
         self.times["extract"] += t1 - t0
         self.times["identify"] += time.perf_counter() - t1
+        if ident.ok and getattr(self.psf_model, "table", None) is not None:
+            # the traced PSF depends on the star's colour: the identified stars fitted again with the catalogue's B−V
+            t2 = time.perf_counter()
+            raw = refit_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, found_kept,
+                              ident.obs_index, self.psf_model, bv=self.sky.catalogue.bv_mag[ident.cat_index],
+                              repair_single_pixels=c.single_pixel_filter)
+            usable = replace(raw, uv=corrected_centroids(raw.uv, self.centroid_map, self.camera))
+            self.times["extract"] += time.perf_counter() - t2
         self.counts["detected"] += len(found)
         self.counts["usable"] += len(usable)
         self.usable.append(usable)
