@@ -18,7 +18,7 @@ import numpy as np
 from rigsim.imaging import Flag, NoiseModel, find_spots
 
 __all__ = ["BACKGROUNDS", "BAD_FLAGS", "POOR_FIT_REFERENCES", "Observations", "extract_stars", "frame_poor_fits",
-           "model_centroids", "refit_stars"]
+           "model_centroids", "refit_windows", "star_windows", "StarWindows"]
 
 POOR_FIT_REFERENCES = ("model", "frame")
 # a star's unexplained share of signal is an outlier of its frame beyond this many robust σ
@@ -90,8 +90,9 @@ def extract_stars(dn: np.ndarray, detector, sigma_px: float, *, method: str = "g
             flags = _frame_poor_fit_flags(flags, sf.chi2_red, sf.flux / sf.sigma_flux)
         return Observations(sf.uv.astype(float), sf.sigma_uv.astype(float), np.asarray(sf.flux, float), flags)
     if background == "model" and method == "model":
+        # the Gaussian fits are the model fits' start only: no joint refit of "blends" (a defocus ring's two maxima)
         res, det = find_spots(np.asarray(dn), method="gauss", sigma_px=float(sigma_px), noise=noise,
-                              threshold_sigma=threshold_sigma, saturation=sat, fit_sigma=True)
+                              threshold_sigma=threshold_sigma, saturation=sat, fit_sigma=True, deblend_fit=False)
         if psf_model is None:
             from rigsim.optics.star_image_model import GaussianStarImage
 
@@ -162,28 +163,46 @@ def model_centroids(dn: np.ndarray, start, det, psf_model, noise: NoiseModel, *,
                          np.where(inv, np.nan, res.sigma_v), res.flux, res.background, fl, "model", extra=res.extra)
 
 
-def refit_stars(dn: np.ndarray, detector, sigma_px: float, found: Observations, index, psf_model, *, bv=None,
-                repair_single_pixels: bool = False) -> Observations:
-    """``found`` with the stars ``index`` fitted again by the forward model ``psf_model`` from their
-    positions, each with its own colour ``bv`` (B−V, (len(index),); e.g. the catalogue's once the star is
-    identified): the frame is prepared as :func:`extract_stars` prepares it. A star whose refit fails
-    (INVALID) keeps its first position."""
+@dataclass(frozen=True)
+class StarWindows:
+    """The pixels of some stars of a frame, kept for fitting them again: ``index`` into the frame's
+    :class:`Observations`, their windows (N, h, w, DN; the frame prepared as :func:`extract_stars`
+    prepares it), each window's pixel (0, 0) position and each star's colour (B−V, NaN: unknown)."""
+
+    index: np.ndarray
+    stack: np.ndarray
+    origin_uv: np.ndarray
+    bv: np.ndarray
+
+
+def star_windows(dn: np.ndarray, detector, sigma_px: float, found: Observations, index, radius_px: int, *, bv=None,
+                 repair_single_pixels: bool = False) -> StarWindows:
+    """The windows of ±``radius_px`` around the stars ``index`` of ``found`` (:class:`StarWindows`)."""
     from rigsim.imaging.detect import extract_rois
-    from rigsim.imaging.star_model_fit import fit_star_models
 
     idx = np.asarray(index, dtype=np.int64)
-    if idx.size == 0:
-        return found
-    noise = NoiseModel.from_detector(detector)
-    if repair_single_pixels:
+    if repair_single_pixels and idx.size:
         from rigsim.imaging.cosmetics import repair_pixels, single_pixel_events
 
-        dn = repair_pixels(dn, single_pixel_events(dn, noise, sigma_px))
+        dn = repair_pixels(dn, single_pixel_events(dn, NoiseModel.from_detector(detector), sigma_px))
     uv0 = found.uv[idx]
-    r = int(psf_model.support_px)
-    rois = extract_rois(np.asarray(dn), uv0[:, 0], uv0[:, 1], 2 * r + 1)
-    res = fit_star_models(rois.stack, rois.origin_uv, psf_model.bind(uv0, bv), noise, uv0[:, 0], uv0[:, 1],
-                          saturation=float(detector.saturation_dn))
+    rois = extract_rois(np.asarray(dn), uv0[:, 0], uv0[:, 1], 2 * int(radius_px) + 1)
+    bv = np.full(idx.size, np.nan) if bv is None else np.asarray(bv, dtype=float)
+    return StarWindows(idx, rois.stack, rois.origin_uv, bv)
+
+
+def refit_windows(found: Observations, win: StarWindows, psf_model, detector) -> Observations:
+    """``found`` with the stars of ``win`` fitted again by the forward model ``psf_model`` from their
+    positions in ``found``, each with its own colour (:func:`rigsim.imaging.star_model_fit.fit_star_models`).
+    A star whose refit fails (INVALID) keeps its position in ``found``."""
+    from rigsim.imaging.star_model_fit import fit_star_models
+
+    idx = win.index
+    if idx.size == 0:
+        return found
+    uv0 = found.uv[idx]
+    res = fit_star_models(win.stack, win.origin_uv, psf_model.bind(uv0, win.bv), NoiseModel.from_detector(detector),
+                          uv0[:, 0], uv0[:, 1], saturation=float(detector.saturation_dn))
     ok = (res.flags & int(Flag.INVALID)) == 0
     uv, sig, flux = found.uv.copy(), found.sigma_uv.copy(), found.flux.copy()
     uv[idx[ok]] = res.uv[ok]

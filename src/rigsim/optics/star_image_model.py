@@ -9,9 +9,14 @@ Brown distortion, is (u, v)), so a fitted position needs no centroid-shift corre
   Airy core), centred on the image point (erf differences per pixel).
 * :class:`TracedStarImage`: the traced lens's PSF (:class:`rigsim.optics.star_psf.PSFTable`) at the
   star's field direction (the nominal camera's ray through (u, v)) for a reference star colour,
-  placed with its chief ray at (u, v). Its ¼-px bins are constant within a bin, as the renderer
-  draws them (``rigsim.render.star.render_stars_psf``), so the pixel values are bilinear in (u, v)
-  between ¼-px steps and exact.
+  placed with its chief ray at (u, v). The renderer draws each ¼-px bin constant within the bin
+  (``rigsim.render.star.render_stars_psf``), which makes a pixel's value piecewise linear in the
+  star's position, with jumps in its derivative that stall a Gauss–Newton fit and make the Fisher
+  information jump. The model smooths each bin by a box of :data:`SMOOTH` bins (⅛ px; the PSF's
+  variance grows by 0.0013 px², against 1.7–3.3 px²): the pixel values are then piecewise quadratic
+  with continuous derivatives. On noise-free traced stars the fitted position is then 0.001 px rms
+  (0.005 px at most) from the exact one; with half that smoothing (0.0005 px rms) a Gauss–Newton
+  fit without step control stalls on a few stars in 100.
 
 A model is bound to the stars of a frame (:meth:`bind`: the per-star PSF at each star's start
 position), then evaluated at trial positions: :meth:`BoundStarImage.pixels` gives the image and its
@@ -31,6 +36,8 @@ from rigsim.optics.star_psf import PSFTable, bv_temperature_k, photon_spectrum_w
 
 __all__ = ["BoundStarImage", "GaussianStarImage", "TracedStarImage"]
 
+SMOOTH = 0.5
+"""Width of the box that smooths each PSF bin, in bins (module docstring)."""
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
@@ -93,32 +100,42 @@ class GaussianStarImage:
         return _BoundGaussian(self.sigma_px, len(np.atleast_2d(uv)))
 
 
-def _overlap(c: np.ndarray, first_px: np.ndarray, m: int, edges: np.ndarray, os_: int):
-    """(N, m, n) share of each ¼-px bin in each of m pixels and its derivative in the star's position c
-    (N,): bin j spans [c + edges[j], c + edges[j+1]], pixel k [first_px + k − ½, first_px + k + ½]."""
+def _ramp_integral(z: np.ndarray, h: float) -> np.ndarray:
+    """∫ clip(t, 0, h) dt from −∞ to z."""
+    return np.where(z <= 0, 0.0, np.where(z <= h, 0.5 * z * z, h * (z - 0.5 * h)))
+
+
+def _overlap(c: np.ndarray, first_px: np.ndarray, m: int, centres: np.ndarray, os_: int, smooth: float):
+    """(N, m, n) share of each 1/os-px bin in each of m pixels, and its derivative in the star's position
+    c (N,): bin j is a box of width h = 1/os centred on c + centres[j], smoothed by a second box of
+    width ``smooth`` · h, pixel k spans [first_px + k − ½, first_px + k + ½]. The share is piecewise
+    quadratic in c with a continuous derivative (the bare box's is piecewise linear with jumps)."""
+    h = 1.0 / os_
+    w = float(smooth) * h
     pix = first_px[:, None, None] + np.arange(m)[None, :, None]
-    a = c[:, None, None] + edges[None, None, :-1]
-    b = c[:, None, None] + edges[None, None, 1:]
-    hi, lo = np.minimum(pix + 0.5, b), np.maximum(pix - 0.5, a)
-    ov = hi - lo
-    inside = ov > 0
-    d = np.where(inside, (b < pix + 0.5).astype(float) - (a > pix - 0.5).astype(float), 0.0)
-    return np.where(inside, ov, 0.0) * os_, d * os_
+    x0 = c[:, None, None] + centres[None, None, :] - 0.5 * h          # the bin's left edge
+    share = np.zeros((len(c), m, centres.size))
+    dshare = np.zeros_like(share)
+    for edge, sign in ((pix + 0.5, 1.0), (pix - 0.5, -1.0)):
+        y = edge - x0
+        share += sign * (_ramp_integral(y + 0.5 * w, h) - _ramp_integral(y - 0.5 * w, h)) / w
+        dshare -= sign * (np.clip(y + 0.5 * w, 0.0, h) - np.clip(y - 0.5 * w, 0.0, h)) / w
+    return share * os_, dshare * os_
 
 
 class _BoundTable(BoundStarImage):
-    def __init__(self, bins: np.ndarray, radius_px: int, oversample: int):
-        self.bins, self.R, self.os = bins, int(radius_px), int(oversample)
-        self.edges = np.arange(bins.shape[-1] + 1) / self.os - self.R
+    def __init__(self, bins: np.ndarray, radius_px: int, oversample: int, smooth: float = SMOOTH):
+        self.bins, self.R, self.os, self.smooth = bins, int(radius_px), int(oversample), float(smooth)
+        self.centres = (np.arange(bins.shape[-1]) + 0.5) / self.os - self.R
 
     def subset(self, idx):
-        return _BoundTable(self.bins[idx], self.R, self.os)
+        return _BoundTable(self.bins[idx], self.R, self.os, self.smooth)
 
     def pixels(self, u, v, origin_uv, shape_hw):
         h, w = shape_hw
         o = np.asarray(origin_uv, float)
-        Au, dAu = _overlap(np.asarray(u, float), o[:, 0], w, self.edges, self.os)   # (N, w, n)
-        Av, dAv = _overlap(np.asarray(v, float), o[:, 1], h, self.edges, self.os)   # (N, h, n)
+        Au, dAu = _overlap(np.asarray(u, float), o[:, 0], w, self.centres, self.os, self.smooth)
+        Av, dAv = _overlap(np.asarray(v, float), o[:, 1], h, self.centres, self.os, self.smooth)
         PAu = self.bins @ np.swapaxes(Au, 1, 2)                                      # (N, n, w)
         p = Av @ PAu
         return p, Av @ (self.bins @ np.swapaxes(dAu, 1, 2)), dAv @ PAu
@@ -140,7 +157,8 @@ class TracedStarImage:
                 f"{t.wavelengths_nm.size} wavelengths {t.wavelengths_nm[0]:.0f}–{t.wavelengths_nm[-1]:.0f} nm)",
                 f"star colour: a blackbody of B−V {self.reference_bv:g} for every star",
                 "field direction: the nominal camera's ray through the star's start position",
-                f"exact pixel integration of 1/{t.oversample}-px bins; no motion smear")
+                f"exact pixel integration of 1/{t.oversample}-px bins (each smoothed by a {SMOOTH:g}-bin box); "
+                "no motion smear")
 
     @property
     def support_px(self) -> int:

@@ -23,7 +23,7 @@ from rigsim.estimation.star_joint import joint_calibration
 from rigsim.estimation.star_lis import identify_lost_in_space
 from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
-from rigsim.imaging.stars import Observations, extract_stars, refit_stars
+from rigsim.imaging.stars import Observations, extract_stars, refit_windows, star_windows
 from rigsim.optics.sky import SkyCatalogue
 from rigsim.procedures.star.ground_map import corrected_centroids, ground_centroid_map
 from rigsim.procedures.star.psf_model import star_image_model
@@ -111,6 +111,10 @@ class StarPipeline:
         self.centroid_map = ground_centroid_map(nominal)
         # the forward-model centroider's star image (the traced lens's PSF or the Gaussian)
         self.psf_model = star_image_model(nominal) if nominal.calibration.centroid_method == "model" else None
+        # a traced model's PSF depends on the star's field direction and colour: the identified stars' windows are
+        # kept, fitted again with the catalogue colour, and again through the first calibrated camera
+        self._traced_model = getattr(self.psf_model, "table", None) is not None
+        self._windows: list = []
         self.usable: list[Observations] = []
         self.ident: list[IdentResult] = []
         self.frames_obs: list[FrameObs] = []
@@ -170,14 +174,17 @@ class StarPipeline:
                              match_tolerance_px=idc.match_tolerance_px, min_matches=idc.min_matches)
         self.times["extract"] += t1 - t0
         self.times["identify"] += time.perf_counter() - t1
-        if ident.ok and getattr(self.psf_model, "table", None) is not None:
+        win = None
+        if ident.ok and self._traced_model:
             # the traced PSF depends on the star's colour: the identified stars fitted again with the catalogue's B−V
             t2 = time.perf_counter()
-            raw = refit_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, found_kept,
-                              ident.obs_index, self.psf_model, bv=self.sky.catalogue.bv_mag[ident.cat_index],
-                              repair_single_pixels=c.single_pixel_filter)
+            win = star_windows(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, found_kept,
+                               ident.obs_index, self.psf_model.support_px, bv=self.sky.catalogue.bv_mag[ident.cat_index],
+                               repair_single_pixels=c.single_pixel_filter)
+            raw = refit_windows(found_kept, win, self.psf_model, s.detector)
             usable = replace(raw, uv=corrected_centroids(raw.uv, self.centroid_map, self.camera))
             self.times["extract"] += time.perf_counter() - t2
+        self._windows.append((win, found_kept))
         self.counts["detected"] += len(found)
         self.counts["usable"] += len(usable)
         self.usable.append(usable)
@@ -204,12 +211,20 @@ class StarPipeline:
             # intrinsics and every attitude fitted together; without a prior attitude the frames are
             # identified again with each round's camera (lost in space starts from the nominal one)
             lis = self.identification == "lost-in-space"
-            joint = joint_calibration(self.usable, self.ident, self.sky, self.camera,
-                                      prior_sigma={"f": s.focal_length_sigma_px, "u0": s.principal_point_sigma_px,
-                                                   "v0": s.principal_point_sigma_px},
-                                      distortion=c.distortion_terms,
-                                      match_tolerance_px=self.nominal.identification.match_tolerance_px,
-                                      reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
+
+            def joint_fit():
+                return joint_calibration(self.usable, self.ident, self.sky, self.camera,
+                                         prior_sigma={"f": s.focal_length_sigma_px, "u0": s.principal_point_sigma_px,
+                                                      "v0": s.principal_point_sigma_px},
+                                         distortion=c.distortion_terms,
+                                         match_tolerance_px=self.nominal.identification.match_tolerance_px,
+                                         reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
+            joint = joint_fit()
+            if self._traced_model and joint.bundle.success:
+                # the traced PSF's shape follows the star's angle from the optical axis: the identified stars fitted
+                # again with their model looked up through the calibrated camera, then the joint fit again
+                self._refit_through(joint.bundle.theta)
+                joint = joint_fit()
             if lis:
                 lis_ident = list(self.ident)
                 self.ident = joint.ident
@@ -250,6 +265,22 @@ class StarPipeline:
                                                                   estimate=est, weighting=weighting, p12=p12,
                                                                   max_stars=c.max_stars_per_frame)
         return out
+
+
+    def _refit_through(self, theta) -> None:
+        """The identified stars' kept windows fitted again, the traced model's field directions taken through
+        the camera of ``theta`` = (f, u0, v0, k1, k2) (the first calibration), and ``usable`` updated."""
+        f, u0, v0, k1, k2 = (float(x) for x in theta[:5])
+        model = replace(self.psf_model, camera=self.nominal.sensor.camera(f_px=f, principal_point_px=(u0, v0), k1=k1, k2=k2))
+        t0 = time.perf_counter()
+        for k, (win, found_kept) in enumerate(self._windows):
+            if win is None:
+                continue
+            raw = refit_windows(found_kept, win, model, self.nominal.sensor.detector)
+            self.usable[k] = replace(raw, uv=corrected_centroids(raw.uv, self.centroid_map, self.camera))
+            o = self.usable[k].subset(self.ident[k].obs_index)
+            self.frames_obs[k] = FrameObs(o.uv, o.sigma_uv, self.ident[k].dirs_icrs, o.flux)
+        self.times["extract"] += time.perf_counter() - t0
 
 
 MIN_PATTERN_MOTION_PX = 3.0
