@@ -19,7 +19,7 @@ import numpy as np
 
 from rigsim.imaging import Flag, crlb_psf
 from rigsim.imaging.stars import extract_stars
-from rigsim.optics.star_image_model import GaussianStarImage, TracedStarImage, _BoundTable
+from rigsim.optics.star_image_model import GaussianStarImage, bind_psf_bins
 from rigsim.optics.star_psf import bv_temperature_k, photon_spectrum_weights
 from rigsim.procedures.star.psf_model import star_image_model
 from rigsim.render.star import render_stars, render_stars_psf
@@ -62,7 +62,7 @@ def run(rig_path: str, seeds: int, photons: float, background_e: float, spacing:
                 w = photon_spectrum_weights(bv_temperature_k(np.full(len(uv), bv)), table.wavelengths_nm)
                 bins, _ = table.star_psfs(d, w)
                 img = render_stars_psf(uv, ph, (H, W), bins, table.radius_px, table.oversample, background=background_e)
-                exact = _BoundTable(bins, table.radius_px, table.oversample)
+                exact = bind_psf_bins(bins, table.radius_px, table.oversample)
             else:
                 img = render_stars(uv, ph, (H, W), sigma_true, background=background_e)
                 exact = GaussianStarImage(sigma_true).bind(uv)

@@ -34,7 +34,7 @@ from scipy.special import erf
 
 from rigsim.optics.star_psf import PSFTable, bv_temperature_k, photon_spectrum_weights
 
-__all__ = ["BoundStarImage", "GaussianStarImage", "TracedStarImage"]
+__all__ = ["BoundStarImage", "GaussianStarImage", "TracedStarImage", "bind_psf_bins"]
 
 SMOOTH = 0.5
 """Width of the box that smooths each PSF bin, in bins (module docstring)."""
@@ -186,3 +186,9 @@ class TracedStarImage:
         w = np.broadcast_to(self.spectral_weights(bv), (len(uv), self.table.wavelengths_nm.size))
         bins, _shift = self.table.star_psfs(d, w)
         return _BoundTable(bins, self.table.radius_px, self.table.oversample)
+
+
+def bind_psf_bins(bins, radius_px: int, oversample: int) -> BoundStarImage:
+    """A star image model of given PSF bins ((N, n, n), a :class:`PSFTable`'s layout: e.g. the PSFs the
+    renderer drew), one per star."""
+    return _BoundTable(np.asarray(bins, dtype=float), radius_px, oversample)
