@@ -240,6 +240,8 @@ class StarPipeline:
                        "fixed_pattern": self.fixed_pattern_note,
                        "centroid_map": "none" if s.centroid_map is None else
                        f"ground map of the traced lens (B−V {s.centroid_map.reference_bv:g}, σ {s.centroid_map.sigma_px:g} px)",
+                       "centroider": c.centroid_method if self.psf_model is None else
+                       "forward model: " + "; ".join(self.psf_model.includes),
                        "reasons": [i.reason for i in self.ident if not i.ok],
                        "refraction": "off (no site and time)" if self.refraction is None else
                        "on: {:.4f}°, {:.4f}°, {:.0f} m, {:.1f} hPa, {:.1f} °C".format(
