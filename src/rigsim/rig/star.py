@@ -217,7 +217,11 @@ class Calibration(_Model):
     weighting: Literal["propagated", "diagonal"] = "propagated"
     ads_variant: Literal["exact", "improved"] = "exact"
     process_noise_px: float = Field(0.0, ge=0.0, le=100.0, description="EKF process noise per frame (1σ)")
-    centroid_method: Literal["gauss", "wcom", "tcom"] = "gauss"
+    centroid_method: Literal["gauss", "wcom", "tcom", "model"] = Field(
+        "gauss", description="'gauss': a Gaussian fitted with its width; 'wcom' / 'tcom': windowed / thresholded "
+                             "centre of mass; 'model': the image the optics predict (the traced lens's PSF with "
+                             "[effects.traced_psf] on, else the [sensor.psf] Gaussian) fitted by maximum likelihood, "
+                             "positions at the camera model's image point (docs/effects-star.md)")
     distortion_terms: Literal["auto", "none", "k1", "k1,k2"] = Field(
         "auto", description="distortion fitted with the intrinsics and attitudes together (the joint fit): 'auto' "
                             "= k1, and k2 when the data support it (χ² lower by more than 9)")
@@ -273,6 +277,22 @@ class CentroidMapSpec(_Model):
     oversample: int
 
 
+class TracedLensSpec(_Model):
+    """The lens design the star images come from when ``[effects.traced_psf]`` is on, as the pipeline's
+    forward-model centroider (``centroid_method = "model"``) knows it: the ``[sensor]`` optics and the
+    ``[effects.traced_psf]`` band and sampling (the design, not a measurement of the instrument)."""
+
+    aperture_diameter_mm: float
+    reference_wavelength_nm: float
+    defocus_um: float
+    band_min_nm: float
+    band_max_nm: float
+    wavelengths: int
+    field_nodes: int
+    pupil_rays: int
+    oversample: int
+
+
 class NominalSensor(_Model):
     """The star sensor as the estimators know it: the detector and optics design (resolution, pitch,
     PSF, detector settings) and the ``[nominal]`` intrinsics. :meth:`StarRig.nominal_rig` builds it."""
@@ -290,6 +310,7 @@ class NominalSensor(_Model):
     psf_sigma_px: float
     detector: DetectorConfig
     centroid_map: CentroidMapSpec | None = None
+    traced_lens: TracedLensSpec | None = None
 
     @property
     def f_px(self) -> float:
@@ -352,6 +373,16 @@ class StarRig(_Model):
                                defocus_um=s.psf.defocus_um, band_min_nm=tp.band_min_nm, band_max_nm=tp.band_max_nm,
                                wavelengths=tp.wavelengths, pupil_rays=tp.pupil_rays, oversample=tp.oversample)
 
+    def traced_lens_spec(self) -> TracedLensSpec | None:
+        """The lens design of ``[effects.traced_psf]`` when it is on (None: the ``[sensor.psf]`` Gaussian)."""
+        s, tp = self.sensor, self.effects.traced_psf
+        if not tp.enabled:
+            return None
+        return TracedLensSpec(aperture_diameter_mm=s.aperture_diameter_mm, reference_wavelength_nm=s.psf.wavelength_nm,
+                              defocus_um=s.psf.defocus_um, band_min_nm=tp.band_min_nm, band_max_nm=tp.band_max_nm,
+                              wavelengths=tp.wavelengths, field_nodes=tp.field_nodes, pupil_rays=tp.pupil_rays,
+                              oversample=tp.oversample)
+
     def nominal_rig(self) -> NominalStarRig:
         """The rig as the estimators may see it (:class:`NominalStarRig`)."""
         s, n = self.sensor, self.nominal_intrinsics
@@ -361,6 +392,7 @@ class StarRig(_Model):
                                principal_point_sigma_px=n.principal_point_sigma_px,
                                psf_sigma_px=psf_sigma_px(s.psf, n.focal_length_mm / s.aperture_diameter_mm,
                                                          s.pixel_pitch_um),
-                               detector=s.detector, centroid_map=self.centroid_map_spec())
+                               detector=s.detector, centroid_map=self.centroid_map_spec(),
+                               traced_lens=self.traced_lens_spec())
         return NominalStarRig(name=self.name, sensor=sensor, sky=self.sky, sequence=self.sequence,
                               identification=self.identification, calibration=self.calibration)

@@ -62,7 +62,17 @@ def bench_centroids(psfs, oversample: int, radius_px: int, nominal: NominalStarR
     px = img.reshape(rows * cell, os_, per_row * cell, os_).sum(axis=(1, 3))
     d = s.detector
     dn = (d.offset_dn + d.gain_dn_per_e * BENCH_SIGNAL_E * px) * d.code_step_dn  # frame DN
-    found = extract_stars(dn, d, s.psf_sigma_px, method=c.centroid_method, repair_single_pixels=c.single_pixel_filter)
+    psf_model = None
+    if c.centroid_method == "model":
+        from rigsim.procedures.star.psf_model import star_image_model
+
+        psf_model = star_image_model(nominal)
+        if s.traced_lens is not None:
+            # the forward model looks a star's PSF up at its field direction; on the bench that is the collimator's
+            # known angle, i.e. the node's own PSF (the bench frame's pixel positions are not field positions)
+            psf_model = _BenchStars(flat[np.arange(k) // len(phases)], chief, radius_px, os_, psf_model.support_px)
+    found = extract_stars(dn, d, s.psf_sigma_px, method=c.centroid_method, repair_single_pixels=c.single_pixel_filter,
+                          psf_model=psf_model)
     out = np.full((k, 2), np.nan)
     if len(found):
         dist = np.linalg.norm(found.uv[None, :, :] - chief[:, None, :], axis=2)
@@ -77,6 +87,24 @@ def bench_centroids(psfs, oversample: int, radius_px: int, nominal: NominalStarR
     full = np.all(np.isfinite(out[..., 0]), axis=1)             # a PSF measured at every phase (else the phases do not cancel)
     res[full] = out[full].mean(axis=1)
     return res.reshape(*lead, 2)
+
+
+class _BenchStars:
+    """The forward-model centroider's star image on the bench: each bench star's own PSF (its node's), found
+    by the chief ray nearest to the star's position."""
+
+    includes = ("the bench node's own PSF",)
+
+    def __init__(self, psfs, chief, radius_px: int, oversample: int, support_px: int):
+        self.psfs, self.chief = psfs, np.asarray(chief, dtype=float)
+        self.radius_px, self.oversample, self.support_px = int(radius_px), int(oversample), int(support_px)
+
+    def bind(self, uv, bv=None):
+        from rigsim.optics.star_image_model import bind_psf_bins
+
+        uv = np.atleast_2d(np.asarray(uv, dtype=float))
+        j = np.argmin(np.linalg.norm(uv[:, None, :] - self.chief[None, :, :], axis=2), axis=1)
+        return bind_psf_bins(self.psfs[j], self.radius_px, self.oversample)
 
 
 def fill_missing(shift) -> np.ndarray:

@@ -23,9 +23,10 @@ from rigsim.estimation.star_joint import joint_calibration
 from rigsim.estimation.star_lis import identify_lost_in_space
 from rigsim.imaging import Flag
 from rigsim.imaging.cosmetics import sequence_fixed_pattern, subtract_pattern
-from rigsim.imaging.stars import Observations, extract_stars
+from rigsim.imaging.stars import Observations, extract_stars, refit_windows, star_windows
 from rigsim.optics.sky import SkyCatalogue
 from rigsim.procedures.star.ground_map import corrected_centroids, ground_centroid_map
+from rigsim.procedures.star.psf_model import star_image_model
 from rigsim.rig.star import NominalStarRig
 
 __all__ = [
@@ -108,6 +109,12 @@ class StarPipeline:
         self.identification = identification
         self.camera = nominal.sensor.camera()
         self.centroid_map = ground_centroid_map(nominal)
+        # the forward-model centroider's star image (the traced lens's PSF or the Gaussian)
+        self.psf_model = star_image_model(nominal) if nominal.calibration.centroid_method == "model" else None
+        # a traced model's PSF depends on the star's field direction and colour: the identified stars' windows are
+        # kept, fitted again with the catalogue colour, and again through the first calibrated camera
+        self._traced_model = getattr(self.psf_model, "table", None) is not None
+        self._windows: list = []
         self.usable: list[Observations] = []
         self.ident: list[IdentResult] = []
         self.frames_obs: list[FrameObs] = []
@@ -122,7 +129,8 @@ class StarPipeline:
         self._extractions = extractions
         c, s = nominal.calibration, nominal.sensor
         self._extraction_settings = (s.detector.model_dump_json(), s.psf_sigma_px, c.centroid_method,
-                                     c.single_pixel_filter, c.poor_fit_reference, c.background)
+                                     c.single_pixel_filter, c.poor_fit_reference, c.background,
+                                     None if s.traced_lens is None else s.traced_lens.model_dump_json())
 
     def _refract(self, k: int, dirs: np.ndarray) -> np.ndarray:
         if self.refraction is None:
@@ -146,13 +154,13 @@ class StarPipeline:
         if found is None:
             found = extract_stars(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px,
                                   method=c.centroid_method, repair_single_pixels=c.single_pixel_filter,
-                                  poor_fit=c.poor_fit_reference, background=c.background)
+                                  poor_fit=c.poor_fit_reference, background=c.background, psf_model=self.psf_model)
             if self._extractions is not None:
                 self._extractions[key] = found
         keep = found.usable
         if c.reject_poor_fits:
             keep = keep & ((found.flags & int(Flag.POOR_FIT)) == 0)
-        usable = found.subset(np.flatnonzero(keep))
+        usable = found_kept = found.subset(np.flatnonzero(keep))
         if self.centroid_map is not None:  # the ground calibration of the lens's centroid shift ([nominal] centroid_map)
             usable = replace(usable, uv=corrected_centroids(usable.uv, self.centroid_map, self.camera))
         t1 = time.perf_counter()
@@ -166,6 +174,17 @@ class StarPipeline:
                              match_tolerance_px=idc.match_tolerance_px, min_matches=idc.min_matches)
         self.times["extract"] += t1 - t0
         self.times["identify"] += time.perf_counter() - t1
+        win = None
+        if ident.ok and self._traced_model:
+            # the traced PSF depends on the star's colour: the identified stars fitted again with the catalogue's B−V
+            t2 = time.perf_counter()
+            win = star_windows(subtract_pattern(obs.dn, self.fixed_pattern), s.detector, s.psf_sigma_px, found_kept,
+                               ident.obs_index, self.psf_model.support_px, bv=self.sky.catalogue.bv_mag[ident.cat_index],
+                               repair_single_pixels=c.single_pixel_filter)
+            raw = refit_windows(found_kept, win, self.psf_model, s.detector)
+            usable = replace(raw, uv=corrected_centroids(raw.uv, self.centroid_map, self.camera))
+            self.times["extract"] += time.perf_counter() - t2
+        self._windows.append((win, found_kept))
         self.counts["detected"] += len(found)
         self.counts["usable"] += len(usable)
         self.usable.append(usable)
@@ -192,12 +211,20 @@ class StarPipeline:
             # intrinsics and every attitude fitted together; without a prior attitude the frames are
             # identified again with each round's camera (lost in space starts from the nominal one)
             lis = self.identification == "lost-in-space"
-            joint = joint_calibration(self.usable, self.ident, self.sky, self.camera,
-                                      prior_sigma={"f": s.focal_length_sigma_px, "u0": s.principal_point_sigma_px,
-                                                   "v0": s.principal_point_sigma_px},
-                                      distortion=c.distortion_terms,
-                                      match_tolerance_px=self.nominal.identification.match_tolerance_px,
-                                      reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
+
+            def joint_fit():
+                return joint_calibration(self.usable, self.ident, self.sky, self.camera,
+                                         prior_sigma={"f": s.focal_length_sigma_px, "u0": s.principal_point_sigma_px,
+                                                      "v0": s.principal_point_sigma_px},
+                                         distortion=c.distortion_terms,
+                                         match_tolerance_px=self.nominal.identification.match_tolerance_px,
+                                         reidentify=lis, held_out=len(self.ident) >= 2, dirs_transform=self._refract)
+            joint = joint_fit()
+            if self._traced_model and joint.bundle.success:
+                # the traced PSF's shape follows the star's angle from the optical axis: the identified stars fitted
+                # again with their model looked up through the calibrated camera, then the joint fit again
+                self._refit_through(joint.bundle.theta)
+                joint = joint_fit()
             if lis:
                 lis_ident = list(self.ident)
                 self.ident = joint.ident
@@ -213,6 +240,8 @@ class StarPipeline:
                        "fixed_pattern": self.fixed_pattern_note,
                        "centroid_map": "none" if s.centroid_map is None else
                        f"ground map of the traced lens (B−V {s.centroid_map.reference_bv:g}, σ {s.centroid_map.sigma_px:g} px)",
+                       "centroider": c.centroid_method if self.psf_model is None else
+                       "forward model: " + "; ".join(self.psf_model.includes),
                        "reasons": [i.reason for i in self.ident if not i.ok],
                        "refraction": "off (no site and time)" if self.refraction is None else
                        "on: {:.4f}°, {:.4f}°, {:.0f} m, {:.1f} hPa, {:.1f} °C".format(
@@ -238,6 +267,22 @@ class StarPipeline:
                                                                   estimate=est, weighting=weighting, p12=p12,
                                                                   max_stars=c.max_stars_per_frame)
         return out
+
+
+    def _refit_through(self, theta) -> None:
+        """The identified stars' kept windows fitted again, the traced model's field directions taken through
+        the camera of ``theta`` = (f, u0, v0, k1, k2) (the first calibration), and ``usable`` updated."""
+        f, u0, v0, k1, k2 = (float(x) for x in theta[:5])
+        model = replace(self.psf_model, camera=self.nominal.sensor.camera(f_px=f, principal_point_px=(u0, v0), k1=k1, k2=k2))
+        t0 = time.perf_counter()
+        for k, (win, found_kept) in enumerate(self._windows):
+            if win is None:
+                continue
+            raw = refit_windows(found_kept, win, model, self.nominal.sensor.detector)
+            self.usable[k] = replace(raw, uv=corrected_centroids(raw.uv, self.centroid_map, self.camera))
+            o = self.usable[k].subset(self.ident[k].obs_index)
+            self.frames_obs[k] = FrameObs(o.uv, o.sigma_uv, self.ident[k].dirs_icrs, o.flux)
+        self.times["extract"] += time.perf_counter() - t0
 
 
 MIN_PATTERN_MOTION_PX = 3.0

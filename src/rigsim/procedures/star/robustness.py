@@ -43,7 +43,8 @@ def effect_names(rig) -> tuple[str, ...]:
 def _describe(cal, sensor) -> str:
     return (f"single-pixel filter {'on' if cal.single_pixel_filter else 'off'}, fixed pattern: {cal.fixed_pattern}, "
             f"poor fits {'rejected against the ' + cal.poor_fit_reference if cal.reject_poor_fits else 'kept'}"
-            + ("" if sensor.centroid_map is None else ", ground centroid map of the traced lens"))
+            + ("" if sensor.centroid_map is None else ", ground centroid map of the traced lens")
+            + ("" if cal.centroid_method == "gauss" else f", centroids: {cal.centroid_method}"))
 
 
 def pipeline_variants(rig) -> dict[str, object]:
