@@ -259,27 +259,8 @@ class Study(_Model):
     seed: int = Field(4, ge=0)
 
 
-class CentroidMapSpec(_Model):
-    """The ``[nominal] centroid_map = "traced_lens"`` ground calibration as the pipeline knows it: the lens
-    design it was measured on (``[sensor]`` optics, ``[effects.traced_psf]`` band and sampling), the
-    reference star colour and the bench's error (rigsim.procedures.star.ground_map builds the map)."""
-
-    reference_bv: float
-    sigma_px: float
-    seed: int
-    aperture_diameter_mm: float
-    reference_wavelength_nm: float
-    defocus_um: float
-    band_min_nm: float
-    band_max_nm: float
-    wavelengths: int
-    pupil_rays: int
-    oversample: int
-
-
-class TracedLensSpec(_Model):
-    """The lens design the star images come from when ``[effects.traced_psf]`` is on, as the pipeline's
-    forward-model centroider (``centroid_method = "model"``) knows it: the ``[sensor]`` optics and the
+class _LensDesign(_Model):
+    """The traced lens's design as the pipeline knows it: the ``[sensor]`` optics and the
     ``[effects.traced_psf]`` band and sampling (the design, not a measurement of the instrument)."""
 
     aperture_diameter_mm: float
@@ -288,9 +269,25 @@ class TracedLensSpec(_Model):
     band_min_nm: float
     band_max_nm: float
     wavelengths: int
-    field_nodes: int
     pupil_rays: int
     oversample: int
+
+
+class CentroidMapSpec(_LensDesign):
+    """The ``[nominal] centroid_map = "traced_lens"`` ground calibration as the pipeline knows it: the lens
+    design it was measured on, the reference star colour and the bench's error
+    (rigsim.procedures.star.ground_map builds the map)."""
+
+    reference_bv: float
+    sigma_px: float
+    seed: int
+
+
+class TracedLensSpec(_LensDesign):
+    """The lens design the star images come from when ``[effects.traced_psf]`` is on, as the pipeline's
+    forward-model centroider (``centroid_method = "model"``) knows it, with the PSF table's field nodes."""
+
+    field_nodes: int
 
 
 class NominalSensor(_Model):
