@@ -31,15 +31,29 @@ __all__ = ["measure_concentricity", "null_step", "parse_reading", "read_autocoll
 FREE_AXES = ("X", "Y")
 
 
-def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray) -> dict:
+def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray, *,
+                          method: str = "moments") -> dict:
     """Hole and spot centres on the screen (mm) and their offset (mm and aiming-camera px, spot −
     hole) from a hole frame (the spot blocked) and a spot frame, with the nominal screen homography
-    and the aiming camera's ``hole_background`` fit."""
+    and the aiming camera's ``hole_background`` fit. ``method="model"``: the spot's centre from the
+    forward-model fit of the spot frame (:func:`rigsim.procedures.cube_mirror.model_spots.fit_screen_spot`,
+    starting from the moments'; keys ``spot_sigma_mm``, ``spot_chi2_dof`` and ``spot_problem`` added;
+    the spot is NaN when the fit is refused)."""
+    if method not in ("moments", "model"):
+        raise ValueError(f"method = {method!r}: 'moments' or 'model'")
     ac = rig.aiming_camera
     if rig.procedure.method != "diaphragm" or ac is None:
         raise InputError(f"rig {rig.name!r} has no diaphragm screen and aiming camera (seed 000's method)")
-    return hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
-                            offset_dn=ac.detector.offset_dn * ac.detector.code_step_dn, background=ac.hole_background)
+    m = hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
+                         offset_dn=ac.detector.offset_dn * ac.detector.code_step_dn, background=ac.hole_background)
+    if method == "model":
+        from rigsim.procedures.cube_mirror.model_spots import fit_screen_spot
+
+        r, _ = fit_screen_spot(rig, hole_dn, spot_dn, hole_mm=m["hole_mm"], start_mm=m["spot_mm"])
+        sc = r["spot_mm"] if r["problem"] is None else np.full(2, np.nan)
+        m.update(spot_mm=sc, offset_mm=sc - m["hole_mm"], offset_px=(sc - m["hole_mm"]) / ac.object_pixel_mm,
+                 spot_sigma_mm=r["sigma_mm"], spot_chi2_dof=r["chi2_dof"], spot_problem=r["problem"])
+    return m
 
 
 def null_step(rig: CubeMirrorRig, reading_rad: Mapping[str, float], offset_px, axis_order: str | None = None) -> dict:
@@ -114,13 +128,26 @@ def autocollimator_roi_px(rig: CubeMirrorRig, target: str | None = None) -> int:
 
 
 def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
-                        target: str | None = None) -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
+                        target: str | None = None, *, method: str = "tcom") -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
     """The autocollimator's reading (θx, θy) in arcsec of one frame, its 1σ (the centroid's noise
     through the calibration), and the spot measurement (centroid window
     :func:`autocollimator_roi_px` of ``target``, the frame's mirror if known). The reading is NaN
-    when the spot is not measurable (``SpotMeasurement.problem`` says why)."""
+    when the spot is not measurable (``SpotMeasurement.problem`` says why). ``method="model"``: the
+    spot's forward-model fit (:func:`rigsim.procedures.cube_mirror.model_spots.fit_autocollimator_spot`;
+    needs ``target``)."""
+    if method not in ("tcom", "model"):
+        raise ValueError(f"method = {method!r}: 'tcom' or 'model'")
     optics = optics if optics is not None else autocollimator_optics(rig)
-    sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig, target))
+    if method == "model":
+        targets = autocollimator_targets(rig)
+        if target not in targets:
+            raise InputError(f"the autocollimator's spot model needs the frame's mirror (target: {', '.join(targets)})")
+        from rigsim.procedures.cube_mirror.model_spots import fit_autocollimator_spot
+
+        sm, _ = fit_autocollimator_spot(rig, dn, targets[target], optics=optics,
+                                        roi_px=autocollimator_roi_px(rig, target))
+    else:
+        sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig, target))
     if not sm.ok:
         return np.full(2, np.nan), np.full(2, np.nan), sm
     m = optics.reading(sm.uv) * ARCSEC_PER_RAD
