@@ -100,9 +100,10 @@ def test_the_fit_attains_the_crlb_and_the_moments_carry_the_holes_bias():
     away from the hole by the light lost into it: (a/R)² of the spot's offset from the hole."""
     c = np.array([0.37, -0.52])
     uvc = plane_to_uv(H, c)
-    pad = (A + R) / AC.object_pixel_mm * 1.2
-    o = (int(uvc[0] - pad), int(uvc[1] - pad))
-    shape = (int(2 * pad), int(2 * pad))
+    ang = np.linspace(0.0, 2 * math.pi, 256, endpoint=False)
+    rim = plane_to_uv(H, c + (A + R) * np.stack([np.cos(ang), np.sin(ang)], 1))
+    o = (int(rim[:, 0].min()) - 4, int(rim[:, 1].min()) - 4)
+    shape = (int(rim[:, 1].max()) + 5 - o[1], int(rim[:, 0].max()) + 5 - o[0])
     m = ScreenSpotModel(H, o, shape, A, R, hole_centre_st=(0.0, 0.0), hole_radius_mm=A)
     ref = second_method(c, o, shape, gs=0.01) * m.keep
     K = DET.gain_dn_per_e
