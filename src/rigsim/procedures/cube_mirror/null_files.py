@@ -271,6 +271,9 @@ def add_cli(groups: dict) -> None:
                    help="the offset (spot − hole, aiming-camera px) at which your aiming camera shows concentricity: its "
                         "mounting offset, as your procedure defines the null (`run cube-mirror --export-frames` writes the "
                         "campaign's in null_frames.csv); default 0,0")
+    c.add_argument("--method", default="moments", choices=["moments", "model"],
+                   help="the spot's centre: the moments of spot − hole, or the forward model of the divergent spot "
+                        "fitted to the spot frame (docs/forward-model-spots.md)")
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
@@ -283,6 +286,11 @@ def add_cli(groups: dict) -> None:
                                    "the instrument's reading with its nominal calibration.")
     r.add_argument("frame", metavar="FRAME", help="autocollimator frame (PNG/TIFF/FITS)")
     r.add_argument("--rig", default="sun_sensor_3axis_autocollimator", help="rig file or default name")
+    r.add_argument("--method", default="tcom", choices=["tcom", "model"],
+                   help="the spot's centroid: thresholded centre of mass, or the forward model of the return spot "
+                        "fitted by maximum likelihood (needs --target; docs/forward-model-spots.md)")
+    r.add_argument("--target", default=None, choices=["face", "plane_mirror"],
+                   help="the frame's mirror (default: not known; the centroid window is the largest)")
     r.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(r)
     r.set_defaults(func=cmd_autocollimator_read)
@@ -320,7 +328,10 @@ def cmd_concentricity(args) -> int:
     shape = tuple(rig.aiming_camera.resolution_px[::-1])
     hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
     spot = read_image(args.spot, shape=shape, what="aiming-camera frame")
-    m = measure_concentricity(rig, hole, spot)
+    method = getattr(args, "method", "moments")
+    m = measure_concentricity(rig, hole, spot, method=method)
+    if method == "model" and m.get("spot_problem"):
+        raise InputError(f"{args.spot}: {m['spot_problem']}")
     q = concentricity_quality(rig, m, hole, spot)
     verdict = judge(q, [("HOLE and SPOT swapped", lambda: concentricity_quality(
         rig, measure_concentricity(rig, spot, hole), spot, hole, ("SPOT", "HOLE")))], accept=args.accept_poor_fit,
@@ -366,7 +377,7 @@ def cmd_autocollimator_read(args) -> int:
     if rig.autocollimator is None:
         raise CliError(f"--rig {args.rig}: no autocollimator (seed 001's method); this rig uses {rig.procedure.method}")
     dn = read_image(args.frame, shape=tuple(rig.autocollimator.resolution_px[::-1]), what="autocollimator frame")
-    m, sig, sm = read_autocollimator(rig, dn)
+    m, sig, sm = read_autocollimator(rig, dn, None, getattr(args, "target", None), method=getattr(args, "method", "tcom"))
     if not sm.ok:
         raise InputError(f"{args.frame}: {sm.problem}")
     problems, noise = frame_noise_problems(rig, "autocollimator", {str(args.frame): dn})
