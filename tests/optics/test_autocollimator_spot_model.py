@@ -37,7 +37,7 @@ def test_the_model_is_the_renderers_image_and_its_centre_the_rays_mean(face):
     into pixels before convolving with the pixel-integrated PSF: one pixel box more and the binned
     ring's aliasing, 4.3 % at worst); the same light in the window to 0.2 %; the model's first moment at the ray centroid of a
     trace with 3× its rays is that centroid to 1e-3 px. Without the diffraction the peak is 2.4×
-    too high and the test fails."""
+    too high and the test fails. With ``construction="renderer"`` the model is the renderer's image."""
     m, sp, c, o = face
     W, Hk = 59, HALF_K
     win = (o[0] - Hk, o[1] - Hk, W + 2 * Hk, W + 2 * Hk)
@@ -52,6 +52,9 @@ def test_the_model_is_the_renderers_image_and_its_centre_the_rays_mean(face):
     assert np.array([(big * u).sum(), (big * v).sum()]) / big.sum() + o - 45 == pytest.approx(c, abs=1e-3)
     geo = AutocollimatorSpotModel(OPTICS, m, o, (W, W), diffraction_half_px=None)(*c)
     assert geo.max() > 2.0 * ref.max()
+    # built as the renderer builds it (binning first), the model is its image to 0.5 % of the peak
+    ren = AutocollimatorSpotModel(OPTICS, m, o, (W, W), diffraction_half_px=Hk, construction="renderer")(*c)
+    assert np.abs(ren - ref).max() < 0.005 * ref.max()
 
 
 @pytest.mark.slow

@@ -63,10 +63,15 @@ class AutocollimatorSpotModel:
     centroid is at (u, v). ``optics``: the instrument (:class:`AutocollimatorOptics`, with its beam
     splitter if it has one). ``diffraction_half_px``: the PSF's half extent (None: no diffraction,
     a ray-optics image). ``n_rays``: the trace's rays; ``step_px``: the grid (1/m px).
-    ``effects`` lists what the model holds."""
+    ``construction``: ``"optics"`` (the PSF applied to the continuous image, then the pixel's
+    box) or ``"renderer"`` (as rigsim's renderer draws frames: the rays binned into pixels, then
+    the per-pixel kernel; it aliases a sharp ring by up to 0.006 px). ``effects`` lists what the
+    model holds."""
 
     def __init__(self, optics, mirror, origin_uv, shape_hw, *, diffraction_half_px: int | None = 32,
-                 n_rays: int = 400_000, step_px: float = 0.125, double_box: bool = False):
+                 n_rays: int = 400_000, step_px: float = 0.125, construction: str = "optics"):
+        if construction not in ("optics", "renderer"):
+            raise ValueError(f"construction = {construction!r}: 'optics' or 'renderer'")
         m = round(1.0 / step_px)
         if m < 1 or abs(m * step_px - 1.0) > 1e-9:
             raise ValueError(f"step_px = {step_px!r}: must be 1/m for an integer m >= 1")
@@ -86,11 +91,22 @@ class AutocollimatorSpotModel:
         effects = ["reticle point image (exact trace: objective aberrations, mirror outline, stop)"]
         if optics.beam_splitter is not None:
             effects.append("beam splitter plate")
-        if diffraction_half_px is None:
+        if diffraction_half_px is None or construction == "renderer":
             # one pixel's sum: m cells (centres offset by (m-1)/2 cells)
             c = np.cumsum(np.pad(img, ((1, 0), (1, 0))), axis=0).cumsum(axis=1)
             P = c[m:, m:] - c[:-m, m:] - c[m:, :-m] + c[:-m, :-m]
             self._first = ((m - 1) / 2.0 - half * m) * step_px
+            if diffraction_half_px is not None:
+                # rigsim's renderer: the rays binned into pixels, then that pixel image convolved with the
+                # per-pixel kernel; at every sub-pixel phase that is P convolved with the kernel's samples
+                # placed every m cells
+                from scipy.signal import fftconvolve
+
+                Kp = optics.diffraction_kernel(mirror, half_px=half_k)
+                Ks = np.zeros((2 * half_k * m + 1, 2 * half_k * m + 1))
+                Ks[::m, ::m] = Kp
+                P = fftconvolve(P, Ks, mode="same")
+                effects.append("return-pupil diffraction (as rigsim's renderer applies it: after pixel binning)")
         else:
             from scipy.signal import fftconvolve
 
@@ -98,13 +114,6 @@ class AutocollimatorSpotModel:
             P = fftconvolve(img, K, mode="same")
             self._first = -half * m * step_px
             effects.append("return-pupil diffraction")
-            if double_box:
-                # rigsim's renderer bins the rays into pixels, then convolves that pixel image with the
-                # pixel-integrated PSF: one pixel box more than the optics have (a blur of 1/12 px²)
-                c = np.cumsum(np.pad(P, ((1, 0), (1, 0))), axis=0).cumsum(axis=1)
-                P = (c[m:, m:] - c[:-m, m:] - c[m:, :-m] + c[:-m, :-m]) / (m * m)
-                self._first += (m - 1) / 2.0 * step_px
-                effects.append("the renderer's second pixel box")
         self._step = step_px
         self._coef = spline_filter(P, order=3, mode="constant")
         self.effects = tuple(effects)

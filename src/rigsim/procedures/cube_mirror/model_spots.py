@@ -35,7 +35,8 @@ model leaves out, a wrong target, a defect)."""
 
 # ------------------------------------------------------------------------------ autocollimator
 def fit_autocollimator_spot(rig: CubeMirrorRig, dn: np.ndarray, mirror: tuple[str, float], *, optics,
-                            roi_px: int, n_rays: int = 400_000) -> tuple[SpotMeasurement, ModelFit | None]:
+                            roi_px: int, n_rays: int = 400_000,
+                            construction: str = "optics") -> tuple[SpotMeasurement, ModelFit | None]:
     """The autocollimator's return spot on a full DN frame of the mirror ``mirror`` = (outline
     ``"square"`` or ``"disk"``, size mm: the frame's target in
     :func:`~rigsim.procedures.cube_mirror.null_files.autocollimator_targets`) by forward-model
@@ -43,7 +44,10 @@ def fit_autocollimator_spot(rig: CubeMirrorRig, dn: np.ndarray, mirror: tuple[st
     refusals), then the model of that mirror as the rig describes it (centred, at the instrument's
     distance) tilted to the first estimate's reading (``optics``: the nominal instrument), fitted on
     the same window. Returns the measurement (``uv``: the spot's ray centroid, what the calibration
-    reads; ``sigma_uv`` from the fit) and the fit (None when the first estimate was refused)."""
+    reads; ``sigma_uv`` from the fit) and the fit (None when the first estimate was refused).
+    ``construction``: ``"optics"`` (the instrument's image) or ``"renderer"`` (the image as rigsim's
+    renderer draws it, diffraction applied after pixel binning: for rigsim's own frames;
+    :class:`AutocollimatorSpotModel`)."""
     from rigsim.optics.autocollimator import diffraction_half_px, peak_over_noise, retilt
     from rigsim.optics.autocollimator_spot_model import AutocollimatorSpotModel
 
@@ -66,7 +70,8 @@ def fit_autocollimator_spot(rig: CubeMirrorRig, dn: np.ndarray, mirror: tuple[st
     if o[0] < 0 or o[1] < 0 or o[0] + W > a.shape[1] or o[1] + W > a.shape[0]:
         return replace(sm, uv=None, problem="the spot's fit window leaves the detector"), None
     roi = a[o[1]:o[1] + W, o[0]:o[0] + W]
-    model = AutocollimatorSpotModel(optics, tilted, o, (W, W), diffraction_half_px=half_k, n_rays=n_rays)
+    model = AutocollimatorSpotModel(optics, tilted, o, (W, W), diffraction_half_px=half_k, n_rays=n_rays,
+                                    construction=construction)
     f = fit_spot_model(roi, model, NoiseModel.from_detector(det), *sm.uv, mask=roi < float(det.saturation_dn),
                        effects=model.effects)
     if not f.ok:

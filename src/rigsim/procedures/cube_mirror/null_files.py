@@ -128,13 +128,14 @@ def autocollimator_roi_px(rig: CubeMirrorRig, target: str | None = None) -> int:
 
 
 def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
-                        target: str | None = None, *, method: str = "tcom") -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
+                        target: str | None = None, *, method: str = "tcom",
+                        construction: str = "optics") -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
     """The autocollimator's reading (θx, θy) in arcsec of one frame, its 1σ (the centroid's noise
     through the calibration), and the spot measurement (centroid window
     :func:`autocollimator_roi_px` of ``target``, the frame's mirror if known). The reading is NaN
     when the spot is not measurable (``SpotMeasurement.problem`` says why). ``method="model"``: the
     spot's forward-model fit (:func:`rigsim.procedures.cube_mirror.model_spots.fit_autocollimator_spot`;
-    needs ``target``)."""
+    needs ``target``; ``construction="renderer"`` for rigsim's rendered frames)."""
     if method not in ("tcom", "model"):
         raise ValueError(f"method = {method!r}: 'tcom' or 'model'")
     optics = optics if optics is not None else autocollimator_optics(rig)
@@ -145,7 +146,7 @@ def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
         from rigsim.procedures.cube_mirror.model_spots import fit_autocollimator_spot
 
         sm, _ = fit_autocollimator_spot(rig, dn, targets[target], optics=optics,
-                                        roi_px=autocollimator_roi_px(rig, target))
+                                        roi_px=autocollimator_roi_px(rig, target), construction=construction)
     else:
         sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig, target))
     if not sm.ok:
