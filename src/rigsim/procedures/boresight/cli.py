@@ -68,8 +68,9 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--camera", required=True, help="the camera's name in the rig file")
     c.add_argument("--m1", nargs="+", required=True, metavar="FRAME", help="ROI frames of detector M1")
     c.add_argument("--m2", nargs="+", required=True, metavar="FRAME", help="ROI frames of detector M2, in the same order")
-    c.add_argument("--method", default="tcom", choices=["tcom", "tcom_peak", "wcom", "gauss"],
-                   help="centroider (seed 003: tcom; tcom_peak: the peak's blob only, leaves out a ghost)")
+    c.add_argument("--method", default="tcom", choices=["tcom", "tcom_peak", "wcom", "gauss", "model"],
+                   help="centroider (seed 003: tcom; tcom_peak: the peak's blob only, leaves out a ghost; model: "
+                        "the core's image fitted by maximum likelihood, docs/forward-model-spots.md)")
     c.add_argument("--out", required=True, metavar="FILE", help="spot table (.csv or .parquet)")
     c.set_defaults(func=cmd_boresight_centroid)
     declare(c, "out", suffixes=(".csv", ".parquet"))

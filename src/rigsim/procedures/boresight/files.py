@@ -18,8 +18,8 @@ from rigsim.estimation.dvad import BoresightEstimate, DVADSolver, estimate
 from rigsim.estimation.fit_quality import FitQuality, judge_residuals, not_judged
 from rigsim.files import Column, read_image, read_table
 from rigsim.imaging import NoiseModel
-from rigsim.imaging.rois import centroid_rois
 from rigsim.optics.line_camera import CameraGeometry
+from rigsim.procedures.boresight.model_spot import roi_centroids
 from rigsim.rig.boresight import BoresightRig
 
 __all__ = ["SIGMA_COLUMNS", "SPOT_COLUMNS", "camera_geometry", "spot_sigmas", "centroid_roi_files", "read_spot_rows", "reference_spots",
@@ -38,13 +38,16 @@ def camera_geometry(rig: BoresightRig, camera: str) -> CameraGeometry:
 
 
 def centroid_roi_files(rig: BoresightRig, camera: str, m1: Sequence, m2: Sequence, *, method: str = "tcom") -> dict:
-    """The spot table of pairs of ROI files (i-th M1 with i-th M2) of one camera."""
+    """The spot table of pairs of ROI files (i-th M1 with i-th M2) of one camera. ``method``: a
+    centroider of :func:`rigsim.imaging.centroid`, or ``"model"`` (the core's image fitted:
+    :mod:`rigsim.procedures.boresight.model_spot`)."""
     if len(m1) != len(m2):
         raise InputError(f"--m1 has {len(m1)} frames and --m2 {len(m2)}; expected one M2 frame per M1 frame")
     from rigsim.files.inputs import check_distinct
 
     check_distinct([*m1, *m2], "--m1/--m2", by_name=False, what="ROI frame")
     geom = camera_geometry(rig, camera)
+    cam_index = [c.name for c in rig.cameras].index(camera)
     w = rig.orbit.window_px
     noise = NoiseModel.from_detector(rig.detector)
     cols: dict[str, list] = {k: [] for k in ("sample", "camera", "m1_frame", "m2_frame", "u_m1_px", "v_m1_px",
@@ -54,7 +57,7 @@ def centroid_roi_files(rig: BoresightRig, camera: str, m1: Sequence, m2: Sequenc
         uv, sig = [], []
         for j, p in enumerate(pair):
             dn = read_image(p, shape=(w, w), what=f"M{j + 1} ROI")
-            m = centroid_rois(dn, [geom.roi_origin(j, w)], method=method, noise=noise)
+            m = roi_centroids(rig, dn, [geom.roi_origin(j, w)], method=method, noise=noise, camera=cam_index)
             if not m.valid.all():
                 from rigsim.imaging import Flag
 

@@ -244,7 +244,8 @@ def run_orbit(rig: BoresightRig, *, seed: int = 2023, progress=None, centroider:
     """Render the four CMOS ROIs at every measurement of the orbit scenario, centroid, estimate
     per camera (DVAD, and the simplified method for comparison), form the relative angle and compare
     with truth. ``progress(n)`` is called after each rendered frame. ``centroider``: a method of
-    :func:`rigsim.imaging.centroid` (default the rig's ``[orbit] centroider``).
+    :func:`rigsim.imaging.centroid` (default the rig's ``[orbit] centroider``), or ``"model"``: the
+    forward-model fit of the core's image (:mod:`rigsim.procedures.boresight.model_spot`).
 
     ``jitter_px``: the same frames are also evaluated with Gaussian noise of this σ added to every
     measured centroid (an *equivalent* centroid error, the paper's 0.1 px: vibration, thermal
@@ -338,10 +339,13 @@ def _orbit_frames(rig, geoms, truth, next_frame, *, seed, progress, centroider, 
     import warnings
 
     from rigsim.imaging import NoiseModel
-    from rigsim.imaging.rois import centroid_rois
+    from rigsim.procedures.boresight.model_spot import roi_centroids
 
     noise = NoiseModel.from_detector(rig.detector)
     o = rig.orbit
+
+    def centroid_rois(rois, origins, *, method, noise, camera):
+        return roi_centroids(rig, rois, origins, method=method, noise=noise, camera=camera)
     n_meas = len(truth.t_min)
     step = 0
 
@@ -367,7 +371,7 @@ def _orbit_frames(rig, geoms, truth, next_frame, *, seed, progress, centroider, 
                     rois.append(fr.dn)
                     origins.append(fr.origin_uv)
                     tick()
-                m = centroid_rois(np.stack(rois), origins, method=centroider, noise=noise)
+                m = centroid_rois(np.stack(rois), origins, method=centroider, noise=noise, camera=c)
                 if not m.valid.all():
                     raise RuntimeError(f"reference spot of camera {c} M{j + 1} not measurable")
                 ref_single[c, :, j] = m.uv
@@ -382,7 +386,7 @@ def _orbit_frames(rig, geoms, truth, next_frame, *, seed, progress, centroider, 
                     if on_frame is not None:
                         on_frame("measurement", c, j, k, fr)
                     fidelity.append(float(np.abs(fr.photon_centroid() - np.array(fr.truth["pixel_centroid_uv"])).max()))
-                    m = centroid_rois(fr.dn, [fr.origin_uv], method=centroider, noise=noise)
+                    m = centroid_rois(fr.dn, [fr.origin_uv], method=centroider, noise=noise, camera=c)
                     if not m.valid.all():
                         raise RuntimeError(f"measurement {k}: spot of camera {c} M{j + 1} not measurable")
                     meas[c, k, j] = m.uv[0]

@@ -257,7 +257,9 @@ class FaceReadingMeasurer:
     cube face ``face`` seen by an autocollimator whose true axis is ``axis_rot`` (step A's).
 
     ``rendered=True``: render the DN frame (Mitsuba + detector; ``noiseless`` drops the
-    detector's random terms), centroid it (:func:`measure_spot`, no truth) and convert with the
+    detector's random terms), centroid it (:func:`measure_spot`, no truth; ``spot_method="model"``:
+    the spot's forward-model fit, :func:`read_autocollimator`; ``"model_renderer"``: the same with the
+    image as rigsim's renderer draws it) and convert with the
     instrument's calibrated reading. ``rendered=False``: the exact reading +
     N(0, ``reading_sigma_arcsec``) per component. Call k uses the seed derived from (``seed``, k):
     a run is reproducible from ``seed``. Raises :class:`SearchError` naming the face and the pose
@@ -266,7 +268,7 @@ class FaceReadingMeasurer:
 
     def __init__(self, rig: CubeMirrorRig, real: Realization, face: str, axis_rot, *, rendered: bool = True,
                  reading_sigma_arcsec: float = 0.0, seed: int = 0, spp: int | None = None,
-                 noiseless: bool = False, optics=None, mesh_dir=None, on_frame=None):
+                 noiseless: bool = False, optics=None, mesh_dir=None, on_frame=None, spot_method: str = "tcom"):
         if rig.autocollimator is None:
             raise ValueError(f"rig {rig.name!r} has no autocollimator")
         if face not in real.face_normals_mount:
@@ -280,6 +282,9 @@ class FaceReadingMeasurer:
         self.reading_sigma_arcsec = float(reading_sigma_arcsec)
         self.seed = int(seed)
         self.noiseless = bool(noiseless)
+        if spot_method not in ("tcom", "model", "model_renderer"):
+            raise ValueError(f"spot_method = {spot_method!r}: 'tcom', 'model' or 'model_renderer'")
+        self.spot_method = spot_method  # read_autocollimator's method; "model_renderer": the model of rigsim's frames
         self.calls = 0
         self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
         self.last_reading: dict = {}
@@ -326,7 +331,9 @@ class FaceReadingMeasurer:
         with warnings.catch_warnings(record=True) as wl:
             warnings.simplefilter("always")
             frame = self.renderer.render_frame(pose, seed=seed, noiseless=self.noiseless)
-        m, _sig, sm = read_autocollimator(self.rig, frame.dn, self.optics, "face")  # the `rigsim autocollimator read` stage
+        m, _sig, sm = read_autocollimator(self.rig, frame.dn, self.optics, "face",  # the `rigsim autocollimator read` stage
+                                          method="tcom" if self.spot_method == "tcom" else "model",
+                                          construction="renderer" if self.spot_method == "model_renderer" else "optics")
         rm = measure_reticle(frame.dn, sm, self.roi_px)
         if rm is not None:  # the instrument projects a cross-hair: its centre from two line fits
             sm = rm

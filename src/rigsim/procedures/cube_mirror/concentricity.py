@@ -46,7 +46,8 @@ class OffsetMeasurer:
     """``measure(true_pose_rad) -> (measured px (2,), exact px (2,), flags)`` for one face.
 
     ``renderer`` (a :class:`~rigsim.render.cube_mirror.aiming.ConcentricityRenderer`): rendered frames,
-    fitted by :func:`hole_spot_offset`. ``renderer=None``: the surrogate — the exact trace plus
+    fitted by :func:`hole_spot_offset` (``spot_method="model"``: the spot by its forward model,
+    :func:`measure_concentricity`). ``renderer=None``: the surrogate — the exact trace plus
     N(0, ``sigma_px``) per axis — for Monte-Carlo budgets whose noise was measured on renders.
     Raises :class:`SearchError` when the spot cannot be measured (off the detector, cut by its
     edge, beam off the face, saturated). ``geometry``: this face's
@@ -56,7 +57,7 @@ class OffsetMeasurer:
 
     def __init__(self, rig: CubeMirrorRig, real: Realization, face_index: int, *, renderer=None, seed: int = 0,
                  sigma_px: float = 0.0, rng: np.random.Generator | None = None, noiseless: bool = False,
-                 keep_frames: bool = False, on_frame=None, geometry=None):
+                 keep_frames: bool = False, on_frame=None, geometry=None, spot_method: str = "moments"):
         from rigsim.truth.cube_mirror.placement import diaphragm_layout
 
         self.rig, self.real, self.face_index = rig, real, int(face_index)
@@ -66,6 +67,7 @@ class OffsetMeasurer:
         self.sigma_px = float(sigma_px)
         self.rng = rng if rng is not None else np.random.default_rng(seed)
         self.noiseless = noiseless
+        self.spot_method = spot_method  # "moments" (default) or "model": measure_concentricity's method
         self.bias_px = null_bias_offset_px(rig, real, face_index)
         self.layout = geometry.layout if geometry is not None else diaphragm_layout(rig, real, face_index)
         # the operator's screen → image homography: from the nominal aiming-camera spec only
@@ -121,7 +123,7 @@ class OffsetMeasurer:
             raise SearchError(
                 f"face {self.face}: cannot measure the hole/spot offset at true pose {pose_txt}: {', '.join(bad)}. "
                 "Start the search closer to the null (procedure.search_start_deg) or widen the aiming camera's field.")
-        m = measure_concentricity(self.rig, fr.hole.dn, fr.spot.dn)  # the `rigsim concentricity` stage
+        m = measure_concentricity(self.rig, fr.hole.dn, fr.spot.dn, method=self.spot_method)  # `rigsim concentricity`
         if self.on_frame is not None:
             info = {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
                     "measured_offset_px": np.asarray(m["offset_px"]).tolist(), "face": self.face,

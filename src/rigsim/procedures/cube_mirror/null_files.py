@@ -31,15 +31,29 @@ __all__ = ["measure_concentricity", "null_step", "parse_reading", "read_autocoll
 FREE_AXES = ("X", "Y")
 
 
-def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray) -> dict:
+def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray, *,
+                          method: str = "moments") -> dict:
     """Hole and spot centres on the screen (mm) and their offset (mm and aiming-camera px, spot −
     hole) from a hole frame (the spot blocked) and a spot frame, with the nominal screen homography
-    and the aiming camera's ``hole_background`` fit."""
+    and the aiming camera's ``hole_background`` fit. ``method="model"``: the spot's centre from the
+    forward-model fit of the spot frame (:func:`rigsim.procedures.cube_mirror.model_spots.fit_screen_spot`,
+    starting from the moments'; keys ``spot_sigma_mm``, ``spot_chi2_dof`` and ``spot_problem`` added;
+    the spot is NaN when the fit is refused)."""
+    if method not in ("moments", "model"):
+        raise ValueError(f"method = {method!r}: 'moments' or 'model'")
     ac = rig.aiming_camera
     if rig.procedure.method != "diaphragm" or ac is None:
         raise InputError(f"rig {rig.name!r} has no diaphragm screen and aiming camera (seed 000's method)")
-    return hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
-                            offset_dn=ac.detector.offset_dn * ac.detector.code_step_dn, background=ac.hole_background)
+    m = hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
+                         offset_dn=ac.detector.offset_dn * ac.detector.code_step_dn, background=ac.hole_background)
+    if method == "model":
+        from rigsim.procedures.cube_mirror.model_spots import fit_screen_spot
+
+        r, _ = fit_screen_spot(rig, hole_dn, spot_dn, hole_mm=m["hole_mm"], start_mm=m["spot_mm"])
+        sc = r["spot_mm"] if r["problem"] is None else np.full(2, np.nan)
+        m.update(spot_mm=sc, offset_mm=sc - m["hole_mm"], offset_px=(sc - m["hole_mm"]) / ac.object_pixel_mm,
+                 spot_sigma_mm=r["sigma_mm"], spot_chi2_dof=r["chi2_dof"], spot_problem=r["problem"])
+    return m
 
 
 def null_step(rig: CubeMirrorRig, reading_rad: Mapping[str, float], offset_px, axis_order: str | None = None) -> dict:
@@ -114,13 +128,27 @@ def autocollimator_roi_px(rig: CubeMirrorRig, target: str | None = None) -> int:
 
 
 def read_autocollimator(rig: CubeMirrorRig, dn: np.ndarray, optics=None,
-                        target: str | None = None) -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
+                        target: str | None = None, *, method: str = "tcom",
+                        construction: str = "optics") -> tuple[np.ndarray, np.ndarray, SpotMeasurement]:
     """The autocollimator's reading (θx, θy) in arcsec of one frame, its 1σ (the centroid's noise
     through the calibration), and the spot measurement (centroid window
     :func:`autocollimator_roi_px` of ``target``, the frame's mirror if known). The reading is NaN
-    when the spot is not measurable (``SpotMeasurement.problem`` says why)."""
+    when the spot is not measurable (``SpotMeasurement.problem`` says why). ``method="model"``: the
+    spot's forward-model fit (:func:`rigsim.procedures.cube_mirror.model_spots.fit_autocollimator_spot`;
+    needs ``target``; ``construction="renderer"`` for rigsim's rendered frames)."""
+    if method not in ("tcom", "model"):
+        raise ValueError(f"method = {method!r}: 'tcom' or 'model'")
     optics = optics if optics is not None else autocollimator_optics(rig)
-    sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig, target))
+    if method == "model":
+        targets = autocollimator_targets(rig)
+        if target not in targets:
+            raise InputError(f"the autocollimator's spot model needs the frame's mirror (target: {', '.join(targets)})")
+        from rigsim.procedures.cube_mirror.model_spots import fit_autocollimator_spot
+
+        sm, _ = fit_autocollimator_spot(rig, dn, targets[target], optics=optics,
+                                        roi_px=autocollimator_roi_px(rig, target), construction=construction)
+    else:
+        sm = measure_spot(dn, rig.autocollimator.detector, roi_px=autocollimator_roi_px(rig, target))
     if not sm.ok:
         return np.full(2, np.nan), np.full(2, np.nan), sm
     m = optics.reading(sm.uv) * ARCSEC_PER_RAD
@@ -244,6 +272,9 @@ def add_cli(groups: dict) -> None:
                    help="the offset (spot − hole, aiming-camera px) at which your aiming camera shows concentricity: its "
                         "mounting offset, as your procedure defines the null (`run cube-mirror --export-frames` writes the "
                         "campaign's in null_frames.csv); default 0,0")
+    c.add_argument("--method", default="moments", choices=["moments", "model"],
+                   help="the spot's centre: the moments of spot − hole, or the forward model of the divergent spot "
+                        "fitted to the spot frame (docs/forward-model-spots.md)")
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
@@ -256,6 +287,11 @@ def add_cli(groups: dict) -> None:
                                    "the instrument's reading with its nominal calibration.")
     r.add_argument("frame", metavar="FRAME", help="autocollimator frame (PNG/TIFF/FITS)")
     r.add_argument("--rig", default="sun_sensor_3axis_autocollimator", help="rig file or default name")
+    r.add_argument("--method", default="tcom", choices=["tcom", "model"],
+                   help="the spot's centroid: thresholded centre of mass, or the forward model of the return spot "
+                        "fitted by maximum likelihood (needs --target; docs/forward-model-spots.md)")
+    r.add_argument("--target", default=None, choices=["face", "plane_mirror"],
+                   help="the frame's mirror (default: not known; the centroid window is the largest)")
     r.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(r)
     r.set_defaults(func=cmd_autocollimator_read)
@@ -293,7 +329,10 @@ def cmd_concentricity(args) -> int:
     shape = tuple(rig.aiming_camera.resolution_px[::-1])
     hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
     spot = read_image(args.spot, shape=shape, what="aiming-camera frame")
-    m = measure_concentricity(rig, hole, spot)
+    method = getattr(args, "method", "moments")
+    m = measure_concentricity(rig, hole, spot, method=method)
+    if method == "model" and m.get("spot_problem"):
+        raise InputError(f"{args.spot}: {m['spot_problem']}")
     q = concentricity_quality(rig, m, hole, spot)
     verdict = judge(q, [("HOLE and SPOT swapped", lambda: concentricity_quality(
         rig, measure_concentricity(rig, spot, hole), spot, hole, ("SPOT", "HOLE")))], accept=args.accept_poor_fit,
@@ -339,7 +378,7 @@ def cmd_autocollimator_read(args) -> int:
     if rig.autocollimator is None:
         raise CliError(f"--rig {args.rig}: no autocollimator (seed 001's method); this rig uses {rig.procedure.method}")
     dn = read_image(args.frame, shape=tuple(rig.autocollimator.resolution_px[::-1]), what="autocollimator frame")
-    m, sig, sm = read_autocollimator(rig, dn)
+    m, sig, sm = read_autocollimator(rig, dn, None, getattr(args, "target", None), method=getattr(args, "method", "tcom"))
     if not sm.ok:
         raise InputError(f"{args.frame}: {sm.problem}")
     problems, noise = frame_noise_problems(rig, "autocollimator", {str(args.frame): dn})
