@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.ndimage import spline_filter
-from scipy.ndimage import map_coordinates
+
+from rigsim.optics.spot_grid import GridSpotModel, pixel_sums
 
 __all__ = ["AutocollimatorSpotModel", "fine_diffraction_kernel"]
 
@@ -56,7 +56,7 @@ def fine_diffraction_kernel(optics, mirror, half_px: int, step_px: float) -> np.
     return K * (m * m / K.sum())
 
 
-class AutocollimatorSpotModel:
+class AutocollimatorSpotModel(GridSpotModel):
     """``model(u, v)``: the unit-flux pixel image, on the window of ``shape_hw`` pixels whose first
     pixel is at ``origin_uv``, of the autocollimator's return spot off ``mirror`` (a
     :class:`~rigsim.optics.autocollimator.MirrorTarget`: its outline, distance and tilt) whose ray
@@ -93,9 +93,8 @@ class AutocollimatorSpotModel:
             effects.append("beam splitter plate")
         if diffraction_half_px is None or construction == "renderer":
             # one pixel's sum: m cells (centres offset by (m-1)/2 cells)
-            c = np.cumsum(np.pad(img, ((1, 0), (1, 0))), axis=0).cumsum(axis=1)
-            P = c[m:, m:] - c[:-m, m:] - c[m:, :-m] + c[:-m, :-m]
-            self._first = ((m - 1) / 2.0 - half * m) * step_px
+            P = pixel_sums(img, m)
+            first = ((m - 1) / 2.0 - half * m) * step_px
             if diffraction_half_px is not None:
                 # rigsim's renderer: the rays binned into pixels, then that pixel image convolved with the
                 # per-pixel kernel; at every sub-pixel phase that is P convolved with the kernel's samples
@@ -112,17 +111,6 @@ class AutocollimatorSpotModel:
 
             K = fine_diffraction_kernel(optics, mirror, half_k, step_px)
             P = fftconvolve(img, K, mode="same")
-            self._first = -half * m * step_px
+            first = -half * m * step_px
             effects.append("return-pupil diffraction")
-        self._step = step_px
-        self._coef = spline_filter(P, order=3, mode="constant")
-        self.effects = tuple(effects)
-        v, u = np.indices(self.shape)
-        self._u = u.ravel() + self.origin[0]
-        self._v = v.ravel() + self.origin[1]
-
-    def __call__(self, u: float, v: float) -> np.ndarray:
-        iu = (self._u - u - self._first) / self._step
-        iv = (self._v - v - self._first) / self._step
-        out = map_coordinates(self._coef, [iv, iu], order=3, mode="constant", cval=0.0, prefilter=False)
-        return out.reshape(self.shape)
+        self._tabulate(P, first, step_px, origin_uv, shape_hw, effects)

@@ -14,15 +14,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.ndimage import map_coordinates, spline_filter
 
 from rigsim.optics.camera import PinholeBrown
+from rigsim.optics.spot_grid import GridSpotModel, pixel_sums
 from rigsim.optics.sun_disk import disk_image_points
 
 __all__ = ["SunSpotModel"]
 
 
-class SunSpotModel:
+class SunSpotModel(GridSpotModel):
     """``model(u, v)``: the unit-flux pixel image, on the window of ``shape_hw`` pixels whose first
     pixel is at ``origin_uv``, of the sun's disk (``full_angle_rad``) whose centre projects to (u, v);
     ``sun_dir`` is the direction (camera frame) the shape is computed at. ``psf``: a
@@ -70,19 +70,6 @@ class SunSpotModel:
             img = fftconvolve(img, K, mode="same")
             effects.append("pinhole diffraction")
         # one pixel's sum: m cells; for even m the sums sit on the cell boundaries (offset s/2)
-        c = np.cumsum(np.pad(img, ((1, 0), (1, 0))), axis=0).cumsum(axis=1)
-        P = c[m:, m:] - c[:-m, m:] - c[m:, :-m] + c[:-m, :-m]
+        P = pixel_sums(img, m)
         # P[j, i] is the pixel whose lower-left cell is j, i: its centre at offset (i + (m-1)/2 - half·m)·s
-        self._first = ((m - 1) / 2.0 - half * m) * step_px
-        self._step = step_px
-        self._coef = spline_filter(P, order=3, mode="constant")
-        self.effects = tuple(effects)
-        v, u = np.indices(self.shape)
-        self._u = u.ravel() + self.origin[0]
-        self._v = v.ravel() + self.origin[1]
-
-    def __call__(self, u: float, v: float) -> np.ndarray:
-        iu = (self._u - u - self._first) / self._step
-        iv = (self._v - v - self._first) / self._step
-        out = map_coordinates(self._coef, [iv, iu], order=3, mode="constant", cval=0.0, prefilter=False)
-        return out.reshape(self.shape)
+        self._tabulate(P, ((m - 1) / 2.0 - half * m) * step_px, step_px, origin_uv, shape_hw, effects)
