@@ -91,14 +91,16 @@ def test_run_robustness_measures_what_hot_pixels_do_to_each_pipeline(short_star_
     assert not (out / "robustness-trials").exists()                    # the kept trials go once the report is written
     d = json.loads((out / "robustness.json").read_text())
     assert d["configs"] == [IDEAL, "hot_pixels"]
-    conf, no_filter, no_pattern, poor_kept, poor_frame, mapped = d["pipelines"]
-    rejected = "poor fits rejected against the model"
-    assert conf["pipeline"] == f"as configured (single-pixel filter on, fixed pattern: sequence, {rejected})"
-    assert no_filter["pipeline"] == f"single-pixel filter off, fixed pattern: sequence, {rejected}"
-    assert no_pattern["pipeline"] == f"single-pixel filter on, fixed pattern: none, {rejected}"
-    assert poor_kept["pipeline"] == "single-pixel filter on, fixed pattern: sequence, poor fits kept"
-    assert poor_frame["pipeline"] == "single-pixel filter on, fixed pattern: sequence, poor fits rejected against the frame"
-    assert mapped["pipeline"] == f"single-pixel filter on, fixed pattern: sequence, {rejected}, ground centroid map of the traced lens"
+    conf, no_filter, no_pattern, poor_kept, poor_frame, mapped, gauss = d["pipelines"]
+    rejected, cm = "poor fits rejected against the model", "centroids: model"
+    assert conf["pipeline"] == f"as configured (single-pixel filter on, fixed pattern: sequence, {rejected}, {cm})"
+    assert no_filter["pipeline"] == f"single-pixel filter off, fixed pattern: sequence, {rejected}, {cm}"
+    assert no_pattern["pipeline"] == f"single-pixel filter on, fixed pattern: none, {rejected}, {cm}"
+    assert poor_kept["pipeline"] == f"single-pixel filter on, fixed pattern: sequence, poor fits kept, {cm}"
+    assert poor_frame["pipeline"] == f"single-pixel filter on, fixed pattern: sequence, poor fits rejected against the frame, {cm}"
+    assert mapped["pipeline"] == (f"single-pixel filter on, fixed pattern: sequence, {rejected}, ground centroid map of the "
+                                  f"traced lens, {cm}")
+    assert gauss["pipeline"] == f"single-pixel filter on, fixed pattern: sequence, {rejected}"  # the Gaussian fit
 
     def mean(p, c, key):
         return np.mean(p["trials_values"][c][key])

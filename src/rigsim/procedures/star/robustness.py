@@ -51,8 +51,8 @@ def pipeline_variants(rig) -> dict[str, object]:
     """The pipelines every robustness run's frames go through (name → nominal rig): as the rig
     configures it, then with each of its defect settings switched the other way in turn (the
     single-pixel filter, the fixed pattern ``none`` ↔ ``sequence``, the rejection of poor fits and,
-    when they are rejected, what they are judged against, and the ``[nominal] centroid_map``
-    ``none`` ↔ ``traced_lens``)."""
+    when they are rejected, what they are judged against, the ``[nominal] centroid_map``
+    ``none`` ↔ ``traced_lens``, and the centroider: the forward model ↔ the Gaussian fit)."""
     nominal = rig.nominal_rig()
     cal = nominal.calibration
 
@@ -68,6 +68,8 @@ def pipeline_variants(rig) -> dict[str, object]:
     n = rig.nominal_intrinsics
     other_map = "traced_lens" if n.centroid_map == "none" else "none"
     alts.append(rig.model_copy(update={"nominal": n.model_copy(update={"centroid_map": other_map})}).nominal_rig())
+    if getattr(cal, "background", "frame") != "map":  # the centroider the other way: the forward model ↔ the Gaussian fit
+        alts.append(with_cal(centroid_method="gauss" if cal.centroid_method == "model" else "model"))
     for alt in alts:
         out[_describe(alt.calibration, alt.sensor)] = alt
     return out
