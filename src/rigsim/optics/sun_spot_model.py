@@ -30,11 +30,12 @@ class SunSpotModel(GridSpotModel):
     non-uniform disk (:class:`rigsim.optics.sun_radiance.DiskRadiance`; its gradient's axis
     ``radiance_axis``); ``pinhole``: a :class:`rigsim.optics.pinhole.ThickPinhole`'s vignetting.
     ``effects`` lists which of these the model holds. ``step_px``: the grid (default 1/32 px for a
-    point pinhole, 1/4 px with the PSF; docs/forward-model.md gives the errors of coarser grids)."""
+    point pinhole, 1/4 px with the PSF; docs/forward-model.md gives the errors of coarser grids).
+    ``psf_margin_px``: the PSF reaches this far beyond the window's half width."""
 
     def __init__(self, camera: PinholeBrown, full_angle_rad: float, sun_dir, origin_uv, shape_hw, *, psf=None,
                  radiance=None, radiance_axis=None, pinhole=None, response: str = "flux", step_px: float | None = None,
-                 points: int = 60_000):
+                 points: int = 60_000, psf_margin_px: float = 1.0):
         if step_px is None:  # a sharp disk's edges need 1/32 px; the diffracted image is smooth at 1/4 px
             step_px = 0.03125 if psf is None else 0.25
         m = round(1.0 / step_px)
@@ -53,7 +54,11 @@ class SunSpotModel(GridSpotModel):
         extent = float(np.max(np.abs(off))) + 2.0
         half_psf = 0.0
         if psf is not None:
-            half_psf = max(self.shape) / 2.0
+            # the PSF out to a readout window's half width around the spot: the fit's window is 2 px
+            # narrower than the sensor's readout window, whose light the renderer (and a real window)
+            # keeps to ± its half width; a kernel cut at the fit window's half width biases the
+            # streaked spots past 60° by 0.01–0.06 px (docs/forward-model.md)
+            half_psf = max(self.shape) / 2.0 + psf_margin_px
         half = math.ceil(extent + half_psf + 1.0)
         n = 2 * half * m + 1  # cells of step s centred on k·s, k = -half·m … half·m
         idx = np.floor(off / step_px + 0.5).astype(np.int64) + half * m
