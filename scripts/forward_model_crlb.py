@@ -55,7 +55,7 @@ def main() -> int:
 
     photons = default_spot_photons(rig)
     rng = np.random.default_rng(a.seed)
-    W = 30
+    W = 30  # the fit's window; the readout window is 32
     print(f"{a.draws} frames per case; the rig's detector (gain {noise.gain_dn_per_e:g} DN/e-, read noise "
           f"{noise.read_noise_e:g} e-), the spot's photons as the rig's renderer sets them ({photons:.3g} on axis × cos⁴θ)")
     print(f"{'case':<28}{'θ':>5}  {'CRLB u, v (px)':>18}  {'model rms u, v (px)':>20}  {'ratio':>11}  "
@@ -66,8 +66,10 @@ def main() -> int:
             t, p = math.radians(th), math.radians(30.0)
             s = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
             c = cam.project_valid(s[None, :])[0][0]
+            # the sensor's readout window is W + 2 px (the renderer keeps its light to ± its half width);
+            # the fit takes the W px around the spot, as the sweep does
             origin = np.floor(c + 0.5).astype(int) - W // 2
-            ref = second_method(cam, s, A, origin, W, **kw)
+            ref = second_method(cam, s, A, origin - 1, W + 2, **kw)[1:-1, 1:-1]
             flux_e = photons * det.quantum_efficiency * math.cos(t) ** 4 * ref.sum()
             mu_e = flux_e * ref / ref.sum()
             n = a.draws
