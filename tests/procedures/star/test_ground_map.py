@@ -91,6 +91,7 @@ def _errors(p, truths):
     return np.array(err)
 
 
+@pytest.mark.slow  # three traced frames through two pipelines (~10 s): the map corrects the Gaussian fit, no longer the default
 def test_corrected_centroids_of_identified_stars_are_closer_to_the_truth(traced_run):
     """Measured on seed 0's three frames (91 identified stars, the same without and with the map):
     0.0988 px rms per axis without, 0.0914 px with (−7.5 %); the same stars in the same frames, so

@@ -73,6 +73,7 @@ def traced_frames(star_rig, star_sky):
     return out
 
 
+@pytest.mark.slow  # three traced frames rendered (~6 s); the models against the renderer stay in the default stage
 def test_the_model_centroids_sit_on_the_image_points(traced_frames):
     """The forward model's errors do not follow the lens's shift (slope within ±0.1 of 0; measured
     −0.006 over 179 stars) and are 0.07 px rms per axis at most (0.057). The Gaussian fit's follow it
@@ -91,6 +92,7 @@ def test_the_model_centroids_sit_on_the_image_points(traced_frames):
     assert len(ew) < 0.5 * len(e)
 
 
+@pytest.mark.slow  # three traced frames rendered (~6 s); the models against the renderer stay in the default stage
 def test_the_model_keeps_the_stars_the_gaussian_fit_rejects(traced_frames):
     """The traced stars fit their model (χ² near 1): the poor-fit test keeps them, and nearly twice as
     many stars are identified as with the Gaussian fit."""
