@@ -122,11 +122,13 @@ def test_run_robustness_on_the_diaphragm_rig_finds_what_the_gradient_and_room_li
     def mean(p, c, key):
         return float(np.mean(p["trials_values"][c][key]))
 
-    # a class-A angular gradient (2 %) turns the apparent sun by ~4.8″: the sweep's R(sun←rot) absorbs it
+    # a class-A angular gradient (2 %) turns the apparent sun by ~4.8″; the sweep's forward model draws the
+    # gradient along its direction at each pose, so R(sun←rot) moves by less than 0.5″ (the S-curve
+    # centroids moved it by 2–5″: docs/effects.md)
     for p in (none, plane):
         added = np.hypot(*(np.subtract(p["trials_values"]["simulator_nonuniformity"][f"sun_rot_{a}_arcsec"],
                                        p["trials_values"][IDEAL][f"sun_rot_{a}_arcsec"]) for a in "xy"))
-        assert np.all(added > 1.0) and np.all(added < 10.0)
+        assert np.all(added < 0.5), added
     # 3000 lx of room light lifts the lit screen above the hole's threshold: the default hole fit loses
     # the hole (no convergence, or a null error of many pixels); the plane fit keeps the ideal accuracy
     broken = (mean(none, "ambient_light", "converged_count") < 1.0
