@@ -72,6 +72,7 @@ def test_the_gaussian_image_is_a_midpoint_rule():
     assert np.abs(img - ref).max() < 1e-4 * ref.max()
 
 
+@pytest.mark.slow  # 200 draws × 4 phases; the model's images against closed forms stay in the default stage
 def test_the_fit_attains_the_crlb_and_the_thresholded_centroid_does_not():
     """200 ROIs drawn from the chord image at the rig's brightness (400 000 photons, QE 0.6; Poisson
     electrons, read noise, 12-bit DN): the fit's rms error per axis within 1.1× the bound (sampling

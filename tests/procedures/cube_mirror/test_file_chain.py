@@ -172,6 +172,7 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
 
 
 @pytest.mark.render
+@pytest.mark.slow  # seed 000's chain runs every command in the default stage; seed 001's adds the autocollimator's (also read by the dataset tests)
 def test_three_axis_campaign_closes_through_the_commands(tmp_path):
     """Seed 001 (PNG frames; seed 000's test takes TIFF): the sweep, and the autocollimator's readings and null
     decisions."""

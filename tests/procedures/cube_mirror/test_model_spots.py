@@ -18,6 +18,7 @@ from rigsim.procedures.cube_mirror.null_files import autocollimator_optics, meas
 from rigsim.rig import load_rig
 
 
+@pytest.mark.slow  # a named option, not the default: its model is checked in the default stage (optics/test_autocollimator_spot_model.py)
 def test_the_autocollimator_reading_from_the_model_is_the_mirrors_tilt():
     """A face frame (the spot's exact image at a 23″, −41″ tilt, peak at half the full well, the
     detector's noise): the model's spot lies within 4σ of the rays' centroid, its σ is the fit's
@@ -44,6 +45,7 @@ def test_the_autocollimator_reading_from_the_model_is_the_mirrors_tilt():
         read_autocollimator(rig, dn, optics, None, method="model")
 
 
+@pytest.mark.slow  # a named option, not the default: its model is checked in the default stage (optics/test_screen_spot_model.py)
 def test_the_concentricity_offset_from_the_model_has_no_holes_bias():
     """Hole and spot frames of the aiming camera (the divergent spot 0.37, −0.52 mm from the hole,
     its light into the hole lost, the hole glowing at the plateau's level, the detector's noise): the

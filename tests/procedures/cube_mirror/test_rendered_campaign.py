@@ -88,6 +88,7 @@ def test_noise_free_ideal_campaign_recovers_r_pm_sun_within_a_tenth_of_an_arcsec
     assert np.all(np.abs(c.error_arcsec) <= 0.1), c.error_arcsec
 
 
+@pytest.mark.slow  # 200-campaign budget rows (~10 s); the budget's machinery and reproducibility stay in tests/test_cli.py
 def test_budget_with_the_papers_sources_matches_their_rss():
     """Monte-Carlo budget (surrogate of the rendered procedure): the paper's four sources together
     give a per-axis σ within 20 % of the RSS of the same sources simulated one at a time."""
