@@ -156,17 +156,19 @@ def test_field_limit_leaves_out_the_frames_beyond_it():
 
 def test_the_rig_file_switches_both_tests():
     """``[procedure] sweep_outlier_sigma`` and ``sweep_max_field_deg`` reach the campaign's sweep fit;
-    the shipped rigs keep every frame."""
+    the shipped rigs have both on (8σ, 62°); 0 and 90 keep every frame."""
     from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
 
+    assert (RIG.procedure.sweep_outlier_sigma, RIG.procedure.sweep_max_field_deg) == (LIMIT, 62.0)
     readings, exact, sigma, _ = _sweep(12)
     uv = exact + np.random.default_rng(13).normal(size=exact.shape) * sigma
     uv[0] += 3.0
     order = default_axis_order(RIG)
-    plain = fit_sun_sensor(RIG, readings, uv, order, sigma_uv=sigma)
+    off = RIG.model_copy(update={"procedure": RIG.procedure.model_copy(
+        update={"sweep_outlier_sigma": 0.0, "sweep_max_field_deg": 90.0})})
+    plain = fit_sun_sensor(off, readings, uv, order, sigma_uv=sigma)
     assert len(plain.outliers) == 0 and len(plain.outside_field) == 0 and plain.n_points == len(uv)
-    on = RIG.model_copy(update={"procedure": RIG.procedure.model_copy(
-        update={"sweep_outlier_sigma": LIMIT, "sweep_max_field_deg": 60.0})})
+    on = RIG.model_copy(update={"procedure": RIG.procedure.model_copy(update={"sweep_max_field_deg": 60.0})})
     cal = fit_sun_sensor(on, readings, uv, order, sigma_uv=sigma)
     assert 0 in cal.outliers or 0 in cal.outside_field
     assert len(cal.outside_field) > 30 and cal.n_points == len(uv) - len(cal.outliers) - len(cal.outside_field)

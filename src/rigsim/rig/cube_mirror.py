@@ -154,8 +154,8 @@ class AimingCamera(_Model):
     mounting_sigma_arcsec: float = Field(0.0, ge=0.0, le=3600.0, description="paper's σ3: equivalent null bias from the camera mounting (1σ)")
     mounting_bias_arcsec: Small3 = Field([0.0, 0.0, 0.0], description="true equivalent null bias of this instance (arcsec)")
     hole_background: Literal["none", "plane"] = Field(
-        "none", description="pipeline: the hole fit's background — none (the dark offset only) or plane (the lit "
-                            "screen's level and gradient from the frame's border, for room light; docs/effects.md)")
+        "plane", description="pipeline: the hole fit's background — plane (the lit screen's level and gradient from "
+                             "the frame's border, for room light) or none (the dark offset only, the paper's; docs/effects.md)")
     detector: DetectorConfig = Field(default_factory=DetectorConfig)
 
     @property
@@ -255,7 +255,7 @@ class CubeProcedure(_Model):
         "centroid_sigma", description="sweep fit: 'centroid_sigma' weights each frame by its centroid's 1σ in quadrature "
         "with the floor the residuals show beyond it (docs/forward-model.md); 'equal' weighs every frame alike")
     sweep_outlier_sigma: float = Field(
-        0.0, ge=0.0, le=1000.0, description="sweep fit: leave out a frame whose residual, over its centroid's 1σ, "
+        8.0, ge=0.0, le=1000.0, description="sweep fit: leave out a frame whose residual, over its centroid's 1σ, "
         "exceeds this many times the robust (MAD) scale of all frames, and refit; 0 keeps every frame (docs/campaign.md)")
     sweep_max_field_deg: float = Field(
         90.0, gt=0.0, le=90.0, description="sweep fit: leave out a frame whose centroid is farther than this from the "

@@ -78,7 +78,8 @@ def _same_numbers(out, camp):
     assert_rel([i["fx_px"], i["fy_px"], i["cx_px"], i["cy_px"]], [camp["intrinsics"][k] for k in ("fx", "fy", "cx", "cy")])
     # the campaign's sweep fit and the file route's are judged alike
     assert out["sun"]["fit"]["verdict"] == camp["calibration"]["fit"]["verdict"] != "poor"
-    assert out["sun"]["fit"]["chi2_dof"] == pytest.approx(camp["calibration"]["fit"]["chi2_dof"], rel=1e-9)
+    # (1e-7: the outlier test's Cauchy-loss judgement is an iterative solve that carries the table's 12 digits less exactly)
+    assert out["sun"]["fit"]["chi2_dof"] == pytest.approx(camp["calibration"]["fit"]["chi2_dof"], rel=1e-7)
     assert out["cube"]["fit"]["verdict"] in ("good", "scaled") and out["cs"]["fit"]["inputs"]["sun_from_rot"]
 
 

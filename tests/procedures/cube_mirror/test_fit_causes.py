@@ -92,9 +92,15 @@ def test_a_clean_sweep_fits_within_its_noise(tmp_path, sweep, capsys):
     angles, cents = sweep
     rc, out = _calibrate(tmp_path, angles, cents)
     assert rc == 0, capsys.readouterr().err
-    fit = json.loads(out.read_text())["fit"]
-    # 149 frames on the detector, 11 unknowns: χ²/dof of pure noise is 1 ± 0.08 (1σ)
-    assert fit["verdict"] == "good" and 0.7 < fit["chi2_dof"] < 1.3 and fit["dof"] == 2 * 149 - 11
+    res = json.loads(out.read_text())
+    fit = res["fit"]
+    # 149 frames on the detector, those beyond the rig's 62° field limit (through the design camera) left
+    # out, no outlier; 11 unknowns: χ²/dof of pure noise is 1 ± 0.09 (1σ)
+    c = (np.array([1024, 1024]) - 1) / 2
+    fx = 272.727  # the design focal length, px
+    beyond = np.degrees(np.arctan(np.hypot(cents["u_px"] - c[0], cents["v_px"] - c[1]) / fx)) > 62.0
+    assert res["n_outside_field"] == beyond.sum() > 0 and res["n_outliers"] == 0
+    assert fit["verdict"] == "good" and 0.7 < fit["chi2_dof"] < 1.3 and fit["dof"] == 2 * (149 - beyond.sum()) - 11
     assert not fit["covariance_scaled"] and fit["residual_rms"] == pytest.approx(SIGMA_PX, rel=0.15)
     assert "fit: χ²/dof" in capsys.readouterr().out
 
@@ -108,6 +114,21 @@ def test_each_mistake_is_refused_and_named(tmp_path, sweep, capsys, case):
     assert rc == 3 and len(err.splitlines()) == 1, err
     assert "the data do not fit the model" in err and phrase in err.split("The data fit when read as:")[1], err
     assert not out.exists() and not out.with_suffix(".residuals.png").exists()
+
+
+def test_spoilt_frames_are_left_out_and_not_taken_for_a_wrong_log(tmp_path, sweep, capsys):
+    """The shipped rig's outlier test: four frames 1 px off (a passing reflection) are left out and the fit is
+    good; no other reading of the files explains them. A log one row late (the case above) leaves out the
+    frames where the outer axis steps, which the log read one row earlier explains: refused."""
+    angles, cents = sweep
+    spoilt = dict(cents, u_px=np.array(cents["u_px"], float).copy())
+    r = np.hypot(np.asarray(cents["u_px"]) - 511.5, np.asarray(cents["v_px"]) - 511.5)
+    k = list(np.flatnonzero(r < 272.727 * np.tan(np.radians(45.0)))[[3, 20, 40, 60]])  # well inside the 62° limit
+    spoilt["u_px"][k] += 1.0
+    rc, out = _calibrate(tmp_path, angles, spoilt)
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(out.read_text())
+    assert sorted(res["frames_outliers"]) == [angles["frame"][i] for i in k] and res["fit"]["verdict"] == "good"
 
 
 def test_accept_poor_fit_writes_the_calibration_marked(tmp_path, sweep, capsys):

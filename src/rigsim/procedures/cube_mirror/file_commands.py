@@ -95,7 +95,7 @@ def _print_rotation(name: str, blk: dict) -> None:
 def cmd_calibrate_sun_sensor(args) -> int:
     from rigsim.files import write_json
     from rigsim.procedures.cube_mirror import files as F
-    from rigsim.procedures.cube_mirror.input_causes import sweep_alternatives
+    from rigsim.procedures.cube_mirror.input_causes import SweepCauses
     from rigsim.procedures.fit_verdict import judge
     from rigsim.rig.load import load_rig
 
@@ -107,7 +107,9 @@ def cmd_calibrate_sun_sensor(args) -> int:
     t0 = time.perf_counter()
     tables = F.read_sweep_tables(rig, args.angles, args.centroids)
     cal, inputs, q = F.fit_sweep_tables(rig, tables, order)
-    verdict = judge(q, sweep_alternatives(rig, tables, order), accept=args.accept_poor_fit, what="sun-sensor calibration")
+    causes = SweepCauses(rig, tables, order)
+    q = causes.outliers_explained(cal, q)
+    verdict = judge(q, causes.alternatives(), accept=args.accept_poor_fit, what="sun-sensor calibration")
     if cal is None:
         raise PoorFitError(f"sun-sensor calibration: {q.describe()}; there is no calibration to write")
     res = F.sun_calibration_json(cal, rig, order, inputs, fit=verdict.block())

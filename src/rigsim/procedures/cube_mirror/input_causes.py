@@ -18,11 +18,12 @@ from dataclasses import replace
 
 import numpy as np
 
+from rigsim.errors import InputError
 from rigsim.estimation.fit_quality import FitQuality
 from rigsim.procedures.cube_mirror.files import SweepTables, fit_sweep_tables
 from rigsim.rig.cube_mirror import CubeMirrorRig
 
-__all__ = ["null_alternatives", "sweep_alternatives"]
+__all__ = ["SweepCauses", "null_alternatives", "sweep_alternatives"]
 
 Alternative = tuple[str, Callable[[], "FitQuality | None"]]
 
@@ -70,38 +71,94 @@ def _without_repeats(t: SweepTables) -> tuple[SweepTables, list[str]]:
                    spots={f: s for f, s in t.spots.items() if f in set(frames)}), drop
 
 
-def sweep_alternatives(rig: CubeMirrorRig, t: SweepTables, axis_order: str) -> list[Alternative]:
-    """(name, refit) for every reading of the sweep's two tables that :mod:`this module <.input_causes>`
-    tests; ``refit()`` → the fit quality of the sun-sensor calibration of the tables read that way."""
-
-    def refit(tt: SweepTables) -> Callable[[], FitQuality | None]:
-        def run():
-            cal, _, q = fit_sweep_tables(rig, tt, axis_order)
-            return q if cal is not None else None
-        return run
-
+def _sweep_readings(rig: CubeMirrorRig, t: SweepTables) -> list[tuple[str, SweepTables]]:
+    """(name, the tables read that way) for every reading of the sweep that this module tests."""
     labels = list(t.readings)
     cols = _cols(labels)
-    out: list[Alternative] = []
+    out: list[tuple[str, SweepTables]] = []
     if _plausible_radians(np.degrees(v) for v in t.readings.values()):
         out.append((f"angles in radians under {', '.join(cols.values())}",
-                    refit(replace(t, readings={a: np.degrees(v) for a, v in t.readings.items()}))))
+                    replace(t, readings={a: np.degrees(v) for a, v in t.readings.items()})))
     for a in labels:
-        out.append((f"the sign of {cols[a]} flipped", refit(replace(t, readings={**t.readings, a: -t.readings[a]}))))
+        out.append((f"the sign of {cols[a]} flipped", replace(t, readings={**t.readings, a: -t.readings[a]})))
     for a, b in itertools.combinations(labels, 2):
         out.append((f"{cols[a]} and {cols[b]} swapped",
-                    refit(replace(t, readings={**t.readings, a: t.readings[b], b: t.readings[a]}))))
-    out.append(("u_px and v_px swapped", refit(replace(t, spots={f: (s[1], s[0], *s[2:]) for f, s in t.spots.items()}))))
+                    replace(t, readings={**t.readings, a: t.readings[b], b: t.readings[a]})))
+    out.append(("u_px and v_px swapped", replace(t, spots={f: (s[1], s[0], *s[2:]) for f, s in t.spots.items()})))
     W = rig.sun_sensor.resolution_px[0]
-    out.append((f"frames mirrored (u → {W - 1} − u)",
-                refit(replace(t, spots={f: (W - 1 - s[0], *s[1:]) for f, s in t.spots.items()}))))
-    out.append(("the angle log's rows one frame late (each frame's angles on the next row)", refit(_shifted(t, 1))))
-    out.append(("the angle log's rows one frame early (each frame's angles on the row before)", refit(_shifted(t, -1))))
+    out.append((f"frames mirrored (u → {W - 1} − u)", replace(t, spots={f: (W - 1 - s[0], *s[1:]) for f, s in t.spots.items()})))
+    out.append(("the angle log's rows one frame late (each frame's angles on the next row)", _shifted(t, 1)))
+    out.append(("the angle log's rows one frame early (each frame's angles on the row before)", _shifted(t, -1)))
     dedup, dropped = _without_repeats(t)
     if dropped:
         out.append((f"duplicate inputs: {len(dropped)} frame(s) repeat another frame's centroid or reading exactly "
-                    f"({', '.join(dropped[:3])}{', …' if len(dropped) > 3 else ''}); without them", refit(dedup)))
+                    f"({', '.join(dropped[:3])}{', …' if len(dropped) > 3 else ''}); without them", dedup))
     return out
+
+
+class SweepCauses:
+    """The sweep's alternative readings, each fitted at most once: :meth:`alternatives` for
+    :func:`~rigsim.procedures.fit_verdict.judge`, and :meth:`outliers_explained`, which asks whether
+    the frames the outlier test left out are a wrong reading of the files rather than spoilt frames."""
+
+    def __init__(self, rig: CubeMirrorRig, t: SweepTables, axis_order: str):
+        self.rig, self.axis_order = rig, axis_order
+        self.readings = _sweep_readings(rig, t)
+        self._fits: dict[str, tuple] = {}
+        self._most_left_out: int | None = None  # set when the given files' outliers are a wrong reading's
+
+    def fit(self, name: str, tt: SweepTables):
+        """(calibration or None, fit quality) of the tables read as ``name`` (cached)."""
+        if name not in self._fits:
+            cal, _, q = fit_sweep_tables(self.rig, tt, self.axis_order)
+            self._fits[name] = (cal, q)
+        return self._fits[name]
+
+    def alternatives(self) -> list[Alternative]:
+        """(name, refit) pairs; after :meth:`outliers_explained` has made the given files' fit poor, a
+        reading that leaves out too many frames itself (more than half as many) does not fit either."""
+        def refit(name, tt) -> Callable[[], FitQuality | None]:
+            def run():
+                cal, q = self.fit(name, tt)
+                if cal is None:
+                    return None
+                if self._most_left_out is not None and len(cal.outliers) > self._most_left_out:
+                    q = replace(q, problems=(*q.problems, f"{len(cal.outliers)} frames left out by the outlier test"))
+                return q
+            return run
+        return [(name, refit(name, tt)) for name, tt in self.readings]
+
+    def outliers_explained(self, cal, q: FitQuality) -> FitQuality:
+        """``q``, made poor when the outlier test left out frames that another reading of the files
+        explains: a reading whose fit is not poor and leaves out at most half as many frames, and at
+        least :data:`MIN_EXPLAINED` fewer. Spoilt frames are few and scattered; a log one row late
+        leaves out exactly the frames where the outer axis steps, and the rest of the sweep absorbs
+        the shift into R(sun←rot) (docs/campaign.md)."""
+        n = 0 if cal is None else len(cal.outliers)
+        if n < MIN_EXPLAINED:
+            return q
+        for name, tt in self.readings:
+            try:
+                alt, qa = self.fit(name, tt)
+            except (ValueError, ArithmeticError, InputError, FloatingPointError, IndexError):
+                continue
+            if alt is None or qa.poor or len(alt.outliers) > min(n // 2, n - MIN_EXPLAINED):
+                continue
+            self._most_left_out = min(n // 2, n - MIN_EXPLAINED)
+            return replace(q, problems=(*q.problems, (
+                f"{n} frames left out by the outlier test (beyond {self.rig.procedure.sweep_outlier_sigma:g}× the robust "
+                f"scale) are not spoilt frames: read as {name}, {len(alt.outliers)} are left out")))
+        return q
+
+
+MIN_EXPLAINED = 3
+"""Fewer frames than this left out by the outlier test are never taken for a wrong reading of the files."""
+
+
+def sweep_alternatives(rig: CubeMirrorRig, t: SweepTables, axis_order: str) -> list[Alternative]:
+    """(name, refit) for every reading of the sweep's two tables that :mod:`this module <.input_causes>`
+    tests; ``refit()`` → the fit quality of the sun-sensor calibration of the tables read that way."""
+    return SweepCauses(rig, t, axis_order).alternatives()
 
 
 def null_alternatives(labels, readings_rad: list[dict], judge_readings: Callable[[list[dict], str | None], FitQuality],

@@ -65,14 +65,17 @@ def quantities(rig) -> tuple[Quantity, ...]:
 
 SWEEP_GUARDS = {"sweep_outlier_sigma": 8.0, "sweep_max_field_deg": 62.0}
 """The sweep fit's guards the robustness study tries when the rig has them off (docs/campaign.md)."""
+NO_GUARDS = {"sweep_outlier_sigma": 0.0, "sweep_max_field_deg": 90.0}
+"""The sweep fit that keeps every frame, which the study tries when the rig has guards on."""
 
 
 def pipeline_variants(rig) -> dict[str, object]:
     """The pipelines a configuration's campaigns run (name → rig): as the rig configures them, on
-    the 2-axis rig with the aiming camera's hole fit switched (``hole_background`` none ↔ plane), and,
-    when the rig's sweep fit keeps every frame, with :data:`SWEEP_GUARDS`. Each hole fit is a
-    campaign of its own (the null search goes where its measurements lead it); the guarded variant
-    refits the configured campaign's own sweep (:func:`_guarded`)."""
+    the 2-axis rig with the aiming camera's hole fit switched (``hole_background`` none ↔ plane), and
+    with the sweep fit's guards switched: :data:`SWEEP_GUARDS` when the rig's sweep fit keeps every
+    frame, :data:`NO_GUARDS` when it has guards. Each hole fit is a campaign of its own (the null
+    search goes where its measurements lead it); the guards' variant refits the configured
+    campaign's own sweep (:func:`_refit_only`)."""
     out = {f"as configured{_describe(rig)}": rig}
     if rig.procedure.method == "diaphragm":
         ac = rig.aiming_camera
@@ -84,10 +87,13 @@ def pipeline_variants(rig) -> dict[str, object]:
         g = rig.model_copy(update={"procedure": p.model_copy(update=SWEEP_GUARDS)})
         out[f"sweep fit guarded (outliers beyond {SWEEP_GUARDS['sweep_outlier_sigma']:g}σ, field "
             f"{SWEEP_GUARDS['sweep_max_field_deg']:g}°){_describe(rig)}"] = g
+    else:
+        g = rig.model_copy(update={"procedure": p.model_copy(update=NO_GUARDS)})
+        out[f"sweep fit keeps every frame (no guards){_describe(rig)}"] = g
     return out
 
 
-def _guarded(v_rig, rig) -> bool:
+def _refit_only(v_rig, rig) -> bool:
     """``v_rig`` is ``rig`` with only the sweep fit's guards changed: it needs no campaign of its own."""
     return v_rig.model_copy(update={"procedure": rig.procedure}) == rig and v_rig.procedure != rig.procedure
 
@@ -107,7 +113,7 @@ def campaign_trial(rig, names, config: str, seed: int) -> dict:
     frames, wall = 0, 0.0
     first = None  # the configured variant's campaign and rig instance
     for variant, v_rig in pipeline_variants(rig).items():
-        if _guarded(v_rig, rig):
+        if _refit_only(v_rig, rig):
             out[variant] = _refit(rig_with(v_rig, config, names), *(first or (None, None)), quantities(rig))
             continue
         sweep = None
