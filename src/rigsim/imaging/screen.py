@@ -11,7 +11,9 @@ import numpy as np
 
 __all__ = [
     "BACKGROUNDS",
+    "apply_flat",
     "border_plane",
+    "flat_field",
     "hole_spot_offset",
     "masked_screen_centroid",
     "pixel_area_mm2",
@@ -105,6 +107,37 @@ def masked_screen_centroid(img: np.ndarray, H, level: float, *, weights: str = "
 
 
 BACKGROUNDS = ("none", "plane")
+
+FLAT_MIN_LEVEL = 0.5
+"""A flat-field pixel below this fraction of the flat's median (the hole, the field's dark edge)
+is not corrected."""
+
+
+def flat_field(frames_dn, dark_dn) -> np.ndarray:
+    """The screen's and the camera's relative response per pixel from frames of the screen lit
+    evenly by a lamp (the simulator shuttered): their mean less ``dark_dn`` (the dark offset, or a
+    frame without the lamp: the hole frame, whose room light the flat frames hold too), over its
+    median; NaN where it is below :data:`FLAT_MIN_LEVEL` of the median (the hole, which a lamp in
+    front of the screen leaves dark). It holds the screen's grain (its albedo) and the detector's
+    PRNU."""
+    f = np.mean([np.asarray(x, float) for x in frames_dn], axis=0) - np.asarray(dark_dn, float)
+    med = float(np.median(f))
+    if not med > 0.0:
+        raise ValueError(f"flat field: median level {med:.3g} DN above the dark frame; the screen is not lit")
+    f = f / med
+    f[~(f >= FLAT_MIN_LEVEL)] = np.nan
+    return f
+
+
+def apply_flat(hole_dn: np.ndarray, spot_dn: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """The spot frame with its spot divided by the flat (:func:`flat_field`): hole + (spot − hole)/flat,
+    the returned light's irradiance as a uniform screen would show it; pixels without a flat value
+    keep theirs. The hole's glow comes through the hole, not off the screen, so it is not divided."""
+    hole = np.asarray(hole_dn, float)
+    d = np.asarray(spot_dn, float) - hole
+    ok = np.isfinite(flat)
+    d[ok] = d[ok] / flat[ok]
+    return hole + d
 
 
 def border_plane(img: np.ndarray, border: float = 0.05) -> np.ndarray:

@@ -153,6 +153,10 @@ class AimingCamera(_Model):
     null_sigma_px: float = Field(1.0, ge=0.0, le=100.0, description="1σ residual hole/spot offset at the end of the search (paper's σ1)")
     mounting_sigma_arcsec: float = Field(0.0, ge=0.0, le=3600.0, description="paper's σ3: equivalent null bias from the camera mounting (1σ)")
     mounting_bias_arcsec: Small3 = Field([0.0, 0.0, 0.0], description="true equivalent null bias of this instance (arcsec)")
+    flat_frames: int = Field(
+        16, ge=0, le=256, description="pipeline: frames of the screen lit evenly by a lamp (the simulator shuttered), "
+        "averaged into a flat field that divides the spot (the screen's grain, the camera's PRNU); 0: no flat "
+        "(docs/effects-screen.md)")
     hole_background: Literal["none", "plane"] = Field(
         "plane", description="pipeline: the hole fit's background — plane (the lit screen's level and gradient from "
                              "the frame's border, for room light) or none (the dark offset only, the paper's; docs/effects.md)")

@@ -117,6 +117,14 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
     holes = [i for i, k in enumerate(t["kind"]) if k == "aiming-hole"]
     decisions = _decisions(camp)
     assert len(holes) == len(decisions) >= 3 and any(dec != "null" for *_, dec in decisions)
+    # each face's flat frames (the screen under a lamp), taken once before its search
+    flats = {}
+    for j, k in enumerate(t["kind"]):
+        if k == "aiming-flat":
+            name = f"flat_{t['face'][j]}_{len(flats.get(t['face'][j], []))}.tif"
+            shutil.copy(d / "export" / t["frame"][j], bare / name)
+            flats.setdefault(t["face"][j], []).append(name)
+    assert {len(v) for v in flats.values()} == {rig_flat_frames(rig)} and set(flats) == {f for f, *_ in decisions}
     for n, (i, (face, reading, dec)) in enumerate(zip(holes, decisions)):
         shutil.copy(d / "export" / t["frame"][i], bare / f"n{n}h.tif")
         shutil.copy(d / "export" / t["frame"][i + 1], bare / f"n{n}s.tif")
@@ -125,7 +133,7 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
         run("concentricity", f"n{n}h.tif", f"n{n}s.tif", "--rig", rig, "--face", face,
                "--reading", f"X={float(t['x_deg'][i])!r},Y={float(t['y_deg'][i])!r}",
                f"--null-offset-px={float(t['null_offset_x_px'][i])!r},{float(t['null_offset_y_px'][i])!r}", "--json", f"n{n}.json",
-               cwd=bare)
+               "--flat", *flats[face], cwd=bare)
         r = read(bare / f"n{n}.json")
         step = next(s for s in camp["searches"] if s["face"] == face)["steps"]
         measured = [s["measured"] for s in step if s["reading_deg"] == reading][0]
@@ -149,6 +157,12 @@ def test_two_axis_campaign_closes_through_the_commands(two_axis):
     assert int(fs.getNode("image_width").real()) == 1024 and (bare / "sun.residuals.png").stat().st_size > 10_000
 
 
+def rig_flat_frames(rig) -> int:
+    from rigsim.rig.load import load_rig
+
+    return load_rig(rig).aiming_camera.flat_frames
+
+
 def out_sun_intrinsics(bare):
     sun = read(bare / "sun.json")
     i = sun["intrinsics"]
@@ -161,12 +175,17 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
     from rigsim.files import write_image
 
     d, rig, _, _ = two_axis
-    hole, spot = (str(d / "export" / f) for f in ("aiming-hole_000.tif", "aiming-spot_001.tif"))
+    first = sorted(p.name for p in (d / "export").glob("aiming-hole_*.tif"))[0]  # after the flats
+    k = int(first.split("_")[1].split(".")[0])
+    hole, spot = str(d / "export" / first), str(d / "export" / f"aiming-spot_{k + 1:03d}.tif")
     write_image(tmp_path / "small.png", np.zeros((100, 100), np.uint16))
+    shutil.copy(hole, tmp_path / "dark.tif")  # a hole frame given as the flat
     for args, msg in ((["autocollimator", "read", str(tmp_path / "small.png")],
                        "small.png: 100×100 px (width×height); expected 1280×1024 px"),
                       (["concentricity", hole, spot, "--rig", "sun_sensor_3axis_autocollimator"], "no aiming camera"),
-                      (["concentricity", hole, str(tmp_path / "nope.png"), "--rig", str(rig)], "nope.png: no such file")):
+                      (["concentricity", hole, str(tmp_path / "nope.png"), "--rig", str(rig)], "nope.png: no such file"),
+                      (["concentricity", hole, spot, "--rig", str(rig), "--flat", str(tmp_path / "dark.tif")],
+                       "dark.tif: --flat: median 0 DN above the hole frame, must be > 0")):
         assert main(args) == 2
         err = capsys.readouterr().err.strip()
         assert msg in err and len(err.splitlines()) == 1, err

@@ -67,7 +67,8 @@ def _validate_stages(out):
 def _null_frames_round_trip(exp, tmp_path, rig, capsys):
     """Every null-search frame, renamed, through `concentricity` / `autocollimator read`: the campaign's
     measured offset (px) or reading (arcsec) to 1e-9 relative."""
-    t = read_table(exp / "null_frames.csv", [Column("frame", kind="str"), Column("kind", kind="str")])
+    t = read_table(exp / "null_frames.csv", [Column("frame", kind="str"), Column("kind", kind="str"),
+                                             Column("face", kind="str", required=False)])
     assert len(t["frame"]) >= 4
     d = tmp_path / "nulls"
     d.mkdir()
@@ -75,11 +76,18 @@ def _null_frames_round_trip(exp, tmp_path, rig, capsys):
         shutil.copy(exp / f, d / f"n{i:03d}.png")
     unit = "px" if "measured_x_px" in t else "arcsec"
     want = np.column_stack([t[f"measured_x_{unit}"].astype(float), t[f"measured_y_{unit}"].astype(float)])
+    flats = {}  # each face's flat frames (the screen under a lamp), taken before its search
+    for i, kind in enumerate(t["kind"]):
+        if kind == "aiming-flat":
+            flats.setdefault(str(t["face"][i]), []).append(str(d / f"n{i:03d}.png"))
     i = 0
     while i < len(t["frame"]):
+        if t["kind"][i] == "aiming-flat":
+            i += 1
+            continue
         if t["kind"][i] == "aiming-hole":
             assert main(["concentricity", str(d / f"n{i:03d}.png"), str(d / f"n{i + 1:03d}.png"), "--rig", rig,
-                         "--json", str(d / "r.json")]) == 0
+                         "--face", str(t["face"][i]), "--json", str(d / "r.json"), "--flat", *flats[str(t["face"][i])]]) == 0
             got = json.loads((d / "r.json").read_text())["offset_px"]
             i += 2
         else:

@@ -78,6 +78,23 @@ class OffsetMeasurer:
         self.frames: list = []
         self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
         self.last_reading: dict = {}
+        self.flat_dn: np.ndarray | None = None  # the mean flat frame (_flat)
+
+    def _flat(self) -> np.ndarray | None:
+        """The mean of the rig's ``[aiming_camera] flat_frames`` frames of the screen under a lamp,
+        rendered once (None: no flat)."""
+        n = self.rig.aiming_camera.flat_frames
+        if self.renderer is None or n == 0:
+            return None
+        if self.flat_dn is None:
+            frames = self.renderer.render_flats(n, seed=self.seed, noiseless=self.noiseless)
+            if self.on_frame is not None:
+                info = {"face": self.face, "reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
+                        "null_offset_px": np.asarray(self.bias_px, float).tolist()}
+                for f in frames:  # taken once, at the search's first reading (a flat does not depend on it)
+                    self.on_frame("aiming-flat", f.dn, info)
+            self.flat_dn = np.mean([f.dn.astype(float) for f in frames], axis=0)
+        return self.flat_dn
 
     def _in_view(self, offset_px: np.ndarray) -> bool:
         """Does the divergent spot (radius hole + path·tan(α/2)) lie inside the camera's field?"""
@@ -123,7 +140,8 @@ class OffsetMeasurer:
             raise SearchError(
                 f"face {self.face}: cannot measure the hole/spot offset at true pose {pose_txt}: {', '.join(bad)}. "
                 "Start the search closer to the null (procedure.search_start_deg) or widen the aiming camera's field.")
-        m = measure_concentricity(self.rig, fr.hole.dn, fr.spot.dn, method=self.spot_method)  # `rigsim concentricity`
+        m = measure_concentricity(self.rig, fr.hole.dn, fr.spot.dn, method=self.spot_method,
+                                  flat_dn=self._flat())  # `rigsim concentricity`
         if self.on_frame is not None:
             info = {"reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
                     "measured_offset_px": np.asarray(m["offset_px"]).tolist(), "face": self.face,

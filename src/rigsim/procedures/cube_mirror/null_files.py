@@ -18,7 +18,7 @@ from rigsim.estimation.fit_quality import FitQuality, not_judged
 from rigsim.estimation.null_search import numerical_jacobian, offset_model
 from rigsim.files.outputs import declare
 from rigsim.frames import ARCSEC_PER_RAD
-from rigsim.imaging.screen import hole_spot_offset
+from rigsim.imaging.screen import apply_flat, flat_field, hole_spot_offset
 from rigsim.imaging.spot import THRESHOLD_SIGMA, SpotMeasurement, measure_spot
 from rigsim.optics.aiming import nominal_screen_homography
 from rigsim.procedures.fit_verdict import add_accept_option, judge
@@ -32,18 +32,22 @@ FREE_AXES = ("X", "Y")
 
 
 def measure_concentricity(rig: CubeMirrorRig, hole_dn: np.ndarray, spot_dn: np.ndarray, *,
-                          method: str = "moments") -> dict:
+                          method: str = "moments", flat_dn: np.ndarray | None = None) -> dict:
     """Hole and spot centres on the screen (mm) and their offset (mm and aiming-camera px, spot −
     hole) from a hole frame (the spot blocked) and a spot frame, with the nominal screen homography
     and the aiming camera's ``hole_background`` fit. ``method="model"``: the spot's centre from the
     forward-model fit of the spot frame (:func:`rigsim.procedures.cube_mirror.model_spots.fit_screen_spot`,
     starting from the moments'; keys ``spot_sigma_mm``, ``spot_chi2_dof`` and ``spot_problem`` added;
-    the spot is NaN when the fit is refused)."""
+    the spot is NaN when the fit is refused). ``flat_dn``: the mean of frames of the screen lit
+    evenly by a lamp; their flat field against the hole frame (:func:`rigsim.imaging.screen.flat_field`)
+    divides the spot before either fit (docs/effects-screen.md)."""
     if method not in ("moments", "model"):
         raise ValueError(f"method = {method!r}: 'moments' or 'model'")
     ac = rig.aiming_camera
     if rig.procedure.method != "diaphragm" or ac is None:
         raise InputError(f"rig {rig.name!r} has no diaphragm screen and aiming camera (seed 000's method)")
+    if flat_dn is not None:
+        spot_dn = apply_flat(hole_dn, spot_dn, flat_field([flat_dn], hole_dn))
     m = hole_spot_offset(hole_dn, spot_dn, nominal_screen_homography(ac), object_pixel_mm=ac.object_pixel_mm,
                          offset_dn=ac.detector.offset_dn * ac.detector.code_step_dn, background=ac.hole_background)
     if method == "model":
@@ -275,6 +279,10 @@ def add_cli(groups: dict) -> None:
     c.add_argument("--method", default="moments", choices=["moments", "model"],
                    help="the spot's centre: the moments of spot − hole, or the forward model of the divergent spot "
                         "fitted to the spot frame (docs/forward-model-spots.md)")
+    c.add_argument("--flat", nargs="+", default=None, metavar="FLAT",
+                   help="frames of the screen lit evenly by a lamp, the simulator shuttered (`run cube-mirror "
+                        "--export-frames` writes the campaign's as aiming-flat_*): their mean, less the hole frame, "
+                        "divides the spot, removing the screen's grain and the camera's PRNU (docs/effects-screen.md)")
     c.add_argument("--json", default=None, metavar="FILE", help="also write the result as JSON")
     add_accept_option(c)
     c.set_defaults(func=cmd_concentricity)
@@ -325,12 +333,14 @@ def cmd_concentricity(args) -> int:
     parse_reading(args.reading, rig, faces.index(face))  # a bad reading is refused before the frames are read
     from rigsim.files.inputs import check_distinct
 
-    check_distinct([args.hole, args.spot], "HOLE/SPOT", by_name=False)
+    flats = list(getattr(args, "flat", None) or [])
+    check_distinct([args.hole, args.spot, *flats], "HOLE/SPOT/FLAT", by_name=False)
     shape = tuple(rig.aiming_camera.resolution_px[::-1])
     hole = read_image(args.hole, shape=shape, what="aiming-camera frame")
     spot = read_image(args.spot, shape=shape, what="aiming-camera frame")
+    flat_dn = _mean_flat(flats, shape, hole) if flats else None
     method = getattr(args, "method", "moments")
-    m = measure_concentricity(rig, hole, spot, method=method)
+    m = measure_concentricity(rig, hole, spot, method=method, flat_dn=flat_dn)
     if method == "model" and m.get("spot_problem"):
         raise InputError(f"{args.spot}: {m['spot_problem']}")
     q = concentricity_quality(rig, m, hole, spot)
@@ -368,6 +378,19 @@ def cmd_concentricity(args) -> int:
     if args.json:
         _write_json(args.json, res)
     return 0
+
+
+def _mean_flat(paths, shape, hole) -> np.ndarray:
+    """The mean of the --flat frames; refused (one line) when they are not lit above the hole frame."""
+    from rigsim.files import read_image
+
+    frames = [read_image(p, shape=shape, what="aiming-camera flat frame") for p in paths]
+    mean = np.mean([f.astype(float) for f in frames], axis=0)
+    lift = float(np.median(mean - np.asarray(hole, float)))
+    if not lift > 0.0:
+        raise InputError(f"{paths[0]}: --flat: median {lift:.3g} DN above the hole frame, must be > 0 (a flat is the screen "
+                         "lit evenly by a lamp; is this a dark or a hole frame?)")
+    return mean
 
 
 def cmd_autocollimator_read(args) -> int:

@@ -225,7 +225,7 @@ class _NullFrames:
     frames: list = field(default_factory=list)
 
     def null_frame(self, kind: str, dn, info: dict) -> None:
-        if info.get("face", self.face) == self.face and kind != "aiming-hole":
+        if info.get("face", self.face) == self.face and kind not in ("aiming-hole", "aiming-flat"):
             self.frames.append((kind, np.asarray(dn, dtype=float)))
 
 

@@ -252,6 +252,24 @@ class ConcentricityRenderer:
                                                                       self.geometry.camera.width))
         return self._hole_cache[seed]
 
+    def flat_photons(self) -> np.ndarray:
+        """The screen lit evenly by a lamp, the simulator shuttered (no glow, no spot): half the full
+        well on a uniform screen, times the screen's albedo grain; the hole, which the lamp does not
+        light, is dark. The room light, when on, is there too, as in the hole frame."""
+        albedo, ambient = self.surface_maps()
+        level = 0.5 * self.detector.full_well_e / self.detector.quantum_efficiency
+        flat = np.full((self.geometry.camera.height, self.geometry.camera.width), level) * (1.0 - self.hole_coverage)
+        if albedo is not None:
+            flat = flat * albedo
+        return flat if ambient is None else flat + ambient * self.exposure_scale
+
+    def render_flats(self, n: int, seed: int = 0, *, noiseless: bool = False) -> list:
+        """``n`` digitised flat frames (:meth:`flat_photons`), each with its own detector noise from ``seed``."""
+        photons = self.flat_photons()
+        return [digitise(photons, self.detector, seed=_derived_seed(seed, 100 + k), noiseless=noiseless,
+                         frame_seed=int(seed), truth={"frame": f"flat {k}"}, render={**self.settings(), "flat": True})
+                for k in range(int(n))]
+
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
         pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
         spot = self.diverge(pencil, self.pencil.spot_film_binning) * self._gain
