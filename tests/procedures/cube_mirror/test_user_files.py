@@ -76,10 +76,7 @@ def _null_frames_round_trip(exp, tmp_path, rig, capsys):
         shutil.copy(exp / f, d / f"n{i:03d}.png")
     unit = "px" if "measured_x_px" in t else "arcsec"
     want = np.column_stack([t[f"measured_x_{unit}"].astype(float), t[f"measured_y_{unit}"].astype(float)])
-    flats = {}  # each face's flat frames (the screen under a lamp), taken before its search
-    for i, kind in enumerate(t["kind"]):
-        if kind == "aiming-flat":
-            flats.setdefault(str(t["face"][i]), []).append(str(d / f"n{i:03d}.png"))
+    flats = [str(d / f"n{i:03d}.png") for i, kind in enumerate(t["kind"]) if kind == "aiming-flat"]  # the screen's
     i = 0
     while i < len(t["frame"]):
         if t["kind"][i] == "aiming-flat":
@@ -87,7 +84,7 @@ def _null_frames_round_trip(exp, tmp_path, rig, capsys):
             continue
         if t["kind"][i] == "aiming-hole":
             assert main(["concentricity", str(d / f"n{i:03d}.png"), str(d / f"n{i + 1:03d}.png"), "--rig", rig,
-                         "--face", str(t["face"][i]), "--json", str(d / "r.json"), "--flat", *flats[str(t["face"][i])]]) == 0
+                         "--face", str(t["face"][i]), "--json", str(d / "r.json"), "--flat", *flats]) == 0
             got = json.loads((d / "r.json").read_text())["offset_px"]
             i += 2
         else:

@@ -52,12 +52,14 @@ class OffsetMeasurer:
     Raises :class:`SearchError` when the spot cannot be measured (off the detector, cut by its
     edge, beam off the face, saturated). ``geometry``: this face's
     :func:`~rigsim.truth.cube_mirror.diaphragm.diaphragm_geometry` if the caller already has it
-    (its layout is then not solved again).
+    (its layout is then not solved again). ``flat_dn``: the mean of the screen's flat frames when
+    another face's search took them (else they are rendered on first use, ``[aiming_camera] flat_frames``).
     """
 
     def __init__(self, rig: CubeMirrorRig, real: Realization, face_index: int, *, renderer=None, seed: int = 0,
                  sigma_px: float = 0.0, rng: np.random.Generator | None = None, noiseless: bool = False,
-                 keep_frames: bool = False, on_frame=None, geometry=None, spot_method: str = "moments"):
+                 keep_frames: bool = False, on_frame=None, geometry=None, spot_method: str = "moments",
+                 flat_dn: np.ndarray | None = None):
         from rigsim.truth.cube_mirror.placement import diaphragm_layout
 
         self.rig, self.real, self.face_index = rig, real, int(face_index)
@@ -78,7 +80,7 @@ class OffsetMeasurer:
         self.frames: list = []
         self.on_frame = on_frame  # on_frame(kind, dn, info): every rendered frame with the reading it was taken at
         self.last_reading: dict = {}
-        self.flat_dn: np.ndarray | None = None  # the mean flat frame (_flat)
+        self.flat_dn = flat_dn  # the mean flat frame (_flat); another face's search may pass its own
 
     def _flat(self) -> np.ndarray | None:
         """The mean of the rig's ``[aiming_camera] flat_frames`` frames of the screen under a lamp,
@@ -89,9 +91,11 @@ class OffsetMeasurer:
         if self.flat_dn is None:
             frames = self.renderer.render_flats(n, seed=self.seed, noiseless=self.noiseless)
             if self.on_frame is not None:
+                # taken once, before the first face's search, at its first reading (a flat depends on
+                # neither: every face's search uses it)
                 info = {"face": self.face, "reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
                         "null_offset_px": np.asarray(self.bias_px, float).tolist()}
-                for f in frames:  # taken once, at the search's first reading (a flat does not depend on it)
+                for f in frames:
                     self.on_frame("aiming-flat", f.dn, info)
             self.flat_dn = np.mean([f.dn.astype(float) for f in frames], axis=0)
         return self.flat_dn

@@ -149,6 +149,7 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
         from rigsim.render.cube_mirror.aiming import ConcentricityRenderer
 
         resid = []
+        flat_dn = None  # the screen's flat frames, taken once: the screen and the aiming camera do not move
         for fi, face in enumerate(rig.procedure.faces):
             pb.set_description(f"concentricity search, face {face}")
             t0 = time.perf_counter()
@@ -156,9 +157,10 @@ def run_rendered_campaign(rig: CubeMirrorRig, real: Realization, *, seed: int = 
             times[f"aiming-camera scene build, face {face}"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             meas = OffsetMeasurer(rig, real, fi, renderer=renderer, seed=search_seed + fi, noiseless=noiseless,
-                                  on_frame=None if frames is None else frames.null_frame)
+                                  on_frame=None if frames is None else frames.null_frame, flat_dn=flat_dn)
             res = concentricity_search(rig, real, fi, meas, _encoder_errors(rig, noise, rng), axis_order=order,
                                        threshold_px=threshold, progress=pb.update)
+            flat_dn = meas.flat_dn
             times[f"concentricity search, face {face}"] = time.perf_counter() - t0
             searches.append(res)
             # near the null only: further out the hole's lost light scales the offset by ~4 %
