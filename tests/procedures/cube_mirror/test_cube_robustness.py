@@ -55,8 +55,12 @@ def test_rig_with_switches_exactly_the_configured_effects(diaphragm_rig):
 
 
 def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm_rig):
+    """The main job's campaign on a 10° sweep (149 poses on the detector, one flagged at its edge, 12 beyond
+    the 62° field limit; the procedure's 5° sweep is the slow test's below), through each pipeline variant."""
     from rigsim.procedures.cube_mirror.robustness import campaign_trial, pipeline_variants, quantities
 
+    diaphragm_rig = diaphragm_rig.model_copy(update={"procedure": diaphragm_rig.procedure.model_copy(
+        update={"sweep_step_deg": 10.0})})
     variants = list(pipeline_variants(diaphragm_rig))
     assert variants == ["as configured (hole background: plane)", "hole background: none",
                         "sweep fit keeps every frame (no guards) (hole background: plane)"]
@@ -69,7 +73,7 @@ def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm
         # the rig file's true errors and noise: R(cube←sun) inside 3σ of the document's per-axis budget
         assert all(abs(v[f"cube_sun_{a}_arcsec"]) < 3 * 2.13 for a in "xyz")
         # the sweep: every spot on the detector but those at the field's corners, centroids near the exact centre
-        assert v["sweep_points_count"] >= (560 if "every frame" in variant else 500)
+        assert (145 <= v["sweep_points_count"] <= 149) if "every frame" in variant else (130 <= v["sweep_points_count"] <= 137)
         assert v["sun_centroid_rms_px"] < 0.02
         assert abs(v["sun_fx_px"]) < 0.05 and abs(v["sun_u0_px"]) < 0.05 and abs(v["sun_v0_px"]) < 0.05
         # near the null the aiming camera's offset is measured to a small fraction of a pixel
@@ -79,7 +83,7 @@ def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm
     assert a["sun_fx_px"] == b["sun_fx_px"] and a["sun_rot_x_arcsec"] == b["sun_rot_x_arcsec"]
     # the unguarded variant refits the configured campaign's sweep: same nulls, the frames beyond 62° kept
     assert g["cube_rot_x_arcsec"] == a["cube_rot_x_arcsec"] and g["null_measurement_rms"] == a["null_measurement_rms"]
-    assert a["sweep_points_count"] + 20 < g["sweep_points_count"] < a["sweep_points_count"] + 80
+    assert 10 <= g["sweep_points_count"] - a["sweep_points_count"] <= 12
     assert g["sun_rot_x_arcsec"] != a["sun_rot_x_arcsec"]
 
 
