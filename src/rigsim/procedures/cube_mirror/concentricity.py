@@ -89,15 +89,16 @@ class OffsetMeasurer:
         if self.renderer is None or n == 0:
             return None
         if self.flat_dn is None:
-            frames = self.renderer.render_flats(n, seed=self.seed, noiseless=self.noiseless)
-            if self.on_frame is not None:
-                # taken once, before the first face's search, at its first reading (a flat depends on
-                # neither: every face's search uses it)
-                info = {"face": self.face, "reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
-                        "null_offset_px": np.asarray(self.bias_px, float).tolist()}
-                for f in frames:
+            # taken once, before the first face's search, at its first reading (a flat depends on
+            # neither: every face's search uses it)
+            info = {"face": self.face, "reading_deg": {a: math.degrees(v) for a, v in self.last_reading.items()},
+                    "null_offset_px": np.asarray(self.bias_px, float).tolist()}
+            total = None
+            for f in self.renderer.render_flats(n, seed=self.seed, noiseless=self.noiseless):
+                if self.on_frame is not None:
                     self.on_frame("aiming-flat", f.dn, info)
-            self.flat_dn = np.mean([f.dn.astype(float) for f in frames], axis=0)
+                total = f.dn.astype(float) if total is None else total + f.dn
+            self.flat_dn = total / n
         return self.flat_dn
 
     def _in_view(self, offset_px: np.ndarray) -> bool:

@@ -263,12 +263,13 @@ class ConcentricityRenderer:
             flat = flat * albedo
         return flat if ambient is None else flat + ambient * self.exposure_scale
 
-    def render_flats(self, n: int, seed: int = 0, *, noiseless: bool = False) -> list:
-        """``n`` digitised flat frames (:meth:`flat_photons`), each with its own detector noise from ``seed``."""
+    def render_flats(self, n: int, seed: int = 0, *, noiseless: bool = False):
+        """``n`` digitised flat frames (:meth:`flat_photons`), each with its own detector noise from
+        ``seed``, one at a time (a generator: a campaign keeps their running sum, not the frames)."""
         photons = self.flat_photons()
-        return [digitise(photons, self.detector, seed=_derived_seed(seed, 100 + k), noiseless=noiseless,
-                         frame_seed=int(seed), truth={"frame": f"flat {k}"}, render={**self.settings(), "flat": True})
-                for k in range(int(n))]
+        for k in range(int(n)):
+            yield digitise(photons, self.detector, seed=_derived_seed(seed, 100 + k), noiseless=noiseless,
+                           frame_seed=int(seed), truth={"frame": f"flat {k}"}, render={**self.settings(), "flat": True})
 
     def spot_photons(self, pose_rad: dict, seed: int = 0) -> np.ndarray:
         pencil = self._chunks.render(pose_rad, _derived_seed(seed, 1))
