@@ -32,6 +32,7 @@ def _cube_sigma_arcsec(rig) -> float:
     return math.hypot(rig.plane_mirror.perpendicularity_spec_arcsec, 6.6, 1.4, 0.2)
 
 
+@pytest.mark.slow  # 250 random rigs' analytic campaigns, 10 s (the default stage was over 5 min)
 @draw(250)
 @given(rig_dicts())
 def test_random_rig_passes_check_and_the_analytic_campaign(d):
@@ -47,6 +48,7 @@ def test_random_rig_passes_check_and_the_analytic_campaign(d):
     assert np.all(np.abs(res.cube_error_arcsec) < 5.0 * _cube_sigma_arcsec(rig)), res.cube_error_arcsec
 
 
+@pytest.mark.slow  # counts the draws of the test above, which is slow
 def test_at_least_200_different_rigs_were_drawn():
     assert len(SEEN) >= 200
 

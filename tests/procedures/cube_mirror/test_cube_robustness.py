@@ -54,6 +54,23 @@ def test_rig_with_switches_exactly_the_configured_effects(diaphragm_rig):
     assert configs_for(names)[0] == IDEAL
 
 
+def test_the_pipeline_variants_switch_the_hole_fit_and_the_sweep_guards(diaphragm_rig):
+    """The shipped 2-axis rig (plane hole fit, guards on): the other hole fit and the sweep that keeps every
+    frame; a rig without guards gets the guarded variant instead. Each variant differs in what it names only."""
+    from rigsim.procedures.cube_mirror.robustness import NO_GUARDS, SWEEP_GUARDS, pipeline_variants
+
+    v = pipeline_variants(diaphragm_rig)
+    assert list(v) == ["as configured (hole background: plane)", "hole background: none",
+                       "sweep fit keeps every frame (no guards) (hole background: plane)"]
+    assert v["hole background: none"].aiming_camera.hole_background == "none"
+    every = v["sweep fit keeps every frame (no guards) (hole background: plane)"].procedure
+    assert (every.sweep_outlier_sigma, every.sweep_max_field_deg) == tuple(NO_GUARDS.values())
+    off = diaphragm_rig.model_copy(update={"procedure": diaphragm_rig.procedure.model_copy(update=NO_GUARDS)})
+    guarded = [r for k, r in pipeline_variants(off).items() if k.startswith("sweep fit guarded")]
+    assert len(guarded) == 1 and guarded[0].procedure.sweep_outlier_sigma == SWEEP_GUARDS["sweep_outlier_sigma"]
+
+
+@pytest.mark.slow  # three rendered campaigns, 22 s (the default stage was over 5 min)
 def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm_rig):
     """The main job's campaign on a 10° sweep (149 poses on the detector, one flagged at its edge, 12 beyond
     the 62° field limit; the procedure's 5° sweep is the slow test's below), through each pipeline variant."""
@@ -62,8 +79,6 @@ def test_an_ideal_trial_is_the_main_jobs_campaign_scored_against_truth(diaphragm
     diaphragm_rig = diaphragm_rig.model_copy(update={"procedure": diaphragm_rig.procedure.model_copy(
         update={"sweep_step_deg": 10.0})})
     variants = list(pipeline_variants(diaphragm_rig))
-    assert variants == ["as configured (hole background: plane)", "hole background: none",
-                        "sweep fit keeps every frame (no guards) (hole background: plane)"]
     out = campaign_trial(diaphragm_rig, (), IDEAL, 0)
     assert out["_render_ms_per_frame"] > 0
     for variant in variants:
