@@ -40,7 +40,7 @@ class ImageCalibration:
 
 
 def fit_sweep_images(rig: CubeMirrorRig, windows, readings, start: SunCalibration, uv, axis_order: str,
-                     max_iter: int = 8, tol: float = 1e-3) -> ImageCalibration:
+                     max_iter: int = 15, tol: float = 1e-3) -> ImageCalibration:
     """Fit θ to the frames' pixels (module docstring). ``windows``: each kept frame's (dn, origin_uv);
     ``readings``: their turntable readings {axis: (N,) rad}; ``start``: the centroid-then-fit
     calibration on the same frames (θ's start and the spots' shapes); ``uv``: the frames' forward-model
