@@ -47,9 +47,9 @@ from rigsim.procedures.boresight.files import (
     streaming_solver,
 )
 from rigsim.procedures.centroid import DetectorSettings, centroid_files, detector_settings
+from rigsim.procedures.cube_mirror.input_causes import calibrate_sun_sensor_files
 from rigsim.procedures.cube_mirror.files import (
     SunSensorInputs,
-    calibrate_sun_sensor_files,
     compose_rotations,
     read_angle_log,
     read_nulls,

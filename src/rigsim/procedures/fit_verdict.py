@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from rigsim.errors import InputError, PoorFitError
 from rigsim.estimation.fit_quality import FitQuality
 
-__all__ = ["ACCEPT_HELP", "Cause", "Verdict", "add_accept_option", "diagnose", "inherited", "judge"]
+__all__ = ["ACCEPT_HELP", "REFIT_ERRORS", "Cause", "Verdict", "add_accept_option", "diagnose", "inherited", "judge"]
 
 Alternative = tuple[str, Callable[[], "FitQuality | None"]]
 
@@ -36,6 +36,8 @@ ACCEPT_HELP = ("write the result even when the data do not fit the model (χ²/d
                "summary then say so. Without it such a fit writes nothing and exits with status 3")
 
 IMPROVEMENT = 4.0  # a cause is named when its refit fits and its χ²/dof is at least this many times smaller
+REFIT_ERRORS = (ValueError, ArithmeticError, InputError, FloatingPointError, IndexError)
+"""What a refit under an alternative reading may raise: that reading is then no cause."""
 
 
 @dataclass(frozen=True)
@@ -106,7 +108,7 @@ def diagnose(quality: FitQuality, alternatives: Iterable[Alternative]) -> list[C
     for name, refit in alternatives:
         try:
             q = refit()
-        except (ValueError, ArithmeticError, InputError, FloatingPointError, IndexError):
+        except REFIT_ERRORS:
             continue
         if q is None or q.poor or (q.dof > 0 and not math.isfinite(q.chi2_dof)):
             continue

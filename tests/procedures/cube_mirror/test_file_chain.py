@@ -184,7 +184,7 @@ def test_bad_null_frames_one_line(two_axis, tmp_path, capsys):
                       (["concentricity", hole, spot, "--rig", "sun_sensor_3axis_autocollimator"], "no aiming camera"),
                       (["concentricity", hole, str(tmp_path / "nope.png"), "--rig", str(rig)], "nope.png: no such file"),
                       (["concentricity", hole, spot, "--rig", str(rig), "--flat", str(tmp_path / "dark.tif")],
-                       "dark.tif: --flat: median 0 DN above the hole frame, must be > 0")):
+                       "dark.tif: --flat: flat field: median level 0 DN above the dark frame; the screen is not lit")):
         assert main(args) == 2
         err = capsys.readouterr().err.strip()
         assert msg in err and len(err.splitlines()) == 1, err

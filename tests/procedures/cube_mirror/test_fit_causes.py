@@ -131,6 +131,23 @@ def test_spoilt_frames_are_left_out_and_not_taken_for_a_wrong_log(tmp_path, swee
     assert sorted(res["frames_outliers"]) == [angles["frame"][i] for i in k] and res["fit"]["verdict"] == "good"
 
 
+def test_the_api_marks_a_late_log_poor_too(tmp_path, sweep):
+    """``rigsim.api.calibrate_sun_sensor_files``, which writes nothing and refuses nothing, still says the fit
+    is poor when the outlier test's frames are a log one row late, and names the reading."""
+    from rigsim import api
+    from rigsim.rig.load import load_rig
+
+    angles, cents = sweep
+    write_table(tmp_path / "angles.csv", _shift(angles, 1))
+    write_table(tmp_path / "c.csv", cents)
+    cal, _ = api.calibrate_sun_sensor_files(load_rig(RIG), tmp_path / "angles.csv", tmp_path / "c.csv")
+    assert len(cal.outliers) >= 3 and cal.fit.poor
+    assert any("the angle log's rows one frame late" in p for p in cal.fit.problems), cal.fit.problems
+    write_table(tmp_path / "angles.csv", angles)
+    clean, _ = api.calibrate_sun_sensor_files(load_rig(RIG), tmp_path / "angles.csv", tmp_path / "c.csv")
+    assert not clean.fit.poor and not clean.fit.problems
+
+
 def test_accept_poor_fit_writes_the_calibration_marked(tmp_path, sweep, capsys):
     angles, cents = sweep
     edit_a, _, _ = CASES["radians under x_deg"]

@@ -24,7 +24,7 @@ from rigsim.files import Column, covariance_block, read_json, read_table, symmet
 from rigsim.frames import ARCSEC_PER_RAD, angle_between
 from rigsim.imaging.frame_spots import REJECT
 from rigsim.optics.cube import FACE_NORMALS
-from rigsim.procedures.cube_mirror.pipeline import default_axis_order, fit_sun_sensor
+from rigsim.procedures.cube_mirror.pipeline import fit_sun_sensor
 from rigsim.procedures.results import ROTATION_CONVENTION, rotation_block
 from rigsim.rig.cube_mirror import CubeMirrorRig
 from rigsim.rig.turntable import TurntableModel, TurntableReading, as_reading
@@ -35,7 +35,6 @@ __all__ = [
     "SweepTables",
     "angle_columns",
     "axis_orders",
-    "calibrate_sun_sensor_files",
     "compose_rotations",
     "fit_sweep_tables",
     "join_sweep",
@@ -203,17 +202,6 @@ def fit_sweep_tables(rig: CubeMirrorRig, t: SweepTables, axis_order: str
         return None, inp, judge_chi2(math.inf, 2 * len(inp.frames) - 12, "the centroids' σ",
                                      problems=(f"the least squares ends at a non-physical camera ({exc})",))
     return cal, inp, cal.fit or not_judged("no centroid σ: neither the table nor the rig gives one")
-
-
-def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, axis_order: str | None = None
-                               ) -> tuple[SunCalibration, SunSensorInputs]:
-    """Step 1 / B on files: intrinsics, distortion and R(sun←rot) by least squares (its fit quality
-    in ``SunCalibration.fit``; ``rigsim calibrate sun-sensor`` refuses a poor one)."""
-    order = axis_order or default_axis_order(rig)
-    cal, inp, q = fit_sweep_tables(rig, read_sweep_tables(rig, angles_path, centroids_path), order)
-    if cal is None:
-        raise InputError(f"{centroids_path}: {q.describe()}")
-    return cal, inp
 
 
 def covariance_source(q: FitQuality | None) -> str:

@@ -20,10 +20,13 @@ import numpy as np
 
 from rigsim.errors import InputError
 from rigsim.estimation.fit_quality import FitQuality
-from rigsim.procedures.cube_mirror.files import SweepTables, fit_sweep_tables
+from rigsim.estimation.sun_calibration import SunCalibration
+from rigsim.procedures.cube_mirror.files import SunSensorInputs, SweepTables, fit_sweep_tables, read_sweep_tables
+from rigsim.procedures.cube_mirror.pipeline import default_axis_order
+from rigsim.procedures.fit_verdict import REFIT_ERRORS
 from rigsim.rig.cube_mirror import CubeMirrorRig
 
-__all__ = ["SweepCauses", "null_alternatives", "sweep_alternatives"]
+__all__ = ["SweepCauses", "calibrate_sun_sensor_files", "null_alternatives"]
 
 Alternative = tuple[str, Callable[[], "FitQuality | None"]]
 
@@ -140,7 +143,7 @@ class SweepCauses:
         for name, tt in self.readings:
             try:
                 alt, qa = self.fit(name, tt)
-            except (ValueError, ArithmeticError, InputError, FloatingPointError, IndexError):
+            except REFIT_ERRORS:
                 continue
             if alt is None or qa.poor or len(alt.outliers) > min(n // 2, n - MIN_EXPLAINED):
                 continue
@@ -155,10 +158,20 @@ MIN_EXPLAINED = 3
 """Fewer frames than this left out by the outlier test are never taken for a wrong reading of the files."""
 
 
-def sweep_alternatives(rig: CubeMirrorRig, t: SweepTables, axis_order: str) -> list[Alternative]:
-    """(name, refit) for every reading of the sweep's two tables that :mod:`this module <.input_causes>`
-    tests; ``refit()`` → the fit quality of the sun-sensor calibration of the tables read that way."""
-    return SweepCauses(rig, t, axis_order).alternatives()
+def calibrate_sun_sensor_files(rig: CubeMirrorRig, angles_path, centroids_path, axis_order: str | None = None
+                               ) -> tuple[SunCalibration, SunSensorInputs]:
+    """Step 1 / B on files: intrinsics, distortion and R(sun←rot) by least squares (its fit quality
+    in ``SunCalibration.fit``; ``rigsim calibrate sun-sensor`` refuses a poor one). Frames left out by
+    the outlier test that another reading of the files explains make the quality poor
+    (:meth:`SweepCauses.outliers_explained`)."""
+    order = axis_order or default_axis_order(rig)
+    tables = read_sweep_tables(rig, angles_path, centroids_path)
+    cal, inp, q = fit_sweep_tables(rig, tables, order)
+    if cal is None:
+        raise InputError(f"{centroids_path}: {q.describe()}")
+    if cal.fit is not None:
+        cal.fit = SweepCauses(rig, tables, order).outliers_explained(cal, cal.fit)
+    return cal, inp
 
 
 def null_alternatives(labels, readings_rad: list[dict], judge_readings: Callable[[list[dict], str | None], FitQuality],

@@ -384,12 +384,12 @@ def _mean_flat(paths, shape, hole) -> np.ndarray:
     """The mean of the --flat frames; refused (one line) when they are not lit above the hole frame."""
     from rigsim.files import read_image
 
-    frames = [read_image(p, shape=shape, what="aiming-camera flat frame") for p in paths]
-    mean = np.mean([f.astype(float) for f in frames], axis=0)
-    lift = float(np.median(mean - np.asarray(hole, float)))
-    if not lift > 0.0:
-        raise InputError(f"{paths[0]}: --flat: median {lift:.3g} DN above the hole frame, must be > 0 (a flat is the screen "
-                         "lit evenly by a lamp; is this a dark or a hole frame?)")
+    mean = np.mean([read_image(p, shape=shape, what="aiming-camera flat frame").astype(float) for p in paths], axis=0)
+    try:
+        flat_field([mean], hole)
+    except ValueError as e:  # the median level above the hole frame is not > 0
+        raise InputError(f"{paths[0]}: --flat: {e} (a flat is the screen lit evenly by a lamp; is this a dark or a "
+                         "hole frame?)") from None
     return mean
 
 
